@@ -1,0 +1,8 @@
+//! Reader stub (being written).
+use std::path::Path;
+use crate::dem::DemParts;
+use crate::error::{Error, Result};
+
+pub fn read(path: &Path) -> Result<DemParts> {
+    Err(Error::unsupported(path, "exrdem reader not written yet"))
+}

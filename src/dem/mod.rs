@@ -1,0 +1,847 @@
+//! Digital elevation models: one in-memory description for every source format, the
+//! georeferencing of its pixel grid, the void policy, and interpolation at a latitude/longitude.
+//!
+//! Pixel convention: `(col, row)` are pixel *centres*; pixel (0, 0) is the first sample in the
+//! file, its centre at CRS coordinates (`x0`, `y0`); `x` grows by `dx` per column and `y`
+//! shrinks by `dy` per row (north-up rasters have `dy > 0`).
+//!
+//! Void policy (docs/formats.md): a sample equal to the format's no-data value, or NaN/±inf, is
+//! a void. Voids are never read as zero. Each void within `max_fill_px` pixels of measured data
+//! is filled once, at load, by onion peeling: in pass k every void that touches (8-neighbours)
+//! a measured or already filled sample takes the mean of those neighbours. Filled samples are
+//! reported by [`Dem::sample`] so tiles can record them in their mask. Voids farther than
+//! `max_fill_px` from data stay NaN and count as "no data".
+
+pub mod exrdem;
+pub mod geotiff;
+pub mod pds3;
+pub mod raw;
+pub mod srtm;
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use memmap2::Mmap;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, IoContext, Result};
+
+/// Refuse rasters larger than this many samples before allocating anything (2^34 = 16 Gi).
+pub const MAX_SAMPLES: u64 = 1 << 34;
+/// Default distance (pixels) up to which voids are filled from neighbours.
+pub const DEFAULT_MAX_FILL_PX: u32 = 64;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SampleType {
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    F32,
+    F64,
+}
+
+impl SampleType {
+    pub fn size(self) -> usize {
+        match self {
+            SampleType::U8 => 1,
+            SampleType::I16 | SampleType::U16 => 2,
+            SampleType::I32 | SampleType::U32 | SampleType::F32 => 4,
+            SampleType::F64 => 8,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ByteOrder {
+    Little,
+    Big,
+}
+
+/// Where the samples live.
+pub enum Samples {
+    /// A memory-mapped file: `width × height` samples of `ty` starting at byte `offset`, rows
+    /// `row_stride` bytes apart.
+    Mapped {
+        map: Mmap,
+        offset: usize,
+        row_stride: usize,
+        ty: SampleType,
+        order: ByteOrder,
+    },
+    /// Decoded samples (compressed formats, EXR, generated scenes), row-major.
+    Owned(Vec<f32>),
+}
+
+/// Map a whole file read-only.
+///
+/// The file must not be modified while the map lives; sources are inputs that Penumbra only
+/// reads, and a concurrent writer would be a user error we cannot detect.
+pub fn map_file(path: &Path) -> Result<Mmap> {
+    let file = std::fs::File::open(path).at(path)?;
+    // SAFETY: read-only map of an input file; see the function's doc for the caveat.
+    unsafe { Mmap::map(&file) }.at(path)
+}
+
+/// Coordinate reference system of a raster grid.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+pub enum Crs {
+    /// x = east longitude, y = planetocentric latitude, both in degrees.
+    Geographic,
+    /// Spherical equirectangular in metres: x = R·(λ − λ0)·cos φts, y = R·φ.
+    Equirectangular {
+        lat_ts_deg: f64,
+        lon0_deg: f64,
+        radius_m: f64,
+    },
+    /// Spherical polar stereographic in metres, true scale at `lat_ts_deg` (±90 = at the pole).
+    PolarStereographic {
+        north: bool,
+        lon0_deg: f64,
+        lat_ts_deg: f64,
+        radius_m: f64,
+    },
+}
+
+/// Georeferencing of a raster: CRS plus the affine placement of pixel centres.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GeoRef {
+    pub crs: Crs,
+    /// CRS coordinates of the centre of pixel (0, 0).
+    pub x0: f64,
+    pub y0: f64,
+    /// Pixel spacing; x grows with the column, y shrinks with the row when `dy > 0`.
+    pub dx: f64,
+    pub dy: f64,
+}
+
+impl GeoRef {
+    /// CRS coordinates of latitude/longitude (degrees). For geographic rasters `x` is the
+    /// longitude wrapped to lie within 180° of `x_centre`.
+    pub fn forward(&self, lat_deg: f64, lon_deg: f64, x_centre: f64) -> (f64, f64) {
+        match self.crs {
+            Crs::Geographic => {
+                let x = lon_deg + 360.0 * ((x_centre - lon_deg) / 360.0).round();
+                (x, lat_deg)
+            }
+            Crs::Equirectangular {
+                lat_ts_deg,
+                lon0_deg,
+                radius_m,
+            } => {
+                let dl = wrap180(lon_deg - lon0_deg);
+                (
+                    radius_m * dl.to_radians() * lat_ts_deg.to_radians().cos(),
+                    radius_m * lat_deg.to_radians(),
+                )
+            }
+            Crs::PolarStereographic {
+                north,
+                lon0_deg,
+                lat_ts_deg,
+                radius_m,
+            } => {
+                let k0 = (1.0 + lat_ts_deg.to_radians().abs().sin()) / 2.0;
+                let phi = lat_deg.to_radians();
+                let dl = (lon_deg - lon0_deg).to_radians();
+                let q = std::f64::consts::FRAC_PI_4;
+                if north {
+                    let rho = 2.0 * radius_m * k0 * (q - phi / 2.0).tan();
+                    (rho * dl.sin(), -rho * dl.cos())
+                } else {
+                    let rho = 2.0 * radius_m * k0 * (q + phi / 2.0).tan();
+                    (rho * dl.sin(), rho * dl.cos())
+                }
+            }
+        }
+    }
+
+    /// Latitude/longitude (degrees) of CRS coordinates.
+    pub fn inverse(&self, x: f64, y: f64) -> (f64, f64) {
+        match self.crs {
+            Crs::Geographic => (y, x),
+            Crs::Equirectangular {
+                lat_ts_deg,
+                lon0_deg,
+                radius_m,
+            } => (
+                (y / radius_m).to_degrees(),
+                lon0_deg + (x / (radius_m * lat_ts_deg.to_radians().cos())).to_degrees(),
+            ),
+            Crs::PolarStereographic {
+                north,
+                lon0_deg,
+                lat_ts_deg,
+                radius_m,
+            } => {
+                let k0 = (1.0 + lat_ts_deg.to_radians().abs().sin()) / 2.0;
+                let rho = x.hypot(y);
+                let c = 2.0 * (rho / (2.0 * radius_m * k0)).atan();
+                let h = std::f64::consts::FRAC_PI_2;
+                if north {
+                    ((h - c).to_degrees(), lon0_deg + x.atan2(-y).to_degrees())
+                } else {
+                    ((c - h).to_degrees(), lon0_deg + x.atan2(y).to_degrees())
+                }
+            }
+        }
+    }
+}
+
+/// Wrap an angle in degrees to (−180, 180].
+pub fn wrap180(a: f64) -> f64 {
+    let r = a.rem_euclid(360.0);
+    if r > 180.0 {
+        r - 360.0
+    } else {
+        r
+    }
+}
+
+/// Interpolation used when resampling a DEM.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Resampling {
+    #[default]
+    Bilinear,
+    /// Catmull-Rom (a = −½), falls back to bilinear where a tap is no data.
+    Bicubic,
+}
+
+impl std::str::FromStr for Resampling {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "bilinear" => Ok(Resampling::Bilinear),
+            "bicubic" => Ok(Resampling::Bicubic),
+            _ => Err(format!("unknown resampling '{s}': use bilinear or bicubic")),
+        }
+    }
+}
+
+/// Mask values carried with each resampled height (and stored in tiles).
+pub mod mask {
+    /// Every tap was a measured sample.
+    pub const MEASURED: u8 = 0;
+    /// At least one tap was a void filled from its neighbours.
+    pub const FILLED: u8 = 1;
+    /// No data: outside the raster, or only unfilled voids; the height is NaN.
+    pub const NO_DATA: u8 = 2;
+}
+
+/// Everything a reader knows about a raster; [`Dem::new`] checks it and builds the void fill.
+pub struct DemParts {
+    pub width: usize,
+    pub height: usize,
+    pub samples: Samples,
+    /// height (m above `datum_radius_m`) = DN · scale + offset
+    pub scale: f64,
+    pub offset: f64,
+    /// Raw DN value that marks a void, compared before scaling.
+    pub nodata: Option<f64>,
+    pub georef: GeoRef,
+    /// Radius of the sphere the heights refer to, when the file says (LOLA's OFFSET).
+    pub datum_radius_m: Option<f64>,
+    /// Body named by the file (PDS3 TARGET_NAME), lower case.
+    pub target: Option<String>,
+    /// The files the raster was read from (label first); hashed into the manifest.
+    pub sources: Vec<PathBuf>,
+    /// One line for people: format, sample type, CRS.
+    pub format: String,
+}
+
+/// A georeferenced elevation raster, ready for sampling.
+pub struct Dem {
+    p: DemParts,
+    /// Filled voids: (row-major index, height), sorted by index.
+    fills: Vec<(u64, f32)>,
+    void_count: u64,
+    unfilled_count: u64,
+    global_lon: bool,
+    global_lat: bool,
+    x_centre: f64,
+}
+
+impl Dem {
+    /// Check the parts and fill voids up to `max_fill_px` pixels from measured data.
+    pub fn new(parts: DemParts, max_fill_px: u32) -> Result<Dem> {
+        let path = parts.sources.first().cloned().unwrap_or_default();
+        let (w, h) = (parts.width, parts.height);
+        check_dimensions(&path, w as u64, h as u64)?;
+        match &parts.samples {
+            Samples::Mapped {
+                map,
+                offset,
+                row_stride,
+                ty,
+                ..
+            } => {
+                let need = (*offset as u128)
+                    + (*row_stride as u128) * (h as u128 - 1)
+                    + (w as u128) * (ty.size() as u128);
+                if *row_stride < w * ty.size() {
+                    return Err(Error::invalid(&path, "row stride is shorter than a row"));
+                }
+                if need > map.len() as u128 {
+                    return Err(Error::invalid(
+                        &path,
+                        format!(
+                            "file is truncated: {w}×{h} samples of {} bytes from byte {offset} \
+                             need {need} bytes, the file has {}",
+                            ty.size(),
+                            map.len()
+                        ),
+                    ));
+                }
+            }
+            Samples::Owned(v) => {
+                if v.len() != w * h {
+                    return Err(Error::invalid(
+                        &path,
+                        format!("{} samples decoded, {w}×{h} expected", v.len()),
+                    ));
+                }
+            }
+        }
+        let g = &parts.georef;
+        if !(g.dx.is_finite() && g.dy.is_finite() && g.dx > 0.0 && g.dy != 0.0)
+            || !(g.x0.is_finite() && g.y0.is_finite())
+        {
+            return Err(Error::invalid(
+                &path,
+                format!("pixel spacing ({}, {}) is not usable", g.dx, g.dy),
+            ));
+        }
+        if !(parts.scale.is_finite() && parts.scale != 0.0 && parts.offset.is_finite()) {
+            return Err(Error::invalid(
+                &path,
+                format!("scale {} / offset {} are not usable", parts.scale, parts.offset),
+            ));
+        }
+        let (global_lon, global_lat) = match g.crs {
+            Crs::Geographic => {
+                let span_x = g.dx * w as f64;
+                let span_y = g.dy * h as f64;
+                let glon = (span_x - 360.0).abs() < 1e-6 * 360.0;
+                let top = g.y0 + g.dy / 2.0;
+                let glat = glon
+                    && w % 2 == 0
+                    && (span_y - 180.0).abs() < 1e-6 * 180.0
+                    && (top - 90.0).abs() < 1e-6;
+                (glon, glat)
+            }
+            _ => (false, false),
+        };
+        let x_centre = g.x0 + g.dx * (w as f64 - 1.0) / 2.0;
+        let mut dem = Dem {
+            p: parts,
+            fills: Vec::new(),
+            void_count: 0,
+            unfilled_count: 0,
+            global_lon,
+            global_lat,
+            x_centre,
+        };
+        dem.fill_voids(max_fill_px)?;
+        Ok(dem)
+    }
+
+    pub fn width(&self) -> usize {
+        self.p.width
+    }
+    pub fn height(&self) -> usize {
+        self.p.height
+    }
+    pub fn georef(&self) -> &GeoRef {
+        &self.p.georef
+    }
+    pub fn datum_radius_m(&self) -> Option<f64> {
+        self.p.datum_radius_m
+    }
+    pub fn target(&self) -> Option<&str> {
+        self.p.target.as_deref()
+    }
+    pub fn sources(&self) -> &[PathBuf] {
+        &self.p.sources
+    }
+    pub fn format(&self) -> &str {
+        &self.p.format
+    }
+    /// Voids in the file, and how many of them stayed no data after filling.
+    pub fn void_counts(&self) -> (u64, u64) {
+        (self.void_count, self.unfilled_count)
+    }
+    /// Whether the raster wraps around in longitude / covers both poles.
+    pub fn is_global(&self) -> (bool, bool) {
+        (self.global_lon, self.global_lat)
+    }
+
+    /// Height in metres of the sample at (`col`, `row`), NaN for a void, before filling.
+    #[inline]
+    pub fn raw(&self, col: usize, row: usize) -> f32 {
+        let v = match &self.p.samples {
+            Samples::Owned(v) => v[row * self.p.width + col] as f64,
+            Samples::Mapped {
+                map,
+                offset,
+                row_stride,
+                ty,
+                order,
+            } => {
+                let at = offset + row * row_stride + col * ty.size();
+                decode(&map[at..at + ty.size()], *ty, *order)
+            }
+        };
+        if !v.is_finite() || self.p.nodata == Some(v) {
+            return f32::NAN;
+        }
+        (v * self.p.scale + self.p.offset) as f32
+    }
+
+    /// Height after void filling and whether it was filled; NaN when it stayed no data.
+    #[inline]
+    pub fn value(&self, col: usize, row: usize) -> (f32, bool) {
+        let v = self.raw(col, row);
+        if !v.is_nan() {
+            return (v, false);
+        }
+        let idx = (row * self.p.width + col) as u64;
+        match self.fills.binary_search_by_key(&idx, |f| f.0) {
+            Ok(i) => (self.fills[i].1, true),
+            Err(_) => (f32::NAN, false),
+        }
+    }
+
+    fn fill_voids(&mut self, max_fill_px: u32) -> Result<()> {
+        let (w, h) = (self.p.width, self.p.height);
+        let mut voids = Vec::new();
+        for r in 0..h {
+            for c in 0..w {
+                if self.raw(c, r).is_nan() {
+                    voids.push((r * w + c) as u64);
+                }
+            }
+        }
+        self.void_count = voids.len() as u64;
+        if voids.len() as u64 == (w * h) as u64 {
+            let path = self.p.sources.first().cloned().unwrap_or_default();
+            return Err(Error::invalid(
+                path,
+                "every sample is a void (no-data value or NaN): nothing to tile",
+            ));
+        }
+        let mut filled: HashMap<u64, f32> = HashMap::new();
+        let mut remaining = voids;
+        for _pass in 0..max_fill_px {
+            if remaining.is_empty() {
+                break;
+            }
+            let mut newly = Vec::new();
+            let mut next = Vec::new();
+            for &idx in &remaining {
+                let (c, r) = ((idx % w as u64) as i64, (idx / w as u64) as i64);
+                let (mut sum, mut n) = (0.0f64, 0u32);
+                for dr in -1..=1i64 {
+                    for dc in -1..=1i64 {
+                        let (cc, rr) = (c + dc, r + dr);
+                        if (dc == 0 && dr == 0)
+                            || cc < 0
+                            || rr < 0
+                            || cc >= w as i64
+                            || rr >= h as i64
+                        {
+                            continue;
+                        }
+                        let v = self.raw(cc as usize, rr as usize);
+                        let v = if v.is_nan() {
+                            match filled.get(&((rr as u64) * w as u64 + cc as u64)) {
+                                Some(f) => *f,
+                                None => continue,
+                            }
+                        } else {
+                            v
+                        };
+                        sum += v as f64;
+                        n += 1;
+                    }
+                }
+                if n > 0 {
+                    newly.push((idx, (sum / n as f64) as f32));
+                } else {
+                    next.push(idx);
+                }
+            }
+            if newly.is_empty() {
+                break;
+            }
+            filled.extend(newly);
+            remaining = next;
+        }
+        self.unfilled_count = remaining.len() as u64;
+        let mut fills: Vec<(u64, f32)> = filled.into_iter().collect();
+        fills.sort_unstable_by_key(|f| f.0);
+        self.fills = fills;
+        Ok(())
+    }
+
+    /// Fractional pixel position (col, row) of latitude/longitude in degrees.
+    #[inline]
+    pub fn to_pixel(&self, lat_deg: f64, lon_deg: f64) -> (f64, f64) {
+        let g = &self.p.georef;
+        let (x, y) = g.forward(lat_deg, lon_deg, self.x_centre);
+        ((x - g.x0) / g.dx, (g.y0 - y) / g.dy)
+    }
+
+    /// Latitude/longitude in degrees of a fractional pixel position.
+    pub fn to_latlon(&self, col: f64, row: f64) -> (f64, f64) {
+        let g = &self.p.georef;
+        g.inverse(g.x0 + col * g.dx, g.y0 - row * g.dy)
+    }
+
+    /// Nominal ground size of one pixel in metres on a sphere of `radius_m` (the latitude
+    /// spacing for geographic rasters).
+    pub fn pixel_size_m(&self, radius_m: f64) -> f64 {
+        let g = &self.p.georef;
+        match g.crs {
+            Crs::Geographic => g.dy.abs().to_radians() * radius_m,
+            _ => g.dx.abs().min(g.dy.abs()),
+        }
+    }
+
+    /// Resolve a possibly out-of-range integer pixel to one inside the raster: wrap in
+    /// longitude and reflect across the poles for global rasters, clamp otherwise.
+    #[inline]
+    fn resolve(&self, c: i64, r: i64) -> (usize, usize) {
+        let (w, h) = (self.p.width as i64, self.p.height as i64);
+        let (mut c, mut r) = (c, r);
+        if self.global_lat && (r < 0 || r >= h) {
+            r = if r < 0 { -1 - r } else { 2 * h - 1 - r };
+            r = r.clamp(0, h - 1);
+            c += w / 2;
+        }
+        if self.global_lon {
+            c = c.rem_euclid(w);
+        } else {
+            c = c.clamp(0, w - 1);
+        }
+        (c as usize, r.clamp(0, h - 1) as usize)
+    }
+
+    /// Whether a fractional pixel position lies on the raster (within half a pixel of the
+    /// outermost centres; any position for the wrapped axes of global rasters).
+    #[inline]
+    pub fn covers(&self, col: f64, row: f64) -> bool {
+        let (w, h) = (self.p.width as f64, self.p.height as f64);
+        let col_ok = self.global_lon || (col >= -0.5 && col <= w - 0.5);
+        let row_ok = self.global_lat || (row >= -0.5 && row <= h - 0.5);
+        col_ok && row_ok
+    }
+
+    /// Interpolated height (m above the DEM's datum) at latitude/longitude in degrees, with its
+    /// mask value (see [`mask`]). NaN with `NO_DATA` off the raster or on unfilled voids.
+    #[inline]
+    pub fn sample(&self, lat_deg: f64, lon_deg: f64, method: Resampling) -> (f32, u8) {
+        let (col, row) = self.to_pixel(lat_deg, lon_deg);
+        self.sample_pixel(col, row, method)
+    }
+
+    /// As [`Dem::sample`], at a fractional pixel position.
+    pub fn sample_pixel(&self, col: f64, row: f64, method: Resampling) -> (f32, u8) {
+        if !(col.is_finite() && row.is_finite()) || !self.covers(col, row) {
+            return (f32::NAN, mask::NO_DATA);
+        }
+        let (c0, r0) = (col.floor(), row.floor());
+        let (fc, fr) = (col - c0, row - r0);
+        let (c0, r0) = (c0 as i64, r0 as i64);
+        if method == Resampling::Bicubic {
+            let wc = catmull_rom(fc);
+            let wr = catmull_rom(fr);
+            let (mut acc, mut any_filled, mut ok) = (0.0f64, false, true);
+            'taps: for (j, wy) in wr.iter().enumerate() {
+                for (i, wx) in wc.iter().enumerate() {
+                    let (c, r) = self.resolve(c0 - 1 + i as i64, r0 - 1 + j as i64);
+                    let (v, f) = self.value(c, r);
+                    if v.is_nan() {
+                        ok = false;
+                        break 'taps;
+                    }
+                    any_filled |= f;
+                    acc += wx * wy * v as f64;
+                }
+            }
+            if ok {
+                let m = if any_filled { mask::FILLED } else { mask::MEASURED };
+                return (acc as f32, m);
+            }
+        }
+        let taps = [
+            (0, 0, (1.0 - fc) * (1.0 - fr)),
+            (1, 0, fc * (1.0 - fr)),
+            (0, 1, (1.0 - fc) * fr),
+            (1, 1, fc * fr),
+        ];
+        let (mut acc, mut wsum, mut any_filled) = (0.0f64, 0.0f64, false);
+        for (dc, dr, wt) in taps {
+            let (c, r) = self.resolve(c0 + dc, r0 + dr);
+            let (v, f) = self.value(c, r);
+            if v.is_nan() || wt == 0.0 {
+                continue;
+            }
+            any_filled |= f;
+            acc += wt * v as f64;
+            wsum += wt;
+        }
+        if wsum <= 0.0 {
+            return (f32::NAN, mask::NO_DATA);
+        }
+        let m = if any_filled { mask::FILLED } else { mask::MEASURED };
+        ((acc / wsum) as f32, m)
+    }
+
+    /// Points (lat, lon in degrees) that outline the raster's footprint: every boundary pixel
+    /// centre and an interior grid every `stride` pixels. Used to find candidate tiles.
+    pub fn footprint_points(&self, stride: usize) -> Vec<(f64, f64)> {
+        let (w, h) = (self.p.width, self.p.height);
+        let stride = stride.max(1);
+        let mut pts = Vec::new();
+        let mut push = |c: f64, r: f64| pts.push(self.to_latlon(c, r));
+        for c in 0..w {
+            push(c as f64 - 0.5, -0.5);
+            push(c as f64 - 0.5, h as f64 - 0.5);
+        }
+        push(w as f64 - 0.5, -0.5);
+        push(w as f64 - 0.5, h as f64 - 0.5);
+        for r in 0..h {
+            push(-0.5, r as f64);
+            push(w as f64 - 0.5, r as f64);
+        }
+        for r in (0..h).step_by(stride) {
+            for c in (0..w).step_by(stride) {
+                push(c as f64, r as f64);
+            }
+        }
+        pts
+    }
+}
+
+#[inline]
+fn catmull_rom(t: f64) -> [f64; 4] {
+    let t2 = t * t;
+    let t3 = t2 * t;
+    [
+        0.5 * (-t3 + 2.0 * t2 - t),
+        0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+        0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+        0.5 * (t3 - t2),
+    ]
+}
+
+#[inline]
+fn decode(b: &[u8], ty: SampleType, order: ByteOrder) -> f64 {
+    macro_rules! rd {
+        ($t:ty, $n:expr) => {{
+            let a: [u8; $n] = b.try_into().expect("slice length matches sample size");
+            match order {
+                ByteOrder::Little => <$t>::from_le_bytes(a) as f64,
+                ByteOrder::Big => <$t>::from_be_bytes(a) as f64,
+            }
+        }};
+    }
+    match ty {
+        SampleType::U8 => b[0] as f64,
+        SampleType::I16 => rd!(i16, 2),
+        SampleType::U16 => rd!(u16, 2),
+        SampleType::I32 => rd!(i32, 4),
+        SampleType::U32 => rd!(u32, 4),
+        SampleType::F32 => rd!(f32, 4),
+        SampleType::F64 => rd!(f64, 8),
+    }
+}
+
+/// Reject absurd raster sizes before anything is allocated.
+pub fn check_dimensions(path: &Path, width: u64, height: u64) -> Result<()> {
+    if width < 2 || height < 2 {
+        return Err(Error::invalid(
+            path,
+            format!("raster is {width}×{height}: a DEM needs at least 2×2 samples"),
+        ));
+    }
+    if width.saturating_mul(height) > MAX_SAMPLES || width > (1 << 24) || height > (1 << 24) {
+        return Err(Error::invalid(
+            path,
+            format!("raster is {width}×{height}: larger than Penumbra accepts (2^34 samples)"),
+        ));
+    }
+    Ok(())
+}
+
+/// Open a DEM, choosing the reader from the file name and contents:
+/// `.lbl`/`.img` → PDS3, `.hgt` → SRTM, `.tif`/`.tiff` → GeoTIFF, `.exr` → EXR (needs a JSON
+/// sidecar for its georeferencing), anything with a `<file>.json`/`<stem>.json` sidecar → raw.
+pub fn open(path: &Path, max_fill_px: u32) -> Result<Dem> {
+    if !path.exists() {
+        return Err(Error::io(
+            path,
+            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
+        ));
+    }
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
+        .unwrap_or_default();
+    let parts = match ext.as_str() {
+        "lbl" | "img" => pds3::read(path)?,
+        "hgt" => srtm::read(path)?,
+        "tif" | "tiff" => geotiff::read(path)?,
+        "exr" => exrdem::read(path)?,
+        _ => match raw::sidecar_for(path) {
+            Some(_) => raw::read(path)?,
+            None => {
+                return Err(Error::unsupported(
+                    path,
+                    "unknown DEM format: expected .LBL/.IMG (PDS3), .hgt (SRTM), .tif \
+                     (GeoTIFF), .exr, or a raw file with a JSON sidecar (see docs/formats.md)",
+                ))
+            }
+        },
+    };
+    Dem::new(parts, max_fill_px)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn synthetic(w: usize, h: usize, georef: GeoRef, f: impl Fn(usize, usize) -> f32) -> Dem {
+        let mut v = Vec::with_capacity(w * h);
+        for r in 0..h {
+            for c in 0..w {
+                v.push(f(c, r));
+            }
+        }
+        Dem::new(
+            DemParts {
+                width: w,
+                height: h,
+                samples: Samples::Owned(v),
+                scale: 1.0,
+                offset: 0.0,
+                nodata: None,
+                georef,
+                datum_radius_m: None,
+                target: None,
+                sources: vec![],
+                format: "test".into(),
+            },
+            DEFAULT_MAX_FILL_PX,
+        )
+        .unwrap()
+    }
+
+    fn global(w: usize, h: usize) -> GeoRef {
+        let d = 360.0 / w as f64;
+        GeoRef {
+            crs: Crs::Geographic,
+            x0: d / 2.0,
+            y0: 90.0 - d / 2.0,
+            dx: d,
+            dy: 180.0 / h as f64,
+        }
+    }
+
+    #[test]
+    fn bilinear_reproduces_planes_and_wraps() {
+        let dem = synthetic(360, 180, global(360, 180), |c, r| (2 * c + 3 * r) as f32);
+        let (v, m) = dem.sample_pixel(10.25, 20.5, Resampling::Bilinear);
+        assert_eq!(m, mask::MEASURED);
+        assert!((v - (2.0 * 10.25 + 3.0 * 20.5)).abs() < 1e-4);
+        // Across the antimeridian the plane wraps: halfway between col 359 and col 0.
+        let (v, _) = dem.sample_pixel(359.5, 5.0, Resampling::Bilinear);
+        assert!((v - (0.5 * (718.0 + 15.0) + 0.5 * 15.0)).abs() < 1e-3);
+        // Longitudes 0..360 and −180..180 name the same point.
+        let a = dem.sample(10.0, 200.0, Resampling::Bilinear);
+        let b = dem.sample(10.0, -160.0, Resampling::Bilinear);
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn bicubic_reproduces_cubics_in_one_axis() {
+        let dem = synthetic(64, 32, global(64, 32), |c, _| {
+            let x = c as f32;
+            0.01 * x * x * x - 0.5 * x * x + 2.0 * x
+        });
+        let x = 20.3f64;
+        let (v, _) = dem.sample_pixel(x, 10.0, Resampling::Bicubic);
+        let e = 0.01 * x * x * x - 0.5 * x * x + 2.0 * x;
+        // Catmull-Rom reproduces quadratics exactly; the cubic term leaves a small residual.
+        assert!((v as f64 - e).abs() < 0.01, "{v} vs {e}");
+    }
+
+    #[test]
+    fn poles_reflect_with_half_turn() {
+        let dem = synthetic(8, 4, global(8, 4), |c, r| (c + 10 * r) as f32);
+        // Row −1 is row 0 on the far side: col 1 → col 5.
+        let (c, r) = dem.resolve(1, -1);
+        assert_eq!((c, r), (5, 0));
+        let (c, r) = dem.resolve(7, 4);
+        assert_eq!((c, r), (3, 3));
+    }
+
+    #[test]
+    fn voids_are_filled_never_zero() {
+        let g = GeoRef {
+            crs: Crs::Geographic,
+            x0: 0.0,
+            y0: 10.0,
+            dx: 0.1,
+            dy: 0.1,
+        };
+        let dem = synthetic(20, 20, g, |c, r| {
+            if (5..8).contains(&c) && (5..8).contains(&r) {
+                f32::NAN
+            } else {
+                1000.0
+            }
+        });
+        assert_eq!(dem.void_counts(), (9, 0));
+        let (v, filled) = dem.value(6, 6);
+        assert!(filled);
+        assert!((v - 1000.0).abs() < 1e-3);
+        let (v, m) = dem.sample_pixel(6.5, 6.5, Resampling::Bilinear);
+        assert_eq!(m, mask::FILLED);
+        assert!((v - 1000.0).abs() < 1e-3);
+        // Off the raster: no data.
+        assert_eq!(dem.sample_pixel(-0.6, 3.0, Resampling::Bilinear).1, mask::NO_DATA);
+    }
+
+    #[test]
+    fn polar_stereographic_round_trips() {
+        for north in [true, false] {
+            let g = GeoRef {
+                crs: Crs::PolarStereographic {
+                    north,
+                    lon0_deg: 0.0,
+                    lat_ts_deg: if north { 90.0 } else { -90.0 },
+                    radius_m: 1_737_400.0,
+                },
+                x0: 0.0,
+                y0: 0.0,
+                dx: 1.0,
+                dy: 1.0,
+            };
+            let lat = if north { 87.2 } else { -87.2 };
+            let (x, y) = g.forward(lat, 33.0, 0.0);
+            let (la, lo) = g.inverse(x, y);
+            assert!((la - lat).abs() < 1e-10 && (lo - 33.0).abs() < 1e-10);
+            // Scale at the pole is 1: 0.001° of latitude ≈ R·dφ.
+            let (_, y1) = g.forward(if north { 89.999 } else { -89.999 }, 0.0, 0.0);
+            let arc = 1_737_400.0 * 0.001f64.to_radians();
+            assert!((y1.abs() - arc).abs() < 1e-3 * arc);
+        }
+    }
+}
