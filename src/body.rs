@@ -152,9 +152,14 @@ mod tests {
         assert_eq!(Body::preset("Moon").unwrap().radius_m, 1_737_400.0);
         assert_eq!(Body::preset("pluto").unwrap().radius_m, 1_188_300.0);
         assert!(Body::preset("vulcan").is_err());
-        assert_eq!(Body::resolve(None, Some(10_000.0)).unwrap().radius_m, 10_000.0);
         assert_eq!(
-            Body::resolve(Some("mars"), Some(3_396_000.0)).unwrap().radius_m,
+            Body::resolve(None, Some(10_000.0)).unwrap().radius_m,
+            10_000.0
+        );
+        assert_eq!(
+            Body::resolve(Some("mars"), Some(3_396_000.0))
+                .unwrap()
+                .radius_m,
             3_396_000.0
         );
         assert!(Body::custom("x", -1.0).is_err());

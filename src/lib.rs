@@ -1,12 +1,22 @@
 //! Penumbra: prepares planetary terrain for fast, accurate shadows.
 //!
 //! The library never parses arguments, prints or exits; the `penumbra` binary in `tools/` does.
-//! Stages: [`dem`] readers → [`tiling`] into cube-face tiles ([`cube`]) → later mipmaps,
-//! horizons and Fourier pyramids, each a function over a [`manifest::Tileset`].
+//! Stages: [`dem`] readers → [`tiling`] into cube-face tiles ([`cube`], [`layout`]) described by a
+//! [`manifest::Tileset`]; later stages (mipmaps, horizons, Fourier pyramids) consume a tileset
+//! and add their products to its manifest. [`bake`] chains the stages a scene needs.
 
+pub mod albedo;
+pub mod bake;
 pub mod body;
 pub mod cube;
 pub mod dem;
 pub mod error;
+pub mod layout;
+pub mod manifest;
+pub mod progress;
+pub mod query;
+pub mod scene;
+pub mod tileio;
+pub mod tiling;
 
 pub use error::{Error, Result};

@@ -319,7 +319,10 @@ impl Dem {
         if !(parts.scale.is_finite() && parts.scale != 0.0 && parts.offset.is_finite()) {
             return Err(Error::invalid(
                 &path,
-                format!("scale {} / offset {} are not usable", parts.scale, parts.offset),
+                format!(
+                    "scale {} / offset {} are not usable",
+                    parts.scale, parts.offset
+                ),
             ));
         }
         let (global_lon, global_lat) = match g.crs {
@@ -574,7 +577,11 @@ impl Dem {
                 }
             }
             if ok {
-                let m = if any_filled { mask::FILLED } else { mask::MEASURED };
+                let m = if any_filled {
+                    mask::FILLED
+                } else {
+                    mask::MEASURED
+                };
                 return (acc as f32, m);
             }
         }
@@ -598,7 +605,11 @@ impl Dem {
         if wsum <= 0.0 {
             return (f32::NAN, mask::NO_DATA);
         }
-        let m = if any_filled { mask::FILLED } else { mask::MEASURED };
+        let m = if any_filled {
+            mask::FILLED
+        } else {
+            mask::MEASURED
+        };
         ((acc / wsum) as f32, m)
     }
 
@@ -816,7 +827,10 @@ mod tests {
         assert_eq!(m, mask::FILLED);
         assert!((v - 1000.0).abs() < 1e-3);
         // Off the raster: no data.
-        assert_eq!(dem.sample_pixel(-0.6, 3.0, Resampling::Bilinear).1, mask::NO_DATA);
+        assert_eq!(
+            dem.sample_pixel(-0.6, 3.0, Resampling::Bilinear).1,
+            mask::NO_DATA
+        );
     }
 
     #[test]

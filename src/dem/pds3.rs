@@ -1,7 +1,7 @@
 //! Reader stub (being written).
-use std::path::Path;
 use crate::dem::DemParts;
 use crate::error::{Error, Result};
+use std::path::Path;
 
 pub fn read(path: &Path) -> Result<DemParts> {
     Err(Error::unsupported(path, "pds3 reader not written yet"))

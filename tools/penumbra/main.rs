@@ -1,1 +1,242 @@
-fn main(){}
+//! `penumbra`: the command-line front end. Parses arguments, draws progress on stderr, prints
+//! tables or JSON, and turns every error into a message and exit code 2.
+
+mod bench;
+mod output;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{Context, Result};
+use clap::{Args, Parser, Subcommand};
+
+use penumbra::bake::{self, Input, Plan, Stage};
+use penumbra::body::Body;
+use penumbra::cube::Projection;
+use penumbra::dem::Resampling;
+use penumbra::scene::SceneSpec;
+use penumbra::tiling::TileOptions;
+
+#[derive(Parser)]
+#[command(
+    name = "penumbra",
+    version,
+    about = "Prepare planetary terrain for fast, accurate shadows"
+)]
+struct Cli {
+    /// No progress bars.
+    #[arg(long, short, global = true)]
+    quiet: bool,
+    /// Worker threads (default: all cores). Output does not depend on it.
+    #[arg(long, global = true)]
+    threads: Option<usize>,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Cut a DEM into cube-face tiles.
+    Tile(TileArgs),
+    /// Run every stage a scene needs (the embedded default scene when no --dem is given).
+    Bake(BakeArgs),
+    /// Describe a tileset.
+    Info {
+        /// Tileset folder.
+        dir: PathBuf,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Ask a tileset about one point.
+    #[command(subcommand)]
+    Query(QueryCommand),
+    /// Measure throughput against baselines in the same run.
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
+}
+
+#[derive(Subcommand)]
+enum QueryCommand {
+    /// Height (m above the body's reference radius) at a latitude/longitude.
+    Height {
+        dir: PathBuf,
+        /// Planetocentric latitude, degrees.
+        #[arg(long, allow_hyphen_values = true)]
+        lat: f64,
+        /// East longitude, degrees (−180..360).
+        #[arg(long, allow_hyphen_values = true)]
+        lon: f64,
+        /// Level to read (0 = coarsest; default the finest).
+        #[arg(long)]
+        level: Option<u8>,
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+#[derive(Args, Clone)]
+struct BodyArgs {
+    /// Body preset (moon, mars, earth, mercury, venus, pluto, ceres, vesta); default: the body
+    /// the DEM names.
+    #[arg(long)]
+    body: Option<String>,
+    /// Reference radius in metres (overrides the preset's).
+    #[arg(long)]
+    radius_m: Option<f64>,
+}
+
+#[derive(Args, Clone)]
+struct TileFlags {
+    /// Interior pixels per tile side.
+    #[arg(long, default_value_t = 512)]
+    tile_size: u32,
+    /// Halo pixels on each side, sampled from the true neighbours.
+    #[arg(long, default_value_t = 2)]
+    halo: u32,
+    #[arg(long, default_value = "gnomonic")]
+    projection: Projection,
+    /// Number of levels (default: from the source resolution).
+    #[arg(long)]
+    levels: Option<u8>,
+    #[arg(long, default_value = "bilinear")]
+    resampling: Resampling,
+    /// Fill voids up to this many source pixels from measured data; farther voids are no data.
+    #[arg(long, default_value_t = penumbra::dem::DEFAULT_MAX_FILL_PX)]
+    void_fill_px: u32,
+    /// 8/16-bit equirectangular global albedo image (PNG) to tile in the same layout.
+    #[arg(long)]
+    albedo: Option<PathBuf>,
+    /// East longitude of the albedo image's left edge.
+    #[arg(long, default_value_t = -180.0, allow_hyphen_values = true)]
+    albedo_west: f64,
+    /// Print the report as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+impl TileFlags {
+    fn options(&self) -> TileOptions {
+        TileOptions {
+            tile_size: self.tile_size,
+            halo: self.halo,
+            projection: self.projection,
+            levels: self.levels,
+            resampling: self.resampling,
+            max_fill_px: self.void_fill_px,
+            albedo: self.albedo.clone().map(|p| (p, self.albedo_west)),
+        }
+    }
+}
+
+#[derive(Args)]
+struct TileArgs {
+    /// The DEM: PDS3 .LBL or .IMG, SRTM .hgt, GeoTIFF, EXR or raw with a JSON sidecar.
+    dem: PathBuf,
+    #[command(flatten)]
+    body: BodyArgs,
+    /// Output tileset folder.
+    #[arg(long)]
+    out: PathBuf,
+    #[command(flatten)]
+    flags: TileFlags,
+}
+
+#[derive(Args)]
+struct BakeArgs {
+    /// A DEM to bake instead of the embedded scene.
+    #[arg(long)]
+    dem: Option<PathBuf>,
+    #[command(flatten)]
+    body: BodyArgs,
+    /// Output tileset folder.
+    #[arg(long, default_value = "tiles")]
+    out: PathBuf,
+    /// Pixels per side of the embedded scene (20 m/px).
+    #[arg(long, default_value_t = 2048)]
+    scene_size: usize,
+    #[command(flatten)]
+    flags: TileFlags,
+}
+
+fn body_arg(b: &BodyArgs) -> Result<Option<Body>> {
+    if b.body.is_none() && b.radius_m.is_none() {
+        return Ok(None);
+    }
+    Ok(Some(Body::resolve(b.body.as_deref(), b.radius_m)?))
+}
+
+fn run(cli: Cli) -> Result<()> {
+    if let Some(n) = cli.threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n.max(1))
+            .build_global()
+            .context("setting up the thread pool")?;
+    }
+    let progress = output::Bars::new(cli.quiet);
+    match cli.command {
+        Command::Tile(a) => {
+            let plan = Plan {
+                stages: vec![Stage::Tile],
+                tile: a.flags.options(),
+            };
+            let input = Input::Dem {
+                path: a.dem.clone(),
+                body: body_arg(&a.body)?,
+            };
+            let report = bake::bake(&input, &a.out, &plan, &progress)?;
+            output::print_bake(&report, a.flags.json)?;
+        }
+        Command::Bake(a) => {
+            let plan = Plan {
+                stages: vec![Stage::Tile],
+                tile: a.flags.options(),
+            };
+            let input = match &a.dem {
+                Some(p) => Input::Dem {
+                    path: p.clone(),
+                    body: body_arg(&a.body)?,
+                },
+                None => {
+                    if a.scene_size < 1024 || a.scene_size > 16384 {
+                        anyhow::bail!("--scene-size {} is outside 1024..16384", a.scene_size);
+                    }
+                    Input::Embedded(SceneSpec {
+                        size: a.scene_size,
+                        ..SceneSpec::default()
+                    })
+                }
+            };
+            let report = bake::bake(&input, &a.out, &plan, &progress)?;
+            output::print_bake(&report, a.flags.json)?;
+        }
+        Command::Info { dir, json } => output::print_info(&dir, json)?,
+        Command::Query(QueryCommand::Height {
+            dir,
+            lat,
+            lon,
+            level,
+            json,
+        }) => {
+            let ans = penumbra::query::height(&dir, lat, lon, level)?;
+            output::print_height(&ans, json)?;
+        }
+        Command::Bench(b) => bench::run(b, cli.quiet)?,
+    }
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            if let Some(io) = e.downcast_ref::<std::io::Error>() {
+                if io.kind() == std::io::ErrorKind::BrokenPipe {
+                    return ExitCode::SUCCESS;
+                }
+            }
+            eprintln!("penumbra: error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}

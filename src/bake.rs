@@ -1,0 +1,120 @@
+//! `bake`: run the stages a scene needs, in order, on one tileset.
+//!
+//! A [`Plan`] lists the stages to run; each stage reads the tileset the previous one left and
+//! records its product in the manifest. Stages a scene does not select are not run and leave
+//! nothing behind. Today the only stage is tiling; mipmaps, horizons and Fourier pyramids join
+//! as they are built.
+
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+use crate::body::Body;
+use crate::dem::{self, Dem};
+use crate::error::{Error, Result};
+use crate::progress::Progress;
+use crate::scene::{self, SceneSpec};
+use crate::tiling::{self, Embedded, TileOptions, TileReport};
+
+/// A stage of the pipeline.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Stage {
+    /// Cut the DEM (and albedo) into cube-face tiles.
+    Tile,
+}
+
+/// Where the terrain comes from.
+pub enum Input {
+    /// The embedded synthetic south-pole scene on the Moon.
+    Embedded(SceneSpec),
+    /// A DEM file and the body it belongs to (`None`: the body the file names).
+    Dem { path: PathBuf, body: Option<Body> },
+}
+
+/// What to run.
+pub struct Plan {
+    pub stages: Vec<Stage>,
+    pub tile: TileOptions,
+}
+
+impl Default for Plan {
+    fn default() -> Self {
+        Plan {
+            stages: vec![Stage::Tile],
+            tile: TileOptions::default(),
+        }
+    }
+}
+
+#[derive(Debug, Serialize)]
+pub struct BakeReport {
+    pub out: PathBuf,
+    pub stages: Vec<Stage>,
+    pub tile: Option<TileReport>,
+}
+
+pub fn bake(input: &Input, out: &Path, plan: &Plan, progress: &dyn Progress) -> Result<BakeReport> {
+    let mut report = BakeReport {
+        out: out.to_path_buf(),
+        stages: plan.stages.clone(),
+        tile: None,
+    };
+    for stage in &plan.stages {
+        match stage {
+            Stage::Tile => {
+                let r = match input {
+                    Input::Embedded(spec) => {
+                        let parts = scene::generate(spec);
+                        let hash = scene::content_hash(&parts);
+                        let dem = Dem::new(parts, plan.tile.max_fill_px)?;
+                        let body = Body::preset("moon")?;
+                        let label = format!("south-pole-scene-{}px-{}m", spec.size, spec.pixel_m);
+                        let emb = Embedded {
+                            label,
+                            blake3: hash,
+                        };
+                        tiling::tile_dem(&dem, &body, out, &plan.tile, Some(&emb), progress)?
+                    }
+                    Input::Dem { path, body } => {
+                        let dem = dem::open(path, plan.tile.max_fill_px)?;
+                        let body = body_for(&dem, body.clone())?;
+                        tiling::tile_dem(&dem, &body, out, &plan.tile, None, progress)?
+                    }
+                };
+                report.tile = Some(r);
+            }
+        }
+    }
+    Ok(report)
+}
+
+/// The body to tile `dem` for: the one given, checked against the body the file names (PDS3
+/// TARGET_NAME), or the named one when none is given.
+pub fn body_for(dem: &Dem, given: Option<Body>) -> Result<Body> {
+    let path = dem.sources().first().cloned().unwrap_or_default();
+    match (given, dem.target()) {
+        (Some(b), Some(t)) if b.reference.starts_with("radius given") || b.name == "custom" => {
+            let _ = t;
+            Ok(b)
+        }
+        (Some(b), Some(t)) if Body::preset(t).is_ok() && t != b.name => Err(Error::usage(format!(
+            "{} is a {t} DEM but --body {} was given: drop --body, or give --radius-m to force a \
+             radius",
+            path.display(),
+            b.name
+        ))),
+        (Some(b), _) => Ok(b),
+        (None, Some(t)) => Body::preset(t).map_err(|_| {
+            Error::usage(format!(
+                "{} names the body '{t}', which has no preset: give --body or --radius-m",
+                path.display()
+            ))
+        }),
+        (None, None) => Err(Error::usage(format!(
+            "{} does not say which body it belongs to: give --body (moon, mars, earth, …) or \
+             --radius-m",
+            path.display()
+        ))),
+    }
+}

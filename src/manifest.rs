@@ -1,0 +1,211 @@
+//! `tileset.json`: what a tileset holds and how it was made. Specified in docs/tileset.md.
+//! Later stages add their products here; readers must ignore keys they do not know.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::body::Body;
+use crate::cube::Face;
+use crate::dem::{GeoRef, Resampling};
+use crate::error::{Error, IoContext, Result};
+use crate::layout::{Layout, TileId};
+
+pub const MANIFEST: &str = "tileset.json";
+/// Written at the start of a run and removed at its end; a rerun with the same run key resumes.
+pub const PARTIAL: &str = ".penumbra-partial.json";
+pub const FORMAT: &str = "penumbra-tileset";
+pub const FORMAT_VERSION: u32 = 1;
+pub const HEIGHT_PATTERN: &str = "height/{level}/{face}/{y}/{x}.exr";
+pub const ALBEDO_PATTERN: &str = "albedo/{level}/{face}/{y}/{x}.png";
+
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Tool {
+    pub name: String,
+    pub version: String,
+}
+
+impl Tool {
+    pub fn this() -> Tool {
+        Tool {
+            name: "penumbra".into(),
+            version: env!("CARGO_PKG_VERSION").into(),
+        }
+    }
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct SourceFile {
+    pub path: String,
+    pub bytes: u64,
+    pub blake3: String,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct SourceInfo {
+    pub files: Vec<SourceFile>,
+    pub format: String,
+    pub width: usize,
+    pub height: usize,
+    pub georef: GeoRef,
+    /// Nominal source pixel size on the body (m).
+    pub pixel_size_m: f64,
+    /// Radius the source heights refer to, when the source says.
+    pub datum_radius_m: Option<f64>,
+    /// Added to every source height to make it relative to the body's radius.
+    pub height_shift_m: f64,
+    /// Void samples in the source, and how many stayed no data after filling.
+    pub voids: u64,
+    pub voids_unfilled: u64,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct HeightProduct {
+    pub path: String,
+    /// EXR channels: `height` f32 metres above `body.radius_m`, `mask` f16 (0 measured,
+    /// 1 void filled from neighbours, 2 no data: height NaN).
+    pub channels: Vec<String>,
+    pub min_m: f64,
+    pub max_m: f64,
+    /// Interior pixels over all written tiles whose mask is 1 / 2.
+    pub filled_pixels: u64,
+    pub no_data_pixels: u64,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct AlbedoProduct {
+    pub path: String,
+    pub source: SourceFile,
+    pub bit_depth: u8,
+    pub channels: u8,
+    /// Longitude of the image's left edge (east-positive degrees).
+    pub west_lon_deg: f64,
+}
+
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct Products {
+    pub height: Option<HeightProduct>,
+    pub albedo: Option<AlbedoProduct>,
+}
+
+/// Tiles present at one level, as row runs `[y, x_first, x_last]` per face.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct LevelCoverage {
+    pub level: u8,
+    pub tiles: u64,
+    /// Tiles per face at this level (4^level), so `tiles` < 6 × this means partial coverage.
+    pub tiles_per_face: u64,
+    pub faces: BTreeMap<Face, Vec<[u32; 3]>>,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Tileset {
+    pub format: String,
+    pub format_version: u32,
+    pub tool: Tool,
+    pub body: Body,
+    pub layout: Layout,
+    pub resampling: Resampling,
+    pub source: SourceInfo,
+    pub products: Products,
+    pub coverage: Vec<LevelCoverage>,
+    /// Every parameter that shaped the output.
+    pub parameters: serde_json::Value,
+    /// Hash of the tool version, the source hashes and the parameters: equal keys mean
+    /// identical output.
+    pub run_key: String,
+}
+
+impl Tileset {
+    pub fn load(dir: &Path) -> Result<Tileset> {
+        let path = dir.join(MANIFEST);
+        if !path.exists() {
+            return Err(Error::invalid(
+                &path,
+                "no tileset manifest here: point at a folder made by `penumbra tile` or `penumbra bake`",
+            ));
+        }
+        let text = std::fs::read_to_string(&path).at(&path)?;
+        let t: Tileset = serde_json::from_str(&text)
+            .map_err(|e| Error::invalid(&path, format!("manifest is not valid: {e}")))?;
+        if t.format != FORMAT || t.format_version > FORMAT_VERSION {
+            return Err(Error::unsupported(
+                &path,
+                format!(
+                    "format {} v{} (this penumbra reads {FORMAT} up to v{FORMAT_VERSION})",
+                    t.format, t.format_version
+                ),
+            ));
+        }
+        Ok(t)
+    }
+
+    pub fn tile_set(&self) -> BTreeSet<TileId> {
+        let mut set = BTreeSet::new();
+        for lc in &self.coverage {
+            for (face, runs) in &lc.faces {
+                for r in runs {
+                    for x in r[1]..=r[2] {
+                        set.insert(TileId {
+                            level: lc.level,
+                            face: *face,
+                            x,
+                            y: r[0],
+                        });
+                    }
+                }
+            }
+        }
+        set
+    }
+
+    pub fn has_tile(&self, id: TileId) -> bool {
+        self.coverage.iter().any(|lc| {
+            lc.level == id.level
+                && lc.faces.get(&id.face).is_some_and(|runs| {
+                    runs.iter()
+                        .any(|r| r[0] == id.y && (r[1]..=r[2]).contains(&id.x))
+                })
+        })
+    }
+}
+
+/// Row-run coverage of a set of tiles, one entry per level 0..levels.
+pub fn coverage_of(tiles: &BTreeSet<TileId>, levels: u8) -> Vec<LevelCoverage> {
+    (0..levels)
+        .map(|level| {
+            let mut faces: BTreeMap<Face, Vec<[u32; 3]>> = BTreeMap::new();
+            let mut count = 0;
+            for t in tiles.iter().filter(|t| t.level == level) {
+                count += 1;
+                let runs = faces.entry(t.face).or_default();
+                match runs.last_mut() {
+                    Some(r) if r[0] == t.y && r[2] + 1 == t.x => r[2] = t.x,
+                    _ => runs.push([t.y, t.x, t.x]),
+                }
+            }
+            LevelCoverage {
+                level,
+                tiles: count,
+                tiles_per_face: 1u64 << (2 * level as u32),
+                faces,
+            }
+        })
+        .collect()
+}
+
+/// blake3 of a file, streamed through a memory map.
+pub fn hash_file(path: &Path) -> Result<SourceFile> {
+    let meta = std::fs::metadata(path).at(path)?;
+    let mut h = blake3::Hasher::new();
+    if meta.len() > 0 {
+        let map = crate::dem::map_file(path)?;
+        h.update(&map);
+    }
+    Ok(SourceFile {
+        path: path.display().to_string(),
+        bytes: meta.len(),
+        blake3: h.finalize().to_hex().to_string(),
+    })
+}

@@ -1,0 +1,252 @@
+//! Reading and writing tiles: EXR height tiles (f32 `height` + f16 `mask`), PNG albedo tiles,
+//! and the atomic-write helper every output goes through (temp file + rename, so a reader or a
+//! crashed run never sees half a file).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use exr::prelude::*;
+
+use crate::error::{Error, IoContext, Result};
+
+/// Write `bytes` to `path` atomically: a temp file in the same folder, fsync, rename.
+pub fn write_atomic(
+    path: &Path,
+    write: impl FnOnce(&mut std::fs::File) -> Result<()>,
+) -> Result<()> {
+    let dir = path.parent().unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).at(dir)?;
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.tmp.{}", std::process::id()));
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp).at(&tmp)?;
+        write(&mut f)?;
+        f.flush().at(&tmp)?;
+        Ok(())
+    })();
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e);
+    }
+    std::fs::rename(&tmp, path).at(path)
+}
+
+/// Write a small text/JSON file atomically.
+pub fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
+    write_atomic(path, |f| f.write_all(bytes).at(path))
+}
+
+/// A square height tile including its halo.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HeightTile {
+    /// Side length in pixels, halo included.
+    pub size: usize,
+    /// Row-major heights in metres above the body's reference sphere; NaN = no data.
+    pub height: Vec<f32>,
+    /// Row-major mask values (see `dem::mask`).
+    pub mask: Vec<u8>,
+}
+
+impl HeightTile {
+    /// Bilinear height at fractional pixel (x, y) of the stored array (halo included).
+    /// No-data taps are left out; NaN when all four are no data.
+    pub fn bilinear(&self, x: f64, y: f64) -> f32 {
+        let n = self.size as i64;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let mut acc = 0.0f64;
+        let mut wsum = 0.0f64;
+        for (dx, dy, w) in [
+            (0, 0, (1.0 - fx) * (1.0 - fy)),
+            (1, 0, fx * (1.0 - fy)),
+            (0, 1, (1.0 - fx) * fy),
+            (1, 1, fx * fy),
+        ] {
+            let (xi, yi) = ((x0 + dx).clamp(0, n - 1), (y0 + dy).clamp(0, n - 1));
+            let v = self.height[(yi * n + xi) as usize];
+            if v.is_nan() || w == 0.0 {
+                continue;
+            }
+            acc += w * v as f64;
+            wsum += w;
+        }
+        if wsum > 0.0 {
+            (acc / wsum) as f32
+        } else {
+            f32::NAN
+        }
+    }
+}
+
+/// Write a height tile as a single-part scanline EXR, ZIP-compressed (lossless), channels
+/// `height` (f32) and `mask` (f16 holding 0, 1 or 2).
+pub fn write_height_tile(path: &Path, tile: &HeightTile) -> Result<()> {
+    let size = (tile.size, tile.size);
+    let mask: Vec<f16> = tile.mask.iter().map(|&m| f16::from_f32(m as f32)).collect();
+    let channels = AnyChannels::sort(SmallVec::from_vec(vec![
+        AnyChannel::new("height", FlatSamples::F32(tile.height.clone())),
+        AnyChannel::new("mask", FlatSamples::F16(mask)),
+    ]));
+    let layer = Layer::new(
+        size,
+        LayerAttributes::named("penumbra-height"),
+        Encoding::SMALL_LOSSLESS,
+        channels,
+    );
+    let image = Image::from_layer(layer);
+    write_atomic(path, |f| {
+        let mut buf = std::io::Cursor::new(Vec::with_capacity(tile.size * tile.size * 3));
+        image
+            .write()
+            .non_parallel()
+            .to_buffered(&mut buf)
+            .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
+        f.write_all(buf.get_ref()).at(path)
+    })
+}
+
+/// Read a height tile written by [`write_height_tile`].
+pub fn read_height_tile(path: &Path) -> Result<HeightTile> {
+    let bytes = std::fs::read(path).at(path)?;
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .non_parallel()
+        .from_buffered(std::io::Cursor::new(bytes))
+        .map_err(|e| {
+            Error::invalid(
+                path,
+                format!("not a readable EXR height tile ({e}); delete it and rerun the stage"),
+            )
+        })?;
+    let layer = &image.layer_data;
+    let (w, h) = (layer.size.width(), layer.size.height());
+    if w != h {
+        return Err(Error::invalid(
+            path,
+            format!("height tile is {w}×{h}, not square"),
+        ));
+    }
+    let mut height = None;
+    let mut mask = None;
+    for ch in &layer.channel_data.list {
+        match ch.name.to_string().as_str() {
+            "height" => height = Some(ch.sample_data.values_as_f32().collect::<Vec<f32>>()),
+            "mask" => {
+                mask = Some(
+                    ch.sample_data
+                        .values_as_f32()
+                        .map(|m| m.clamp(0.0, 255.0) as u8)
+                        .collect::<Vec<u8>>(),
+                )
+            }
+            _ => {}
+        }
+    }
+    let height = height.ok_or_else(|| Error::invalid(path, "EXR has no 'height' channel"))?;
+    let mask = mask.unwrap_or_else(|| vec![0; height.len()]);
+    Ok(HeightTile {
+        size: w,
+        height,
+        mask,
+    })
+}
+
+/// An albedo/colour tile: 8- or 16-bit samples, 1–4 channels, halo included.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AlbedoTile {
+    pub size: usize,
+    pub channels: usize,
+    pub sixteen_bit: bool,
+    /// Row-major interleaved samples scaled to the bit depth's full range.
+    pub data: Vec<u16>,
+}
+
+/// Write an albedo tile as PNG.
+pub fn write_albedo_tile(path: &Path, tile: &AlbedoTile) -> Result<()> {
+    use image::{DynamicImage, ImageBuffer};
+    let (w, h) = (tile.size as u32, tile.size as u32);
+    let bad = || Error::invalid(path, "albedo tile buffer has the wrong length");
+    let img: DynamicImage = if tile.sixteen_bit {
+        let d = tile.data.clone();
+        match tile.channels {
+            1 => DynamicImage::ImageLuma16(ImageBuffer::from_raw(w, h, d).ok_or_else(bad)?),
+            2 => DynamicImage::ImageLumaA16(ImageBuffer::from_raw(w, h, d).ok_or_else(bad)?),
+            3 => DynamicImage::ImageRgb16(ImageBuffer::from_raw(w, h, d).ok_or_else(bad)?),
+            _ => DynamicImage::ImageRgba16(ImageBuffer::from_raw(w, h, d).ok_or_else(bad)?),
+        }
+    } else {
+        let d: Vec<u8> = tile.data.iter().map(|&v| v as u8).collect();
+        match tile.channels {
+            1 => DynamicImage::ImageLuma8(ImageBuffer::from_raw(w, h, d).ok_or_else(bad)?),
+            2 => DynamicImage::ImageLumaA8(ImageBuffer::from_raw(w, h, d).ok_or_else(bad)?),
+            3 => DynamicImage::ImageRgb8(ImageBuffer::from_raw(w, h, d).ok_or_else(bad)?),
+            _ => DynamicImage::ImageRgba8(ImageBuffer::from_raw(w, h, d).ok_or_else(bad)?),
+        }
+    };
+    write_atomic(path, |f| {
+        let mut buf = std::io::Cursor::new(Vec::new());
+        img.write_to(&mut buf, image::ImageFormat::Png)
+            .map_err(|e| Error::invalid(path, format!("PNG encoding failed: {e}")))?;
+        f.write_all(buf.get_ref()).at(path)
+    })
+}
+
+/// Path of a tile file below a tileset root, from the manifest's pattern.
+pub fn tile_path(root: &Path, pattern: &str, level: u8, face: &str, x: u32, y: u32) -> PathBuf {
+    root.join(
+        pattern
+            .replace("{level}", &level.to_string())
+            .replace("{face}", face)
+            .replace("{x}", &x.to_string())
+            .replace("{y}", &y.to_string()),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn height_tile_round_trips_bit_exact() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("a/b/t.exr");
+        let n = 37;
+        let tile = HeightTile {
+            size: n,
+            height: (0..n * n)
+                .map(|i| {
+                    if i == 5 {
+                        f32::NAN
+                    } else {
+                        (i as f32).sin() * 1234.5
+                    }
+                })
+                .collect(),
+            mask: (0..n * n)
+                .map(|i| if i == 5 { 2 } else { (i % 2) as u8 })
+                .collect(),
+        };
+        write_height_tile(&p, &tile).unwrap();
+        let back = read_height_tile(&p).unwrap();
+        assert_eq!(back.size, n);
+        assert_eq!(back.mask, tile.mask);
+        for (a, b) in back.height.iter().zip(&tile.height) {
+            assert!(a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()));
+        }
+        // No temp file is left behind.
+        let names: Vec<_> = std::fs::read_dir(p.parent().unwrap()).unwrap().collect();
+        assert_eq!(names.len(), 1);
+        // A corrupt tile is an error that names the file.
+        std::fs::write(&p, b"not an exr").unwrap();
+        let e = read_height_tile(&p).unwrap_err().to_string();
+        assert!(e.contains("t.exr"), "{e}");
+    }
+}

@@ -1,0 +1,192 @@
+//! Everything the CLI shows people: progress bars on stderr, tables and JSON on stdout.
+
+use std::io::Write;
+use std::path::Path;
+use std::sync::Mutex;
+
+use anyhow::Result;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use penumbra::bake::BakeReport;
+use penumbra::manifest::Tileset;
+use penumbra::query::HeightAnswer;
+
+/// indicatif bars on stderr; nothing when quiet or when stderr is not a terminal.
+pub struct Bars {
+    quiet: bool,
+    bar: Mutex<Option<ProgressBar>>,
+}
+
+impl Bars {
+    pub fn new(quiet: bool) -> Bars {
+        Bars {
+            quiet,
+            bar: Mutex::new(None),
+        }
+    }
+}
+
+impl penumbra::progress::Progress for Bars {
+    fn start(&self, label: &str, total: u64) {
+        if self.quiet {
+            return;
+        }
+        let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());
+        bar.set_style(
+            ProgressStyle::with_template("{prefix:>10} [{bar:40}] {pos}/{len} {per_sec} eta {eta}")
+                .expect("valid template")
+                .progress_chars("=> "),
+        );
+        bar.set_prefix(label.to_string());
+        *self.bar.lock().expect("progress lock") = Some(bar);
+    }
+    fn inc(&self, n: u64) {
+        if let Some(b) = self.bar.lock().expect("progress lock").as_ref() {
+            b.inc(n);
+        }
+    }
+    fn finish(&self) {
+        if let Some(b) = self.bar.lock().expect("progress lock").take() {
+            b.finish_and_clear();
+        }
+    }
+}
+
+pub fn print_json<T: serde::Serialize>(v: &T) -> Result<()> {
+    let mut out = std::io::stdout().lock();
+    serde_json::to_writer_pretty(&mut out, v)?;
+    writeln!(out)?;
+    Ok(())
+}
+
+pub fn print_bake(r: &BakeReport, json: bool) -> Result<()> {
+    if json {
+        return print_json(r);
+    }
+    let mut out = std::io::stdout().lock();
+    if let Some(t) = &r.tile {
+        if t.up_to_date {
+            writeln!(
+                out,
+                "{}: up to date ({} tiles)",
+                t.out.display(),
+                t.tiles_kept
+            )?;
+        } else {
+            writeln!(
+                out,
+                "{}: {} levels, {} tiles written, {} kept from an earlier run, {} candidates",
+                t.out.display(),
+                t.levels,
+                t.tiles_written,
+                t.tiles_kept,
+                t.candidates
+            )?;
+        }
+    }
+    Ok(())
+}
+
+pub fn print_info(dir: &Path, json: bool) -> Result<()> {
+    let ts = Tileset::load(dir)?;
+    if json {
+        return print_json(&ts);
+    }
+    let mut o = std::io::stdout().lock();
+    let l = &ts.layout;
+    writeln!(o, "tileset      {}", dir.display())?;
+    writeln!(o, "made by      {} {}", ts.tool.name, ts.tool.version)?;
+    writeln!(
+        o,
+        "body         {} (radius {} m; {})",
+        ts.body.name, ts.body.radius_m, ts.body.reference
+    )?;
+    writeln!(
+        o,
+        "layout       {} cube, {} px tiles + {} px halo, {} levels, {:?} resampling",
+        l.projection.name(),
+        l.tile_size,
+        l.halo,
+        l.levels,
+        ts.resampling
+    )?;
+    writeln!(
+        o,
+        "source       {} ({}×{}, {:.1} m/px)",
+        ts.source.format, ts.source.width, ts.source.height, ts.source.pixel_size_m
+    )?;
+    for f in &ts.source.files {
+        writeln!(
+            o,
+            "             {} ({} bytes, blake3 {}…)",
+            f.path,
+            f.bytes,
+            &f.blake3[..16.min(f.blake3.len())]
+        )?;
+    }
+    writeln!(
+        o,
+        "voids        {} in the source, {} left as no data; height shift {:+} m",
+        ts.source.voids, ts.source.voids_unfilled, ts.source.height_shift_m
+    )?;
+    if let Some(h) = &ts.products.height {
+        writeln!(
+            o,
+            "height       {} .. {} m; {} filled px, {} no-data px; {}",
+            h.min_m, h.max_m, h.filled_pixels, h.no_data_pixels, h.path
+        )?;
+    }
+    if let Some(a) = &ts.products.albedo {
+        writeln!(
+            o,
+            "albedo       {}-bit, {} channels from {}; {}",
+            a.bit_depth, a.channels, a.source.path, a.path
+        )?;
+    }
+    writeln!(o)?;
+    writeln!(
+        o,
+        "{:>5} {:>12} {:>10} {:>8}  faces",
+        "level", "m/px centre", "tiles", "of"
+    )?;
+    for c in &ts.coverage {
+        let faces: Vec<String> = c
+            .faces
+            .iter()
+            .map(|(f, runs)| {
+                let n: u32 = runs.iter().map(|r| r[2] - r[1] + 1).sum();
+                format!("{f}:{n}")
+            })
+            .collect();
+        writeln!(
+            o,
+            "{:>5} {:>12.1} {:>10} {:>8}  {}",
+            c.level,
+            l.centre_pixel_m(c.level, ts.body.radius_m),
+            c.tiles,
+            6 * c.tiles_per_face,
+            faces.join(" ")
+        )?;
+    }
+    Ok(())
+}
+
+pub fn print_height(a: &HeightAnswer, json: bool) -> Result<()> {
+    if json {
+        return print_json(a);
+    }
+    let mask = ["measured", "filled void", "no data"][a.mask.min(2) as usize];
+    println!(
+        "{:.3} m at {}°, {}° (level {}, face {}, tile {}/{}, pixel {:.2},{:.2}; {mask})",
+        a.height_m,
+        a.lat_deg,
+        a.lon_deg,
+        a.level,
+        a.face,
+        a.tile[0],
+        a.tile[1],
+        a.pixel[0],
+        a.pixel[1]
+    );
+    Ok(())
+}
