@@ -1,1 +1,17 @@
+//! The one integration-test binary. Each module covers one concern.
 
+// Shared helpers: synthetic DEMs, the shared-data path, running the CLI.
+mod util;
+
+// lat/lon ↔ face/(u,v) ↔ direction round trips over poles, edges and corners.
+mod projection;
+// Adjacent tiles and all 12 face edges agree where they overlap.
+mod seams;
+// The tiling stage: coverage, resume, determinism across thread counts, albedo.
+mod tiling;
+// The CLI contract: commands, JSON, exit code 2 and no partial output on bad input.
+mod cli;
+// DEM readers: good, damaged and truncated files, and the real DEMs in ../shared/data.
+mod readers;
+// Real DEMs tiled and queried at landmarks (skipped without ../shared/data).
+mod realdata;

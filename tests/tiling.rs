@@ -1,0 +1,278 @@
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+
+use penumbra::body::Body;
+use penumbra::cube::{self, Face};
+use penumbra::dem::{Crs, Dem, DemParts, GeoRef, Resampling, Samples};
+use penumbra::layout::TileId;
+use penumbra::manifest::{self, Tileset};
+use penumbra::progress::NoProgress;
+use penumbra::tileio;
+use penumbra::tiling::{tile_dem, TileOptions};
+
+use crate::util::{analytic, global_dem};
+
+fn small_opts() -> TileOptions {
+    TileOptions {
+        tile_size: 32,
+        halo: 2,
+        levels: Some(3),
+        ..Default::default()
+    }
+}
+
+fn moon() -> Body {
+    Body::preset("moon").unwrap()
+}
+
+/// Every file below `dir` with its bytes, by relative path.
+fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let rel = p.strip_prefix(dir).unwrap().display().to_string();
+                out.insert(rel, std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    out
+}
+
+fn tile_with_threads(dem: &Dem, opts: &TileOptions, threads: usize) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(|| tile_dem(dem, &moon(), dir.path(), opts, None, &NoProgress).unwrap());
+    dir
+}
+
+#[test]
+fn same_bytes_whatever_the_thread_count() {
+    let dem = global_dem(720);
+    let a = tile_with_threads(&dem, &small_opts(), 1);
+    let b = tile_with_threads(&dem, &small_opts(), 3);
+    let (sa, sb) = (snapshot(a.path()), snapshot(b.path()));
+    assert_eq!(sa.len(), 6 * (1 + 4 + 16) + 1, "126 tiles and the manifest");
+    assert_eq!(sa.keys().collect::<Vec<_>>(), sb.keys().collect::<Vec<_>>());
+    for (k, v) in &sa {
+        assert!(v == &sb[k], "{k} differs between 1 and 3 threads");
+    }
+}
+
+#[test]
+fn reruns_resume_and_stale_tiles_go() {
+    let dem = global_dem(360);
+    let dir = tempfile::tempdir().unwrap();
+    let opts = small_opts();
+    let r1 = tile_dem(&dem, &moon(), dir.path(), &opts, None, &NoProgress).unwrap();
+    assert_eq!(r1.tiles_written, 126);
+    let before = snapshot(dir.path());
+
+    // Unchanged inputs: nothing to do.
+    let r2 = tile_dem(&dem, &moon(), dir.path(), &opts, None, &NoProgress).unwrap();
+    assert!(r2.up_to_date);
+
+    // An interrupted run (marker present, manifest and one tile missing) resumes.
+    let ts = Tileset::load(dir.path()).unwrap();
+    std::fs::write(
+        dir.path().join(manifest::PARTIAL),
+        serde_json::json!({ "run_key": ts.run_key }).to_string(),
+    )
+    .unwrap();
+    std::fs::remove_file(dir.path().join(manifest::MANIFEST)).unwrap();
+    std::fs::remove_file(dir.path().join("height/2/px/1/3.exr")).unwrap();
+    let r3 = tile_dem(&dem, &moon(), dir.path(), &opts, None, &NoProgress).unwrap();
+    assert_eq!((r3.tiles_written, r3.tiles_kept), (1, 125));
+    assert_eq!(
+        snapshot(dir.path()),
+        before,
+        "a resumed run gives the same bytes"
+    );
+
+    // Other parameters: the old tiles are stale and removed.
+    let opts2 = TileOptions {
+        levels: Some(2),
+        ..small_opts()
+    };
+    let r4 = tile_dem(&dem, &moon(), dir.path(), &opts2, None, &NoProgress).unwrap();
+    assert_eq!(r4.tiles_written, 30);
+    assert!(!dir.path().join("height/2").exists());
+}
+
+#[test]
+fn coverage_matches_brute_force_for_a_regional_dem() {
+    // 20° × 10° at 0.1°, straddling faces +X and +Y (lon 30..50).
+    let (w, h, d) = (200usize, 100usize, 0.1);
+    let georef = GeoRef {
+        crs: Crs::Geographic,
+        x0: 30.0 + d / 2.0,
+        y0: 20.0 - d / 2.0,
+        dx: d,
+        dy: d,
+    };
+    let mut v = Vec::new();
+    for r in 0..h {
+        for c in 0..w {
+            v.push(analytic(georef.y0 - r as f64 * d, georef.x0 + c as f64 * d) as f32);
+        }
+    }
+    let dem = Dem::new(
+        DemParts {
+            width: w,
+            height: h,
+            samples: Samples::Owned(v),
+            scale: 1.0,
+            offset: 0.0,
+            nodata: None,
+            georef,
+            datum_radius_m: None,
+            target: None,
+            sources: vec![],
+            format: "regional".into(),
+        },
+        64,
+    )
+    .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let opts = TileOptions {
+        tile_size: 32,
+        halo: 2,
+        levels: None,
+        ..Default::default()
+    };
+    let r = tile_dem(&dem, &moon(), dir.path(), &opts, None, &NoProgress).unwrap();
+    assert_eq!(
+        r.levels, 7,
+        "3 km source pixels need level 6 (2.7 km) on 32-px tiles"
+    );
+    let ts = Tileset::load(dir.path()).unwrap();
+    let lay = ts.layout;
+    let present = ts.tile_set();
+    let finest = lay.levels - 1;
+    // Brute force: a finest-level tile is covered when any interior pixel centre is on the DEM.
+    let mut expect = BTreeSet::new();
+    for face in Face::ALL {
+        let per = lay.tiles_per_side(finest);
+        for y in 0..per {
+            for x in 0..per {
+                let id = TileId {
+                    level: finest,
+                    face,
+                    x,
+                    y,
+                };
+                // Cheap reject: the tile centre more than 30° from the region centre.
+                let c = lay.pixel_dir(id, 16, 16);
+                let rc = cube::latlon_to_dir(15f64.to_radians(), 40f64.to_radians());
+                if cube::angle_between(c, rc) > 30f64.to_radians() {
+                    continue;
+                }
+                'px: for j in 0..32 {
+                    for i in 0..32 {
+                        let (la, lo) = cube::dir_to_latlon(lay.pixel_dir(id, i, j));
+                        let (col, row) = dem.to_pixel(la.to_degrees(), lo.to_degrees());
+                        if dem.covers(col, row) {
+                            expect.insert(id);
+                            break 'px;
+                        }
+                    }
+                }
+            }
+        }
+    }
+    let got: BTreeSet<TileId> = present
+        .iter()
+        .filter(|t| t.level == finest)
+        .copied()
+        .collect();
+    assert!(!expect.is_empty());
+    assert_eq!(got, expect);
+    let faces: BTreeSet<Face> = got.iter().map(|t| t.face).collect();
+    assert_eq!(faces, [Face::Px, Face::Py].into_iter().collect());
+    // Every coarser tile present is the parent of a finer one.
+    for t in &present {
+        if t.level < finest {
+            assert!(present
+                .iter()
+                .any(|c| c.level == t.level + 1 && c.parent() == Some(*t)));
+        }
+    }
+    // Pixels off the DEM inside a partial tile are NaN with mask 2, never zero.
+    let ts_h = ts.products.height.unwrap();
+    assert!(ts_h.no_data_pixels > 0);
+    let some = got.iter().next().unwrap();
+    let t = tileio::read_height_tile(&tileio::tile_path(
+        dir.path(),
+        manifest::HEIGHT_PATTERN,
+        some.level,
+        some.face.name(),
+        some.x,
+        some.y,
+    ))
+    .unwrap();
+    for (hgt, m) in t.height.iter().zip(&t.mask) {
+        assert_eq!(hgt.is_nan(), *m == penumbra::dem::mask::NO_DATA);
+    }
+}
+
+#[test]
+fn bicubic_beats_bilinear_on_a_smooth_surface() {
+    let dem = global_dem(360);
+    let mut errs = Vec::new();
+    for method in [Resampling::Bilinear, Resampling::Bicubic] {
+        let mut worst: f64 = 0.0;
+        for k in 0..5000 {
+            let la = -80.0 + 160.0 * ((k * 7919) % 5003) as f64 / 5003.0;
+            let lo = 360.0 * ((k * 104_729) % 4999) as f64 / 4999.0;
+            let (h, _) = dem.sample(la, lo, method);
+            worst = worst.max((h as f64 - analytic(la, lo)).abs());
+        }
+        errs.push(worst);
+    }
+    assert!(
+        errs[1] < 0.5 * errs[0],
+        "bicubic {} vs bilinear {}",
+        errs[1],
+        errs[0]
+    );
+}
+
+#[test]
+fn albedo_tiles_follow_the_height_layout() {
+    let dir = tempfile::tempdir().unwrap();
+    // 16-bit grey, value = longitude index; left edge at −180°.
+    let (w, h) = (720u32, 360u32);
+    let img = image::ImageBuffer::from_fn(w, h, |x, _| image::Luma([(x * 90) as u16]));
+    let png = dir.path().join("albedo.png");
+    img.save(&png).unwrap();
+    let out = dir.path().join("ts");
+    let opts = TileOptions {
+        albedo: Some((png.clone(), -180.0)),
+        ..small_opts()
+    };
+    tile_dem(&global_dem(360), &moon(), &out, &opts, None, &NoProgress).unwrap();
+    let ts = Tileset::load(&out).unwrap();
+    let a = ts.products.albedo.as_ref().unwrap();
+    assert_eq!((a.bit_depth, a.channels), (16, 1));
+    // Pixel (10, 20) of tile L1/px/0/1: compare with the column its longitude falls in.
+    let id = TileId {
+        level: 1,
+        face: Face::Px,
+        x: 0,
+        y: 1,
+    };
+    let p = tileio::tile_path(&out, manifest::ALBEDO_PATTERN, 1, "px", 0, 1);
+    let img = image::open(&p).unwrap().into_luma16();
+    assert_eq!(img.width() as usize, ts.layout.stored_size());
+    let (_, lo) = cube::dir_to_latlon(ts.layout.pixel_dir(id, 10, 20));
+    let col = (lo.to_degrees() + 180.0) / 360.0 * w as f64 - 0.5;
+    let got = img.get_pixel(12, 22)[0] as f64;
+    assert!((got - col * 90.0).abs() <= 1.0, "{got} vs {}", col * 90.0);
+}
