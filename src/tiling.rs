@@ -83,6 +83,9 @@ pub struct TileReport {
     pub tiles_written: u64,
     pub tiles_kept: u64,
     pub candidates: u64,
+    /// Samples in the source raster.
+    pub source_pixels: u64,
+    /// Pixels written (halos included).
     pub output_pixels: u64,
     pub up_to_date: bool,
 }
@@ -167,6 +170,7 @@ pub fn tile_dem(
                 tiles_written: 0,
                 tiles_kept: n,
                 candidates: n,
+                source_pixels: (dem.width() * dem.height()) as u64,
                 output_pixels: 0,
                 up_to_date: true,
             });
@@ -310,6 +314,7 @@ pub fn tile_dem(
         tiles_written: written,
         tiles_kept: kept,
         candidates: candidates.len() as u64,
+        source_pixels: (dem.width() * dem.height()) as u64,
         output_pixels: written * side * side,
         up_to_date: false,
     })

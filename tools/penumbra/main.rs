@@ -183,8 +183,9 @@ fn run(cli: Cli) -> Result<()> {
                 path: a.dem.clone(),
                 body: body_arg(&a.body)?,
             };
+            let t0 = std::time::Instant::now();
             let report = bake::bake(&input, &a.out, &plan, &progress)?;
-            output::print_bake(&report, a.flags.json)?;
+            output::print_bake(&report, t0.elapsed().as_secs_f64(), a.flags.json)?;
         }
         Command::Bake(a) => {
             let plan = Plan {
@@ -206,8 +207,9 @@ fn run(cli: Cli) -> Result<()> {
                     })
                 }
             };
+            let t0 = std::time::Instant::now();
             let report = bake::bake(&input, &a.out, &plan, &progress)?;
-            output::print_bake(&report, a.flags.json)?;
+            output::print_bake(&report, t0.elapsed().as_secs_f64(), a.flags.json)?;
         }
         Command::Info { dir, json } => output::print_info(&dir, json)?,
         Command::Query(QueryCommand::Height {

@@ -59,9 +59,20 @@ pub fn print_json<T: serde::Serialize>(v: &T) -> Result<()> {
     Ok(())
 }
 
-pub fn print_bake(r: &BakeReport, json: bool) -> Result<()> {
+/// Peak resident set size of this process in MiB (Linux), for reports and benchmarks.
+pub fn peak_rss_mib() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib / 1024.0)
+}
+
+pub fn print_bake(r: &BakeReport, wall_s: f64, json: bool) -> Result<()> {
     if json {
-        return print_json(r);
+        let mut v = serde_json::to_value(r)?;
+        v["wall_s"] = serde_json::json!(wall_s);
+        v["peak_rss_mib"] = serde_json::json!(peak_rss_mib());
+        return print_json(&v);
     }
     let mut out = std::io::stdout().lock();
     if let Some(t) = &r.tile {
@@ -84,6 +95,7 @@ pub fn print_bake(r: &BakeReport, json: bool) -> Result<()> {
             )?;
         }
     }
+    writeln!(out, "{wall_s:.2} s")?;
     Ok(())
 }
 
