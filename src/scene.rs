@@ -6,7 +6,7 @@
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::dem::{ByteOrder, Crs, DemParts, GeoRef, Samples};
+use crate::dem::{Crs, DemParts, GeoRef, Samples};
 
 /// Parameters of the synthetic scene; the defaults are what `penumbra bake` uses.
 #[derive(Clone, Debug, Serialize)]
@@ -25,7 +25,7 @@ impl Default for SceneSpec {
         SceneSpec {
             size: 2048,
             pixel_m: 20.0,
-            seed: 0x5eed_0f_5a0d,
+            seed: 0x005e_ed0f_5a0d,
             craters: 400,
         }
     }
@@ -180,7 +180,6 @@ pub fn content_hash(parts: &DemParts) -> String {
             h.update(&x.to_le_bytes());
         }
     }
-    let _ = ByteOrder::Little;
     h.finalize().to_hex().to_string()
 }
 

@@ -308,9 +308,8 @@ impl Dem {
             }
         }
         let g = &parts.georef;
-        if !(g.dx.is_finite() && g.dy.is_finite() && g.dx > 0.0 && g.dy != 0.0)
-            || !(g.x0.is_finite() && g.y0.is_finite())
-        {
+        let finite = [g.dx, g.dy, g.x0, g.y0].iter().all(|v| v.is_finite());
+        if !(finite && g.dx > 0.0 && g.dy != 0.0) {
             return Err(Error::invalid(
                 &path,
                 format!("pixel spacing ({}, {}) is not usable", g.dx, g.dy),
@@ -554,7 +553,7 @@ impl Dem {
 
     /// As [`Dem::sample`], at a fractional pixel position.
     pub fn sample_pixel(&self, col: f64, row: f64, method: Resampling) -> (f32, u8) {
-        if !(col.is_finite() && row.is_finite()) || !self.covers(col, row) {
+        if !(col.is_finite() && row.is_finite() && self.covers(col, row)) {
             return (f32::NAN, mask::NO_DATA);
         }
         let (c0, r0) = (col.floor(), row.floor());

@@ -36,12 +36,42 @@ struct Case {
 }
 
 const CASES: &[Case] = &[
-    Case { name: "LDEM_4 Moon global 0.25° (PDS3 int16)", file: "lola_ldem4/LDEM_4.LBL", body: "moon", levels: None },
-    Case { name: "LDEM_4, 4 levels (8× oversampled)", file: "lola_ldem4/LDEM_4.LBL", body: "moon", levels: Some(4) },
-    Case { name: "MEGDR Mars global 0.25° (PDS3 MSB int16)", file: "mola_megt90n000cb/megt90n000cb.lbl", body: "mars", levels: None },
-    Case { name: "SRTM3 N19W156 Hawaiʻi (.hgt)", file: "srtm3/N19W156.hgt", body: "earth", levels: None },
-    Case { name: "Shoemaker 5 m polar (GeoTIFF f32)", file: "lola_shoemaker_1k/Shoemaker_final_adj_5mpp_surf_1k.tif", body: "moon", levels: None },
-    Case { name: "Gale MOLA 128 px/° (raw u16 + JSON)", file: "mola_gale_128ppd_crop/gale-mola.bin", body: "mars", levels: None },
+    Case {
+        name: "LDEM_4 Moon global 0.25° (PDS3 int16)",
+        file: "lola_ldem4/LDEM_4.LBL",
+        body: "moon",
+        levels: None,
+    },
+    Case {
+        name: "LDEM_4, 4 levels (8× oversampled)",
+        file: "lola_ldem4/LDEM_4.LBL",
+        body: "moon",
+        levels: Some(4),
+    },
+    Case {
+        name: "MEGDR Mars global 0.25° (PDS3 MSB int16)",
+        file: "mola_megt90n000cb/megt90n000cb.lbl",
+        body: "mars",
+        levels: None,
+    },
+    Case {
+        name: "SRTM3 N19W156 Hawaiʻi (.hgt)",
+        file: "srtm3/N19W156.hgt",
+        body: "earth",
+        levels: None,
+    },
+    Case {
+        name: "Shoemaker 5 m polar (GeoTIFF f32)",
+        file: "lola_shoemaker_1k/Shoemaker_final_adj_5mpp_surf_1k.tif",
+        body: "moon",
+        levels: None,
+    },
+    Case {
+        name: "Gale MOLA 128 px/° (raw u16 + JSON)",
+        file: "mola_gale_128ppd_crop/gale-mola.bin",
+        body: "mars",
+        levels: None,
+    },
 ];
 
 #[derive(Serialize, Default)]
@@ -92,13 +122,20 @@ fn timed(cmd: &mut Command, scratch: &Path) -> Result<(f64, f64)> {
     }
     let rss = std::fs::read_to_string(&tf)
         .ok()
-        .and_then(|s| s.split_whitespace().nth(1).and_then(|k| k.parse::<f64>().ok()))
+        .and_then(|s| {
+            s.split_whitespace()
+                .nth(1)
+                .and_then(|k| k.parse::<f64>().ok())
+        })
         .map_or(f64::NAN, |k| k / 1024.0);
     Ok((wall, rss))
 }
 
 fn gdalwarp_available() -> bool {
-    Command::new("gdalwarp").arg("--version").output().is_ok_and(|o| o.status.success())
+    Command::new("gdalwarp")
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success())
 }
 
 /// Reproject with gdalwarp onto the gnomonic plane of the face that holds most of penumbra's
@@ -106,7 +143,11 @@ fn gdalwarp_available() -> bool {
 fn gdalwarp_case(src: &Path, ts: &Tileset, scratch: &Path) -> Result<(f64, f64, f64)> {
     let lay = ts.layout;
     let finest = lay.levels - 1;
-    let cov = ts.coverage.iter().find(|c| c.level == finest).context("no finest level")?;
+    let cov = ts
+        .coverage
+        .iter()
+        .find(|c| c.level == finest)
+        .context("no finest level")?;
     let (face, runs) = cov
         .faces
         .iter()
@@ -136,14 +177,25 @@ fn gdalwarp_case(src: &Path, ts: &Tileset, scratch: &Path) -> Result<(f64, f64, 
     let t_srs = format!("+proj=gnom +lat_0={lat0} +lon_0={lon0} +R={rad} +units=m +no_defs");
     let out = scratch.join("gdalwarp.tif");
     let mut cmd = Command::new("gdalwarp");
-    cmd.args(["-q", "-overwrite", "-r", "bilinear", "-ot", "Float32", "-multi"])
-        .args(["-wo", "NUM_THREADS=ALL_CPUS", "-t_srs", &t_srs, "-te"])
-        .arg(format!("{}", rad * u(x0)))
-        .arg(format!("{}", rad * v(y1 + 1)))
-        .arg(format!("{}", rad * u(x1 + 1)))
-        .arg(format!("{}", rad * v(y0)))
-        .args(["-ts", &w.to_string(), &h.to_string()]);
-    if !matches!(ts.source.georef.crs, penumbra::dem::Crs::PolarStereographic { .. }) {
+    cmd.args([
+        "-q",
+        "-overwrite",
+        "-r",
+        "bilinear",
+        "-ot",
+        "Float32",
+        "-multi",
+    ])
+    .args(["-wo", "NUM_THREADS=ALL_CPUS", "-t_srs", &t_srs, "-te"])
+    .arg(format!("{}", rad * u(x0)))
+    .arg(format!("{}", rad * v(y1 + 1)))
+    .arg(format!("{}", rad * u(x1 + 1)))
+    .arg(format!("{}", rad * v(y0)))
+    .args(["-ts", &w.to_string(), &h.to_string()]);
+    if !matches!(
+        ts.source.georef.crs,
+        penumbra::dem::Crs::PolarStereographic { .. }
+    ) {
         cmd.args(["-s_srs", &format!("+proj=longlat +R={rad} +no_defs")]);
     }
     cmd.arg(src).arg(&out);
@@ -152,9 +204,17 @@ fn gdalwarp_case(src: &Path, ts: &Tileset, scratch: &Path) -> Result<(f64, f64, 
 }
 
 pub fn run(cmd: BenchCommand, quiet: bool) -> Result<()> {
-    let BenchCommand::Tiling { data, work, markdown, json } = cmd;
+    let BenchCommand::Tiling {
+        data,
+        work,
+        markdown,
+        json,
+    } = cmd;
     if !data.is_dir() {
-        bail!("{}: shared data folder not found; give --data", data.display());
+        bail!(
+            "{}: shared data folder not found; give --data",
+            data.display()
+        );
     }
     let tmp = tempfile_dir(work)?;
     let exe = std::env::current_exe()?;
@@ -174,7 +234,11 @@ pub fn run(cmd: BenchCommand, quiet: bool) -> Result<()> {
         let out = tmp.join("tiles");
         let _ = std::fs::remove_dir_all(&out);
         let mut c = Command::new(&exe);
-        c.args(["--quiet", "tile"]).arg(&src).args(["--body", case.body, "--out"]).arg(&out).arg("--json");
+        c.args(["--quiet", "tile"])
+            .arg(&src)
+            .args(["--body", case.body, "--out"])
+            .arg(&out)
+            .arg("--json");
         if let Some(l) = case.levels {
             c.args(["--levels", &l.to_string()]);
         }
@@ -205,7 +269,13 @@ pub fn run(cmd: BenchCommand, quiet: bool) -> Result<()> {
                     row.gdalwarp_output_mpx_per_s = Some(gmpx / gw);
                     row.ratio_vs_gdalwarp = Some((out_mpx / wall) / (gmpx / gw));
                 }
-                Err(e) => row.note = format!("gdalwarp: {e:#}").lines().next().unwrap_or("").into(),
+                Err(e) => {
+                    row.note = format!("gdalwarp: {e:#}")
+                        .lines()
+                        .next()
+                        .unwrap_or("")
+                        .into()
+                }
             }
         } else {
             row.note = "gdalwarp not installed".into();
