@@ -368,8 +368,7 @@ pub fn render_height_tile(
     for j in 0..size as i64 {
         for i in 0..size as i64 {
             let d = layout.pixel_dir(id, i - halo, j - halo);
-            let (lat, lon) = cube::dir_to_latlon(d);
-            let (h, mk) = dem.sample(lat.to_degrees(), lon.to_degrees(), resampling);
+            let (h, mk) = dem.sample_dir(d, resampling);
             height.push(if mk == mask::NO_DATA {
                 f32::NAN
             } else {

@@ -160,6 +160,38 @@ impl GeoRef {
         }
     }
 
+    /// CRS coordinates of a unit direction in the body frame. The same as [`GeoRef::forward`]
+    /// of its latitude/longitude, but polar stereographic needs no trigonometry this way
+    /// (ρ·sin λ = 2Rk0·y/(1 ∓ z) on the unit sphere), which is most of the tiling cost.
+    #[inline]
+    pub fn forward_dir(&self, d: [f64; 3], x_centre: f64) -> (f64, f64) {
+        match self.crs {
+            Crs::PolarStereographic {
+                north,
+                lon0_deg,
+                lat_ts_deg,
+                radius_m,
+            } => {
+                let k0 = (1.0 + lat_ts_deg.to_radians().abs().sin()) / 2.0;
+                let (s0, c0) = lon0_deg.to_radians().sin_cos();
+                // Rotate so that lon0 is the x axis: (x', y') = (ρ cos(λ−λ0), ρ sin(λ−λ0))/…
+                let xr = d[0] * c0 + d[1] * s0;
+                let yr = d[1] * c0 - d[0] * s0;
+                if north {
+                    let q = 2.0 * radius_m * k0 / (1.0 + d[2]);
+                    (q * yr, -q * xr)
+                } else {
+                    let q = 2.0 * radius_m * k0 / (1.0 - d[2]);
+                    (q * yr, q * xr)
+                }
+            }
+            _ => {
+                let (lat, lon) = crate::cube::dir_to_latlon(d);
+                self.forward(lat.to_degrees(), lon.to_degrees(), x_centre)
+            }
+        }
+    }
+
     /// Latitude/longitude (degrees) of CRS coordinates.
     pub fn inverse(&self, x: f64, y: f64) -> (f64, f64) {
         match self.crs {
@@ -551,6 +583,14 @@ impl Dem {
         self.sample_pixel(col, row, method)
     }
 
+    /// As [`Dem::sample`], for a unit direction in the body frame.
+    #[inline]
+    pub fn sample_dir(&self, d: [f64; 3], method: Resampling) -> (f32, u8) {
+        let g = &self.p.georef;
+        let (x, y) = g.forward_dir(d, self.x_centre);
+        self.sample_pixel((x - g.x0) / g.dx, (g.y0 - y) / g.dy, method)
+    }
+
     /// As [`Dem::sample`], at a fractional pixel position.
     pub fn sample_pixel(&self, col: f64, row: f64, method: Resampling) -> (f32, u8) {
         if !(col.is_finite() && row.is_finite() && self.covers(col, row)) {
@@ -691,7 +731,8 @@ pub fn check_dimensions(path: &Path, width: u64, height: u64) -> Result<()> {
 
 /// Open a DEM, choosing the reader from the file name and contents:
 /// `.lbl`/`.img` → PDS3, `.hgt` → SRTM, `.tif`/`.tiff` → GeoTIFF, `.exr` → EXR (needs a JSON
-/// sidecar for its georeferencing), anything with a `<file>.json`/`<stem>.json` sidecar → raw.
+/// sidecar for its georeferencing), `.bin`/`.raw`/`.dat` or anything with a
+/// `<file>.json`/`<stem>.json` sidecar → raw (a `.json` sidecar opens the raster it describes).
 pub fn open(path: &Path, max_fill_px: u32) -> Result<Dem> {
     if !path.exists() {
         return Err(Error::io(
@@ -709,6 +750,7 @@ pub fn open(path: &Path, max_fill_px: u32) -> Result<Dem> {
         "hgt" => srtm::read(path)?,
         "tif" | "tiff" => geotiff::read(path)?,
         "exr" => exrdem::read(path)?,
+        "bin" | "raw" | "dat" => raw::read(path)?,
         _ => match raw::sidecar_for(path) {
             Some(_) => raw::read(path)?,
             None => {
@@ -851,6 +893,17 @@ mod tests {
             let (x, y) = g.forward(lat, 33.0, 0.0);
             let (la, lo) = g.inverse(x, y);
             assert!((la - lat).abs() < 1e-10 && (lo - 33.0).abs() < 1e-10);
+            // The trigonometry-free direction path agrees, also with a rotated lon0.
+            let d = crate::cube::latlon_to_dir(lat.to_radians(), 33f64.to_radians());
+            let (xd, yd) = g.forward_dir(d, 0.0);
+            assert!((xd - x).abs() < 1e-6 && (yd - y).abs() < 1e-6, "{xd} {x} {yd} {y}");
+            let mut g2 = g.clone();
+            if let Crs::PolarStereographic { lon0_deg, .. } = &mut g2.crs {
+                *lon0_deg = -70.0;
+            }
+            let (x2, y2) = g2.forward(lat, 33.0, 0.0);
+            let (xd2, yd2) = g2.forward_dir(d, 0.0);
+            assert!((xd2 - x2).abs() < 1e-6 && (yd2 - y2).abs() < 1e-6);
             // Scale at the pole is 1: 0.001° of latitude ≈ R·dφ.
             let (_, y1) = g.forward(if north { 89.999 } else { -89.999 }, 0.0, 0.0);
             let arc = 1_737_400.0 * 0.001f64.to_radians();
