@@ -97,7 +97,7 @@ pub fn generate(spec: &SceneSpec) -> DemParts {
         x: 0.06 * extent,
         y: -0.04 * extent,
         r: 7_500.0_f64.min(0.18 * extent),
-        depth: 3_000.0_f64.min(0.07 * extent),
+        depth: 3_000.0_f64.min(0.1 * extent),
         rim: 250.0,
     }];
     for _ in 0..spec.craters {
@@ -130,8 +130,9 @@ pub fn generate(spec: &SceneSpec) -> DemParts {
                         amp *= 0.5f64.powf(0.8);
                         wl *= 0.5;
                     }
-                    // A regional slope towards the big crater, like the south-polar massifs.
-                    h += 1_500.0 * (-(x * x + y * y) / (0.5 * extent).powi(2)).exp();
+                    // A massif beside the big crater, like Malapert or Leibnitz β.
+                    let (mx, my) = (x + 0.28 * extent, y - 0.22 * extent);
+                    h += 1_800.0 * (-(mx * mx + my * my) / (0.22 * extent).powi(2)).exp();
                     for c in &craters {
                         let (dx, dy) = (x - c.x, y - c.y);
                         if dx.abs() > 4.0 * c.r || dy.abs() > 4.0 * c.r {
