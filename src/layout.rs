@@ -90,6 +90,18 @@ impl Layout {
         )
     }
 
+    /// As [`Layout::pixel_st`] at a fractional pixel position (centres at integers).
+    #[inline]
+    pub fn pixel_st_f(&self, tile: TileId, i: f64, j: f64) -> (f64, f64) {
+        let s_px = self.face_pixels(tile.level) as f64;
+        let gx = (tile.x as u64 * self.tile_size as u64) as f64 + i;
+        let gy = (tile.y as u64 * self.tile_size as u64) as f64 + j;
+        (
+            -1.0 + 2.0 * (gx + 0.5) / s_px,
+            1.0 - 2.0 * (gy + 0.5) / s_px,
+        )
+    }
+
     /// Unit direction of face coordinates (s, t).
     #[inline]
     pub fn st_to_dir(&self, face: Face, s: f64, t: f64) -> Vec3 {

@@ -30,6 +30,8 @@ pub struct TileOptions {
     /// Number of levels; `None` derives it from the source resolution.
     pub levels: Option<u8>,
     pub resampling: Resampling,
+    /// How levels coarser than the finest are filtered.
+    pub prefilter: Prefilter,
     pub max_fill_px: u32,
     /// Equirectangular albedo image and the longitude of its left edge.
     pub albedo: Option<(PathBuf, f64)>,
@@ -43,6 +45,7 @@ impl Default for TileOptions {
             projection: Projection::Gnomonic,
             levels: None,
             resampling: Resampling::Bilinear,
+            prefilter: Prefilter::Box,
             max_fill_px: crate::dem::DEFAULT_MAX_FILL_PX,
             albedo: None,
         }
@@ -72,6 +75,33 @@ impl TileOptions {
             }
         }
         Ok(())
+    }
+}
+
+/// Anti-aliasing of the coarser levels.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Prefilter {
+    /// Each pixel is the mean of a k×k grid of interpolated source samples spread over its
+    /// footprint, k = 2^(finest level − level) capped at [`MAX_BOX`]: a box filter that keeps
+    /// coarse levels from aliasing (a 90 m peak no longer decides a 25 km pixel).
+    #[default]
+    Box,
+    /// One interpolated sample at the pixel centre on every level.
+    Point,
+}
+
+/// Largest box-filter grid per axis (16 samples per pixel).
+pub const MAX_BOX: u32 = 4;
+
+impl std::str::FromStr for Prefilter {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "box" => Ok(Prefilter::Box),
+            "point" => Ok(Prefilter::Point),
+            _ => Err(format!("unknown prefilter '{s}': use box or point")),
+        }
     }
 }
 
@@ -353,28 +383,54 @@ fn interior_stats(layout: &Layout, t: &HeightTile, kept: bool) -> Option<TileSta
     (s.no_data < (n * n) as u64).then_some(s)
 }
 
-/// Sample one height tile (halo included). `None` when no interior pixel has data.
+/// Samples per axis of the box prefilter for a tile at `level`.
+pub fn box_samples(layout: &Layout, level: u8, prefilter: Prefilter) -> u32 {
+    match prefilter {
+        Prefilter::Point => 1,
+        Prefilter::Box => {
+            let below = (layout.levels - 1).saturating_sub(level).min(8) as u32;
+            (1u32 << below).min(MAX_BOX)
+        }
+    }
+}
+
+/// Sample one height tile (halo included).
 pub fn render_height_tile(
     dem: &Dem,
     layout: &Layout,
     id: TileId,
     resampling: Resampling,
+    prefilter: Prefilter,
     height_shift: f64,
 ) -> HeightTile {
     let size = layout.stored_size();
     let halo = layout.halo as i64;
+    let k = box_samples(layout, id.level, prefilter);
+    let offsets: Vec<f64> = (0..k).map(|a| (a as f64 + 0.5) / k as f64 - 0.5).collect();
     let mut height = Vec::with_capacity(size * size);
     let mut m = Vec::with_capacity(size * size);
     for j in 0..size as i64 {
         for i in 0..size as i64 {
-            let d = layout.pixel_dir(id, i - halo, j - halo);
-            let (h, mk) = dem.sample_dir(d, resampling);
-            height.push(if mk == mask::NO_DATA {
-                f32::NAN
+            let (mut sum, mut n, mut filled) = (0.0f64, 0u32, false);
+            for &oj in &offsets {
+                for &oi in &offsets {
+                    let (s, t) =
+                        layout.pixel_st_f(id, (i - halo) as f64 + oi, (j - halo) as f64 + oj);
+                    let (h, mk) = dem.sample_dir(layout.st_to_dir(id.face, s, t), resampling);
+                    if mk != mask::NO_DATA {
+                        sum += h as f64;
+                        n += 1;
+                        filled |= mk == mask::FILLED;
+                    }
+                }
+            }
+            if n == 0 {
+                height.push(f32::NAN);
+                m.push(mask::NO_DATA);
             } else {
-                (h as f64 + height_shift) as f32
-            });
-            m.push(mk);
+                height.push((sum / n as f64 + height_shift) as f32);
+                m.push(if filled { mask::FILLED } else { mask::MEASURED });
+            }
         }
     }
     HeightTile {
@@ -427,7 +483,14 @@ fn make_tile(
             }
         }
     }
-    let tile = render_height_tile(dem, layout, id, opts.resampling, height_shift);
+    let tile = render_height_tile(
+        dem,
+        layout,
+        id,
+        opts.resampling,
+        opts.prefilter,
+        height_shift,
+    );
     let Some(stats) = interior_stats(layout, &tile, false) else {
         return Ok(None);
     };

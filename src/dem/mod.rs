@@ -896,7 +896,10 @@ mod tests {
             // The trigonometry-free direction path agrees, also with a rotated lon0.
             let d = crate::cube::latlon_to_dir(lat.to_radians(), 33f64.to_radians());
             let (xd, yd) = g.forward_dir(d, 0.0);
-            assert!((xd - x).abs() < 1e-6 && (yd - y).abs() < 1e-6, "{xd} {x} {yd} {y}");
+            assert!(
+                (xd - x).abs() < 1e-6 && (yd - y).abs() < 1e-6,
+                "{xd} {x} {yd} {y}"
+            );
             let mut g2 = g.clone();
             if let Crs::PolarStereographic { lon0_deg, .. } = &mut g2.crs {
                 *lon0_deg = -70.0;

@@ -15,7 +15,7 @@ use penumbra::body::Body;
 use penumbra::cube::Projection;
 use penumbra::dem::Resampling;
 use penumbra::scene::SceneSpec;
-use penumbra::tiling::TileOptions;
+use penumbra::tiling::{Prefilter, TileOptions};
 
 #[derive(Parser)]
 #[command(
@@ -100,6 +100,9 @@ struct TileFlags {
     levels: Option<u8>,
     #[arg(long, default_value = "bilinear")]
     resampling: Resampling,
+    /// Anti-aliasing of coarser levels: box (mean of up to 4×4 samples per pixel) or point.
+    #[arg(long, default_value = "box")]
+    prefilter: Prefilter,
     /// Fill voids up to this many source pixels from measured data; farther voids are no data.
     #[arg(long, default_value_t = penumbra::dem::DEFAULT_MAX_FILL_PX)]
     void_fill_px: u32,
@@ -122,6 +125,7 @@ impl TileFlags {
             projection: self.projection,
             levels: self.levels,
             resampling: self.resampling,
+            prefilter: self.prefilter,
             max_fill_px: self.void_fill_px,
             albedo: self.albedo.clone().map(|p| (p, self.albedo_west)),
         }
