@@ -32,6 +32,7 @@ pub struct TileOptions {
     pub resampling: Resampling,
     /// How levels coarser than the finest are filtered.
     pub prefilter: Prefilter,
+    pub compression: tileio::TileCompression,
     pub max_fill_px: u32,
     /// Equirectangular albedo image and the longitude of its left edge.
     pub albedo: Option<(PathBuf, f64)>,
@@ -46,6 +47,7 @@ impl Default for TileOptions {
             levels: None,
             resampling: Resampling::Bilinear,
             prefilter: Prefilter::Box,
+            compression: tileio::TileCompression::Zip,
             max_fill_px: crate::dem::DEFAULT_MAX_FILL_PX,
             albedo: None,
         }
@@ -494,7 +496,7 @@ fn make_tile(
     let Some(stats) = interior_stats(layout, &tile, false) else {
         return Ok(None);
     };
-    tileio::write_height_tile(&hpath, &tile)?;
+    tileio::write_height_tile(&hpath, &tile, opts.compression)?;
     if let Some(a) = albedo {
         tileio::write_albedo_tile(&apath, &render_albedo_tile(a, layout, id))?;
     }

@@ -33,6 +33,7 @@ struct Case {
     file: &'static str,
     body: &'static str,
     levels: Option<u8>,
+    extra: &'static [&'static str],
 }
 
 const CASES: &[Case] = &[
@@ -41,36 +42,56 @@ const CASES: &[Case] = &[
         file: "lola_ldem4/LDEM_4.LBL",
         body: "moon",
         levels: None,
+        extra: &[],
     },
     Case {
         name: "LDEM_4, 4 levels (8× oversampled)",
         file: "lola_ldem4/LDEM_4.LBL",
         body: "moon",
         levels: Some(4),
+        extra: &[],
+    },
+    Case {
+        name: "LDEM_4, 4 levels, --prefilter point",
+        file: "lola_ldem4/LDEM_4.LBL",
+        body: "moon",
+        levels: Some(4),
+        extra: &["--prefilter", "point"],
+    },
+    Case {
+        name: "LDEM_4, 4 levels, point, --compression none",
+        file: "lola_ldem4/LDEM_4.LBL",
+        body: "moon",
+        levels: Some(4),
+        extra: &["--prefilter", "point", "--compression", "none"],
     },
     Case {
         name: "MEGDR Mars global 0.25° (PDS3 MSB int16)",
         file: "mola_megt90n000cb/megt90n000cb.lbl",
         body: "mars",
         levels: None,
+        extra: &[],
     },
     Case {
         name: "SRTM3 N19W156 Hawaiʻi (.hgt)",
         file: "srtm3/N19W156.hgt",
         body: "earth",
         levels: None,
+        extra: &[],
     },
     Case {
         name: "Shoemaker 5 m polar (GeoTIFF f32)",
         file: "lola_shoemaker_1k/Shoemaker_final_adj_5mpp_surf_1k.tif",
         body: "moon",
         levels: None,
+        extra: &[],
     },
     Case {
         name: "Gale MOLA 128 px/° (raw u16 + JSON)",
         file: "mola_gale_128ppd_crop/gale-mola.bin",
         body: "mars",
         levels: None,
+        extra: &[],
     },
 ];
 
@@ -239,6 +260,7 @@ pub fn run(cmd: BenchCommand, quiet: bool) -> Result<()> {
             .args(["--body", case.body, "--out"])
             .arg(&out)
             .arg("--json");
+        c.args(case.extra);
         if let Some(l) = case.levels {
             c.args(["--levels", &l.to_string()]);
         }

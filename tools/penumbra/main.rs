@@ -15,6 +15,7 @@ use penumbra::body::Body;
 use penumbra::cube::Projection;
 use penumbra::dem::Resampling;
 use penumbra::scene::SceneSpec;
+use penumbra::tileio::TileCompression;
 use penumbra::tiling::{Prefilter, TileOptions};
 
 #[derive(Parser)]
@@ -103,6 +104,9 @@ struct TileFlags {
     /// Anti-aliasing of coarser levels: box (mean of up to 4×4 samples per pixel) or point.
     #[arg(long, default_value = "box")]
     prefilter: Prefilter,
+    /// EXR height-tile compression: zip (lossless, about half the size) or none (fastest).
+    #[arg(long, default_value = "zip")]
+    compression: TileCompression,
     /// Fill voids up to this many source pixels from measured data; farther voids are no data.
     #[arg(long, default_value_t = penumbra::dem::DEFAULT_MAX_FILL_PX)]
     void_fill_px: u32,
@@ -126,6 +130,7 @@ impl TileFlags {
             levels: self.levels,
             resampling: self.resampling,
             prefilter: self.prefilter,
+            compression: self.compression,
             max_fill_px: self.void_fill_px,
             albedo: self.albedo.clone().map(|p| (p, self.albedo_west)),
         }
