@@ -90,16 +90,23 @@ impl Layout {
         )
     }
 
-    /// As [`Layout::pixel_st`] at a fractional pixel position (centres at integers).
+    /// Face coordinates (s, t) of fractional *global* face pixel (gx, gy) at `level` (pixel
+    /// centres at integers). Computing from the global position keeps every tile that sees a
+    /// point, through its interior or its halo, on bit-identical coordinates.
     #[inline]
-    pub fn pixel_st_f(&self, tile: TileId, i: f64, j: f64) -> (f64, f64) {
-        let s_px = self.face_pixels(tile.level) as f64;
-        let gx = (tile.x as u64 * self.tile_size as u64) as f64 + i;
-        let gy = (tile.y as u64 * self.tile_size as u64) as f64 + j;
+    pub fn global_st(&self, level: u8, gx: f64, gy: f64) -> (f64, f64) {
+        let s_px = self.face_pixels(level) as f64;
         (
             -1.0 + 2.0 * (gx + 0.5) / s_px,
             1.0 - 2.0 * (gy + 0.5) / s_px,
         )
+    }
+
+    /// Global face pixel (column, row) of a tile's pixel (i, j); i, j may reach into the halo.
+    #[inline]
+    pub fn global_pixel(&self, tile: TileId, i: i64, j: i64) -> (i64, i64) {
+        let n = self.tile_size as i64;
+        (tile.x as i64 * n + i, tile.y as i64 * n + j)
     }
 
     /// Unit direction of face coordinates (s, t).

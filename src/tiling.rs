@@ -396,6 +396,129 @@ pub fn box_samples(layout: &Layout, level: u8, prefilter: Prefilter) -> u32 {
     }
 }
 
+/// Spacing in pixels of the lattice on which source coordinates are computed exactly.
+const LATTICE: i64 = 8;
+/// Largest error (source pixels) allowed where source coordinates are interpolated.
+pub const APPROX_TOL_PX: f64 = 1e-3;
+
+/// Source pixel coordinates of face positions around one tile: exact on a lattice every
+/// [`LATTICE`] global face pixels, bilinear in between where that is within [`APPROX_TOL_PX`]
+/// (checked at each cell's centre and edge midpoints), exact elsewhere — cells that touch the edge of the source,
+/// straddle the antimeridian of a global raster or a pole. GDAL's approximate transformer does
+/// the same with a 0.125 px tolerance. The lattice is aligned to the global face grid, so the
+/// coordinates of a point are the same whichever tile computes them.
+struct SourceGrid<'a> {
+    dem: &'a Dem,
+    layout: &'a Layout,
+    face: crate::cube::Face,
+    level: u8,
+    m0: (i64, i64),
+    cells: (usize, usize),
+    /// Exact coordinates at lattice points, row-major, `(cells.0 + 1) × (cells.1 + 1)`.
+    pts: Vec<(f64, f64)>,
+    /// Whether interpolation is allowed in each cell.
+    ok: Vec<bool>,
+}
+
+impl<'a> SourceGrid<'a> {
+    fn exact(&self, gx: f64, gy: f64) -> (f64, f64) {
+        let (s, t) = self.layout.global_st(self.level, gx, gy);
+        self.dem
+            .dir_to_pixel(self.layout.st_to_dir(self.face, s, t))
+    }
+
+    fn new(dem: &'a Dem, layout: &'a Layout, id: TileId) -> SourceGrid<'a> {
+        let h = layout.halo as i64 + 1;
+        let (g0x, g0y) = layout.global_pixel(id, -h, -h);
+        let n = layout.tile_size as i64 + 2 * h;
+        let m0 = (g0x.div_euclid(LATTICE), g0y.div_euclid(LATTICE));
+        let m1 = (
+            (g0x + n).div_euclid(LATTICE) + 1,
+            (g0y + n).div_euclid(LATTICE) + 1,
+        );
+        let cells = ((m1.0 - m0.0) as usize, (m1.1 - m0.1) as usize);
+        let mut grid = SourceGrid {
+            dem,
+            layout,
+            face: id.face,
+            level: id.level,
+            m0,
+            cells,
+            pts: Vec::with_capacity((cells.0 + 1) * (cells.1 + 1)),
+            ok: Vec::with_capacity(cells.0 * cells.1),
+        };
+        for my in 0..=cells.1 as i64 {
+            for mx in 0..=cells.0 as i64 {
+                let p = grid.exact(
+                    ((m0.0 + mx) * LATTICE) as f64,
+                    ((m0.1 + my) * LATTICE) as f64,
+                );
+                grid.pts.push(p);
+            }
+        }
+        let half_width = dem.width() as f64 / 4.0;
+        for my in 0..cells.1 {
+            for mx in 0..cells.0 {
+                let c = [
+                    grid.pts[my * (cells.0 + 1) + mx],
+                    grid.pts[my * (cells.0 + 1) + mx + 1],
+                    grid.pts[(my + 1) * (cells.0 + 1) + mx],
+                    grid.pts[(my + 1) * (cells.0 + 1) + mx + 1],
+                ];
+                let inside = c
+                    .iter()
+                    .all(|p| p.0.is_finite() && p.1.is_finite() && dem.covers(p.0, p.1));
+                let cols = c.iter().map(|p| p.0);
+                let spread = cols.clone().fold(f64::NEG_INFINITY, f64::max)
+                    - cols.fold(f64::INFINITY, f64::min);
+                let mut ok = inside && spread < half_width;
+                if ok {
+                    // Check the centre and the four edge midpoints: the centre alone misses
+                    // maps whose second derivatives cancel there (f_xx ≈ −f_yy).
+                    let (bx, by) = (
+                        ((m0.0 + mx as i64) * LATTICE) as f64,
+                        ((m0.1 + my as i64) * LATTICE) as f64,
+                    );
+                    let l = LATTICE as f64;
+                    let lerp = |p: f64, q: f64, w: f64| p + (q - p) * w;
+                    let checks = [(0.5, 0.5), (0.5, 0.0), (0.5, 1.0), (0.0, 0.5), (1.0, 0.5)];
+                    ok = checks.iter().all(|&(wx, wy)| {
+                        let e = grid.exact(bx + wx * l, by + wy * l);
+                        let col = lerp(lerp(c[0].0, c[1].0, wx), lerp(c[2].0, c[3].0, wx), wy);
+                        let row = lerp(lerp(c[0].1, c[1].1, wx), lerp(c[2].1, c[3].1, wx), wy);
+                        (e.0 - col).abs() <= APPROX_TOL_PX && (e.1 - row).abs() <= APPROX_TOL_PX
+                    });
+                }
+                grid.ok.push(ok);
+            }
+        }
+        grid
+    }
+
+    /// Source (col, row) of fractional global face pixel (gx, gy).
+    #[inline]
+    fn at(&self, gx: f64, gy: f64) -> (f64, f64) {
+        let (fx, fy) = (gx / LATTICE as f64, gy / LATTICE as f64);
+        let (cx, cy) = (fx.floor(), fy.floor());
+        let (mx, my) = (cx as i64 - self.m0.0, cy as i64 - self.m0.1);
+        if mx < 0 || my < 0 || mx as usize >= self.cells.0 || my as usize >= self.cells.1 {
+            return self.exact(gx, gy);
+        }
+        let (mx, my) = (mx as usize, my as usize);
+        if !self.ok[my * self.cells.0 + mx] {
+            return self.exact(gx, gy);
+        }
+        let (wx, wy) = (fx - cx, fy - cy);
+        let w = self.cells.0 + 1;
+        let (a, b) = (self.pts[my * w + mx], self.pts[my * w + mx + 1]);
+        let (c, d) = (self.pts[(my + 1) * w + mx], self.pts[(my + 1) * w + mx + 1]);
+        let lerp = |p: f64, q: f64, r: f64, s: f64| {
+            (p * (1.0 - wx) + q * wx) * (1.0 - wy) + (r * (1.0 - wx) + s * wx) * wy
+        };
+        (lerp(a.0, b.0, c.0, d.0), lerp(a.1, b.1, c.1, d.1))
+    }
+}
+
 /// Sample one height tile (halo included).
 pub fn render_height_tile(
     dem: &Dem,
@@ -409,16 +532,17 @@ pub fn render_height_tile(
     let halo = layout.halo as i64;
     let k = box_samples(layout, id.level, prefilter);
     let offsets: Vec<f64> = (0..k).map(|a| (a as f64 + 0.5) / k as f64 - 0.5).collect();
+    let grid = SourceGrid::new(dem, layout, id);
     let mut height = Vec::with_capacity(size * size);
     let mut m = Vec::with_capacity(size * size);
     for j in 0..size as i64 {
         for i in 0..size as i64 {
+            let (gx, gy) = layout.global_pixel(id, i - halo, j - halo);
             let (mut sum, mut n, mut filled) = (0.0f64, 0u32, false);
             for &oj in &offsets {
                 for &oi in &offsets {
-                    let (s, t) =
-                        layout.pixel_st_f(id, (i - halo) as f64 + oi, (j - halo) as f64 + oj);
-                    let (h, mk) = dem.sample_dir(layout.st_to_dir(id.face, s, t), resampling);
+                    let (col, row) = grid.at(gx as f64 + oi, gy as f64 + oj);
+                    let (h, mk) = dem.sample_pixel(col, row, resampling);
                     if mk != mask::NO_DATA {
                         sum += h as f64;
                         n += 1;

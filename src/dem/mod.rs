@@ -586,9 +586,16 @@ impl Dem {
     /// As [`Dem::sample`], for a unit direction in the body frame.
     #[inline]
     pub fn sample_dir(&self, d: [f64; 3], method: Resampling) -> (f32, u8) {
+        let (col, row) = self.dir_to_pixel(d);
+        self.sample_pixel(col, row, method)
+    }
+
+    /// Fractional pixel position (col, row) of a unit direction in the body frame.
+    #[inline]
+    pub fn dir_to_pixel(&self, d: [f64; 3]) -> (f64, f64) {
         let g = &self.p.georef;
         let (x, y) = g.forward_dir(d, self.x_centre);
-        self.sample_pixel((x - g.x0) / g.dx, (g.y0 - y) / g.dy, method)
+        ((x - g.x0) / g.dx, (g.y0 - y) / g.dy)
     }
 
     /// As [`Dem::sample`], at a fractional pixel position.
