@@ -436,6 +436,45 @@ impl Dem {
         (v * self.p.scale + self.p.offset) as f32
     }
 
+    /// Heights of pixels (c, r), (c+1, r), (c, r+1), (c+1, r+1), all inside the raster, or
+    /// `None` when any of them is a void. One dispatch on the sample type for all four.
+    #[inline]
+    fn quad(&self, c: usize, r: usize) -> Option<[f32; 4]> {
+        let w = self.p.width;
+        let raw: [f64; 4] = match &self.p.samples {
+            Samples::Owned(v) => {
+                let i = r * w + c;
+                [
+                    v[i] as f64,
+                    v[i + 1] as f64,
+                    v[i + w] as f64,
+                    v[i + w + 1] as f64,
+                ]
+            }
+            Samples::Mapped {
+                map,
+                offset,
+                row_stride,
+                ty,
+                order,
+            } => {
+                let sz = ty.size();
+                let a = offset + r * row_stride + c * sz;
+                let b = a + row_stride;
+                let rd = |at: usize| decode(&map[at..at + sz], *ty, *order);
+                [rd(a), rd(a + sz), rd(b), rd(b + sz)]
+            }
+        };
+        let mut out = [0f32; 4];
+        for (o, v) in out.iter_mut().zip(raw) {
+            if !v.is_finite() || self.p.nodata == Some(v) {
+                return None;
+            }
+            *o = (v * self.p.scale + self.p.offset) as f32;
+        }
+        Some(out)
+    }
+
     /// Height after void filling and whether it was filled; NaN when it stayed no data.
     #[inline]
     pub fn value(&self, col: usize, row: usize) -> (f32, bool) {
@@ -629,6 +668,18 @@ impl Dem {
                     mask::MEASURED
                 };
                 return (acc as f32, m);
+            }
+        }
+        // Fast path: all four taps inside the raster and measured (the common case).
+        if c0 >= 0
+            && r0 >= 0
+            && ((c0 + 1) as usize) < self.p.width
+            && ((r0 + 1) as usize) < self.p.height
+        {
+            if let Some(q) = self.quad(c0 as usize, r0 as usize) {
+                let top = q[0] as f64 * (1.0 - fc) + q[1] as f64 * fc;
+                let bottom = q[2] as f64 * (1.0 - fc) + q[3] as f64 * fc;
+                return ((top * (1.0 - fr) + bottom * fr) as f32, mask::MEASURED);
             }
         }
         let taps = [
