@@ -99,7 +99,7 @@ pub fn body_for(dem: &Dem, given: Option<Body>) -> Result<Body> {
             Ok(b)
         }
         (Some(b), Some(t)) if Body::preset(t).is_ok() && t != b.name => Err(Error::usage(format!(
-            "{} is a {t} DEM but --body {} was given: drop --body, or give --radius-m to force a \
+            "{} is a DEM of {t} but --body {} was given: drop --body, or give --radius-m to force a \
              radius",
             path.display(),
             b.name

@@ -398,6 +398,9 @@ pub fn box_samples(layout: &Layout, level: u8, prefilter: Prefilter) -> u32 {
 
 /// Spacing in pixels of the lattice on which source coordinates are computed exactly.
 const LATTICE: i64 = 8;
+const EXACT: u8 = 0;
+const INTERP: u8 = 1;
+const OUTSIDE: u8 = 2;
 /// Largest error (source pixels) allowed where source coordinates are interpolated.
 pub const APPROX_TOL_PX: f64 = 1e-3;
 
@@ -416,8 +419,8 @@ struct SourceGrid<'a> {
     cells: (usize, usize),
     /// Exact coordinates at lattice points, row-major, `(cells.0 + 1) × (cells.1 + 1)`.
     pts: Vec<(f64, f64)>,
-    /// Whether interpolation is allowed in each cell.
-    ok: Vec<bool>,
+    /// Per cell: [`EXACT`], [`INTERP`] or [`OUTSIDE`] (wholly off the source).
+    ok: Vec<u8>,
 }
 
 impl<'a> SourceGrid<'a> {
@@ -457,8 +460,40 @@ impl<'a> SourceGrid<'a> {
             }
         }
         let half_width = dem.width() as f64 / 4.0;
+        let cap = dem.footprint_cap();
         for my in 0..cells.1 {
             for mx in 0..cells.0 {
+                if let Some((cc, cr)) = cap {
+                    // Wholly off the source: the cell's own cap does not meet the source's.
+                    let corner = |dx: i64, dy: i64| {
+                        let (s, t) = layout.global_st(
+                            id.level,
+                            ((m0.0 + mx as i64 + dx) * LATTICE) as f64,
+                            ((m0.1 + my as i64 + dy) * LATTICE) as f64,
+                        );
+                        layout.st_to_dir(id.face, s, t)
+                    };
+                    let ds = [corner(0, 0), corner(1, 0), corner(0, 1), corner(1, 1)];
+                    let mut mid = [0.0; 3];
+                    for d in &ds {
+                        for k in 0..3 {
+                            mid[k] += d[k];
+                        }
+                    }
+                    let n = (mid[0] * mid[0] + mid[1] * mid[1] + mid[2] * mid[2]).sqrt();
+                    let mid = [mid[0] / n, mid[1] / n, mid[2] / n];
+                    // Cell edges are great circles for gnomonic, nearly so for equal-angle:
+                    // 1% margin on the corner radius.
+                    let r = ds
+                        .iter()
+                        .map(|d| crate::cube::angle_between(mid, *d))
+                        .fold(0.0f64, f64::max)
+                        * 1.01;
+                    if crate::cube::angle_between(mid, cc) > r + cr {
+                        grid.ok.push(OUTSIDE);
+                        continue;
+                    }
+                }
                 let c = [
                     grid.pts[my * (cells.0 + 1) + mx],
                     grid.pts[my * (cells.0 + 1) + mx + 1],
@@ -489,7 +524,7 @@ impl<'a> SourceGrid<'a> {
                         (e.0 - col).abs() <= APPROX_TOL_PX && (e.1 - row).abs() <= APPROX_TOL_PX
                     });
                 }
-                grid.ok.push(ok);
+                grid.ok.push(if ok { INTERP } else { EXACT });
             }
         }
         grid
@@ -505,8 +540,10 @@ impl<'a> SourceGrid<'a> {
             return self.exact(gx, gy);
         }
         let (mx, my) = (mx as usize, my as usize);
-        if !self.ok[my * self.cells.0 + mx] {
-            return self.exact(gx, gy);
+        match self.ok[my * self.cells.0 + mx] {
+            INTERP => {}
+            OUTSIDE => return (f64::NAN, f64::NAN),
+            _ => return self.exact(gx, gy),
         }
         let (wx, wy) = (fx - cx, fy - cy);
         let w = self.cells.0 + 1;

@@ -296,6 +296,9 @@ pub struct Dem {
     global_lon: bool,
     global_lat: bool,
     x_centre: f64,
+    /// A spherical cap (centre direction, angular radius) that contains the whole raster,
+    /// for rasters well inside a hemisphere.
+    cap: Option<([f64; 3], f64)>,
 }
 
 impl Dem {
@@ -379,7 +382,9 @@ impl Dem {
             global_lon,
             global_lat,
             x_centre,
+            cap: None,
         };
+        dem.cap = dem.bounding_cap();
         dem.fill_voids(max_fill_px)?;
         Ok(dem)
     }
@@ -710,6 +715,49 @@ impl Dem {
         ((acc / wsum) as f32, m)
     }
 
+    /// A cap containing the raster: centred on the mean of its outline, radius the largest
+    /// angle to the outline plus two pixel diagonals. `None` for rasters that wrap or reach
+    /// beyond 80° from their centre (no useful bound).
+    pub fn footprint_cap(&self) -> Option<([f64; 3], f64)> {
+        self.cap
+    }
+
+    fn bounding_cap(&self) -> Option<([f64; 3], f64)> {
+        if self.global_lon || self.global_lat {
+            return None;
+        }
+        let stride = self.p.width.max(self.p.height);
+        let pts: Vec<[f64; 3]> = self
+            .footprint_points(stride)
+            .into_iter()
+            .map(|(la, lo)| crate::cube::latlon_to_dir(la.to_radians(), lo.to_radians()))
+            .collect();
+        let mut c = [0.0; 3];
+        for p in &pts {
+            for k in 0..3 {
+                c[k] += p[k];
+            }
+        }
+        let n = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+        if n.is_nan() || n <= 0.0 {
+            return None;
+        }
+        let c = [c[0] / n, c[1] / n, c[2] / n];
+        let r = pts
+            .iter()
+            .map(|p| crate::cube::angle_between(c, *p))
+            .fold(0.0f64, f64::max);
+        // Two pixel diagonals of margin: the outline runs through pixel edges.
+        let (la0, lo0) = self.to_latlon(0.0, 0.0);
+        let (la1, lo1) = self.to_latlon(2.0, 2.0);
+        let margin = crate::cube::angle_between(
+            crate::cube::latlon_to_dir(la0.to_radians(), lo0.to_radians()),
+            crate::cube::latlon_to_dir(la1.to_radians(), lo1.to_radians()),
+        );
+        let r = r + margin;
+        (r.is_finite() && r < 80f64.to_radians()).then_some((c, r))
+    }
+
     /// Points (lat, lon in degrees) that outline the raster's footprint: every boundary pixel
     /// centre and an interior grid every `stride` pixels. Used to find candidate tiles.
     pub fn footprint_points(&self, stride: usize) -> Vec<(f64, f64)> {
@@ -930,6 +978,46 @@ mod tests {
             dem.sample_pixel(-0.6, 3.0, Resampling::Bilinear).1,
             mask::NO_DATA
         );
+    }
+
+    #[test]
+    fn footprint_cap_contains_every_pixel() {
+        for (crs, x0, y0, d) in [
+            (
+                Crs::PolarStereographic {
+                    north: false,
+                    lon0_deg: 0.0,
+                    lat_ts_deg: -90.0,
+                    radius_m: 1_737_400.0,
+                },
+                -30_000.0,
+                50_000.0,
+                400.0,
+            ),
+            (Crs::Geographic, 170.0, 30.0, 0.2),
+        ] {
+            let g = GeoRef {
+                crs,
+                x0,
+                y0,
+                dx: d,
+                dy: d,
+            };
+            let dem = synthetic(100, 60, g, |_, _| 1.0);
+            let (c, r) = dem.footprint_cap().expect("regional raster has a cap");
+            for row in 0..60 {
+                for col in 0..100 {
+                    for (dc, dr) in [(-0.5, -0.5), (0.5, 0.5), (0.0, 0.0)] {
+                        let (la, lo) = dem.to_latlon(col as f64 + dc, row as f64 + dr);
+                        let p = crate::cube::latlon_to_dir(la.to_radians(), lo.to_radians());
+                        assert!(crate::cube::angle_between(c, p) <= r);
+                    }
+                }
+            }
+        }
+        assert!(synthetic(36, 18, global(36, 18), |_, _| 0.0)
+            .footprint_cap()
+            .is_none());
     }
 
     #[test]
