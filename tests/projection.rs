@@ -57,6 +57,7 @@ fn latlon_face_uv_round_trip_within_1e12_rad() {
             }
         }
     }
+    eprintln!("worst lat/lon → face → lat/lon round trip: {worst:e} rad over {n} points");
     assert!(
         worst < 1e-12,
         "worst round-trip error {worst:e} rad over {n} points"
