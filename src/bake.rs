@@ -2,8 +2,8 @@
 //!
 //! A [`Plan`] lists the stages to run; each stage reads the tileset the previous one left and
 //! records its product in the manifest. Stages a scene does not select are not run and leave
-//! nothing behind. Today the only stage is tiling; mipmaps, horizons and Fourier pyramids join
-//! as they are built.
+//! nothing behind. Today: tiling, then mipmaps; horizons and Fourier pyramids join as they are
+//! built.
 
 use std::path::{Path, PathBuf};
 
@@ -12,6 +12,7 @@ use serde::Serialize;
 use crate::body::Body;
 use crate::dem::{self, Dem};
 use crate::error::{Error, Result};
+use crate::mip::{self, MipOptions, MipReport};
 use crate::progress::Progress;
 use crate::scene::{self, SceneSpec};
 use crate::tiling::{self, Embedded, TileOptions, TileReport};
@@ -22,6 +23,8 @@ use crate::tiling::{self, Embedded, TileOptions, TileReport};
 pub enum Stage {
     /// Cut the DEM (and albedo) into cube-face tiles.
     Tile,
+    /// Maximum and (min, max) mipmaps of the height tiles (needs `Tile` first).
+    Mip,
 }
 
 /// Where the terrain comes from.
@@ -36,13 +39,15 @@ pub enum Input {
 pub struct Plan {
     pub stages: Vec<Stage>,
     pub tile: TileOptions,
+    pub mip: MipOptions,
 }
 
 impl Default for Plan {
     fn default() -> Self {
         Plan {
-            stages: vec![Stage::Tile],
+            stages: vec![Stage::Tile, Stage::Mip],
             tile: TileOptions::default(),
+            mip: MipOptions::default(),
         }
     }
 }
@@ -52,6 +57,7 @@ pub struct BakeReport {
     pub out: PathBuf,
     pub stages: Vec<Stage>,
     pub tile: Option<TileReport>,
+    pub mip: Option<MipReport>,
 }
 
 pub fn bake(input: &Input, out: &Path, plan: &Plan, progress: &dyn Progress) -> Result<BakeReport> {
@@ -59,6 +65,7 @@ pub fn bake(input: &Input, out: &Path, plan: &Plan, progress: &dyn Progress) -> 
         out: out.to_path_buf(),
         stages: plan.stages.clone(),
         tile: None,
+        mip: None,
     };
     for stage in &plan.stages {
         match stage {
@@ -84,6 +91,7 @@ pub fn bake(input: &Input, out: &Path, plan: &Plan, progress: &dyn Progress) -> 
                 };
                 report.tile = Some(r);
             }
+            Stage::Mip => report.mip = Some(mip::build_mips(out, &plan.mip, progress)?),
         }
     }
     Ok(report)

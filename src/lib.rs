@@ -13,6 +13,7 @@ pub mod dem;
 pub mod error;
 pub mod layout;
 pub mod manifest;
+pub mod mip;
 pub mod progress;
 pub mod query;
 pub mod scene;

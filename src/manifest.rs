@@ -83,10 +83,51 @@ pub struct AlbedoProduct {
     pub west_lon_deg: f64,
 }
 
+/// Extrema of one tile level over all its tiles (`null` when every texel is no data).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct MipLevelRange {
+    pub level: u8,
+    pub min_m: Option<f64>,
+    pub max_m: Option<f64>,
+}
+
+/// Maximum and (min, max) mipmaps (docs/mipmaps.md).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct MipProduct {
+    /// Products present: `max` (one-channel maximum pyramid), `minmax` (two-channel).
+    pub products: Vec<String>,
+    /// Path pattern of the maximum pyramids, one mip-mapped EXR per height tile.
+    pub max_path: String,
+    pub max_channels: Vec<String>,
+    /// Path pattern of the (min, max) pyramids, one mip-mapped EXR per height tile.
+    pub minmax_path: String,
+    pub minmax_channels: Vec<String>,
+    /// Path pattern of the face pyramids of whole-tile extrema, one per (tile level, face).
+    pub face_path: String,
+    /// Sample type of the tile pyramids (`f32`, or `f16` rounded outwards).
+    pub precision: crate::mip::Precision,
+    /// Sample type of the face pyramids.
+    pub face_precision: crate::mip::Precision,
+    /// How level sizes halve: `up` (⌈n/2⌉, OpenEXR's ROUND_UP).
+    pub level_rounding: String,
+    /// The texel convention in one line.
+    pub texel: String,
+    /// Extrema over every tile of every level (as stored, so rounded outwards for f16).
+    pub global_min_m: f64,
+    pub global_max_m: f64,
+    /// Extrema per tile level.
+    pub levels: Vec<MipLevelRange>,
+    /// Hash of the tool version, the height tiles' run key and the mip options.
+    pub run_key: String,
+}
+
 #[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
 pub struct Products {
     pub height: Option<HeightProduct>,
     pub albedo: Option<AlbedoProduct>,
+    /// Absent in tilesets made before the mipmap stage existed.
+    #[serde(default)]
+    pub mip: Option<MipProduct>,
 }
 
 /// Tiles present at one level, as row runs `[y, x_first, x_last]` per face.

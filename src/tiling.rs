@@ -215,7 +215,7 @@ pub fn tile_dem(
     let resume = previous_key.as_deref() == Some(run_key.as_str());
     if !resume && (manifest_path.exists() || partial_path.exists()) {
         // A tileset made with other inputs or parameters: its tiles are stale.
-        for sub in ["height", "albedo"] {
+        for sub in ["height", "albedo", "maxmip", "minmax"] {
             let p = out.join(sub);
             if p.exists() {
                 std::fs::remove_dir_all(&p).map_err(|e| Error::io(&p, e))?;
@@ -331,6 +331,7 @@ pub fn tile_dem(
                     channels: a.channels as u8,
                     west_lon_deg: a.west_lon_deg,
                 }),
+            mip: None,
         },
         coverage: manifest::coverage_of(&present, levels),
         parameters,

@@ -15,3 +15,5 @@ mod cli;
 mod readers;
 // Real DEMs tiled and queried at landmarks (skipped without ../shared/data).
 mod realdata;
+// Max and min/max mipmaps: bounds of the interpolated surface, reference twin, CLI.
+mod mip;

@@ -14,6 +14,7 @@ use penumbra::bake::{self, Input, Plan, Stage};
 use penumbra::body::Body;
 use penumbra::cube::Projection;
 use penumbra::dem::Resampling;
+use penumbra::mip::{MipOptions, Precision};
 use penumbra::scene::SceneSpec;
 use penumbra::tileio::TileCompression;
 use penumbra::tiling::{Prefilter, TileOptions};
@@ -39,8 +40,22 @@ struct Cli {
 enum Command {
     /// Cut a DEM into cube-face tiles.
     Tile(TileArgs),
-    /// Run every stage a scene needs (the embedded default scene when no --dem is given).
+    /// Run every stage a scene needs (the embedded default scene when no --dem is given):
+    /// tiling, then mipmaps.
     Bake(BakeArgs),
+    /// Build the maximum and (min, max) mipmaps of a tileset's height tiles.
+    Mip {
+        /// Tileset folder.
+        dir: PathBuf,
+        #[command(flatten)]
+        flags: MipFlags,
+        /// EXR compression of the mipmaps: zip (lossless) or none (fastest).
+        #[arg(long, default_value = "zip")]
+        compression: TileCompression,
+        /// Print the report as JSON.
+        #[arg(long)]
+        json: bool,
+    },
     /// Describe a tileset.
     Info {
         /// Tileset folder.
@@ -73,6 +88,40 @@ enum QueryCommand {
         #[arg(long)]
         json: bool,
     },
+    /// The (min, max) mipmap texel that contains a latitude/longitude.
+    Mip {
+        dir: PathBuf,
+        /// Planetocentric latitude, degrees.
+        #[arg(long, allow_hyphen_values = true)]
+        lat: f64,
+        /// East longitude, degrees (−180..360).
+        #[arg(long, allow_hyphen_values = true)]
+        lon: f64,
+        /// Mip level (0 = finest: one texel per pixel); past the tile's 1×1 the face pyramid.
+        #[arg(long)]
+        level: u32,
+        /// Tile level whose tiles to use (0 = coarsest; default the finest).
+        #[arg(long)]
+        tile_level: Option<u8>,
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+#[derive(Args, Clone)]
+struct MipFlags {
+    /// Sample type of the mipmaps: f32, or f16 with max rounded up and min rounded down.
+    #[arg(long, default_value = "f32")]
+    precision: Precision,
+}
+
+impl MipFlags {
+    fn options(&self, compression: TileCompression) -> MipOptions {
+        MipOptions {
+            precision: self.precision,
+            compression,
+        }
+    }
 }
 
 #[derive(Args, Clone)]
@@ -165,6 +214,8 @@ struct BakeArgs {
     scene_size: usize,
     #[command(flatten)]
     flags: TileFlags,
+    #[command(flatten)]
+    mip: MipFlags,
 }
 
 fn body_arg(b: &BodyArgs) -> Result<Option<Body>> {
@@ -187,6 +238,7 @@ fn run(cli: Cli) -> Result<()> {
             let plan = Plan {
                 stages: vec![Stage::Tile],
                 tile: a.flags.options(),
+                mip: MipOptions::default(),
             };
             let input = Input::Dem {
                 path: a.dem.clone(),
@@ -198,8 +250,9 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Bake(a) => {
             let plan = Plan {
-                stages: vec![Stage::Tile],
                 tile: a.flags.options(),
+                mip: a.mip.options(a.flags.compression),
+                ..Plan::default()
             };
             let input = match &a.dem {
                 Some(p) => Input::Dem {
@@ -220,6 +273,16 @@ fn run(cli: Cli) -> Result<()> {
             let report = bake::bake(&input, &a.out, &plan, &progress)?;
             output::print_bake(&report, t0.elapsed().as_secs_f64(), a.flags.json)?;
         }
+        Command::Mip {
+            dir,
+            flags,
+            compression,
+            json,
+        } => {
+            let t0 = std::time::Instant::now();
+            let report = penumbra::mip::build_mips(&dir, &flags.options(compression), &progress)?;
+            output::print_mip(&report, t0.elapsed().as_secs_f64(), json)?;
+        }
         Command::Info { dir, json } => output::print_info(&dir, json)?,
         Command::Query(QueryCommand::Height {
             dir,
@@ -230,6 +293,17 @@ fn run(cli: Cli) -> Result<()> {
         }) => {
             let ans = penumbra::query::height(&dir, lat, lon, level)?;
             output::print_height(&ans, json)?;
+        }
+        Command::Query(QueryCommand::Mip {
+            dir,
+            lat,
+            lon,
+            level,
+            tile_level,
+            json,
+        }) => {
+            let ans = penumbra::mip::query(&dir, lat, lon, level, tile_level)?;
+            output::print_mip_answer(&ans, json)?;
         }
         Command::Bench(b) => bench::run(b, cli.quiet)?,
     }

@@ -9,6 +9,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use penumbra::bake::BakeReport;
 use penumbra::manifest::Tileset;
+use penumbra::mip::{MipAnswer, MipReport};
 use penumbra::query::HeightAnswer;
 
 /// indicatif bars on stderr; nothing when quiet or when stderr is not a terminal.
@@ -95,7 +96,72 @@ pub fn print_bake(r: &BakeReport, wall_s: f64, json: bool) -> Result<()> {
             )?;
         }
     }
+    if let Some(m) = &r.mip {
+        write_mip_line(&mut out, m)?;
+    }
     writeln!(out, "{wall_s:.2} s")?;
+    Ok(())
+}
+
+fn write_mip_line(out: &mut impl Write, m: &MipReport) -> Result<()> {
+    if m.up_to_date {
+        writeln!(
+            out,
+            "{}: mipmaps up to date ({} tiles)",
+            m.out.display(),
+            m.tiles
+        )?;
+    } else {
+        writeln!(
+            out,
+            "{}: mipmaps of {} tiles ({} written, {} kept), {} face pyramids, {:?}; heights {} .. {} m",
+            m.out.display(),
+            m.tiles,
+            m.tiles_written,
+            m.tiles_kept,
+            m.face_pyramids,
+            m.precision,
+            m.global_min_m,
+            m.global_max_m
+        )?;
+    }
+    Ok(())
+}
+
+pub fn print_mip(r: &MipReport, wall_s: f64, json: bool) -> Result<()> {
+    if json {
+        let mut v = serde_json::to_value(r)?;
+        v["wall_s"] = serde_json::json!(wall_s);
+        v["peak_rss_mib"] = serde_json::json!(peak_rss_mib());
+        return print_json(&v);
+    }
+    let mut out = std::io::stdout().lock();
+    write_mip_line(&mut out, r)?;
+    writeln!(out, "{wall_s:.2} s")?;
+    Ok(())
+}
+
+pub fn print_mip_answer(a: &MipAnswer, json: bool) -> Result<()> {
+    if json {
+        return print_json(a);
+    }
+    let f = |v: Option<f64>| v.map_or("no data".to_string(), |v| format!("{v:.3} m"));
+    println!(
+        "min {} max {} at {}°, {}° (mip level {} of tile level {}: {} texel {},{} of {}², face {}, tile {}/{})",
+        f(a.min_m),
+        f(a.max_m),
+        a.lat_deg,
+        a.lon_deg,
+        a.level,
+        a.tile_level,
+        a.scope,
+        a.texel[0],
+        a.texel[1],
+        a.texels,
+        a.face,
+        a.tile[0],
+        a.tile[1]
+    );
     Ok(())
 }
 
@@ -146,6 +212,19 @@ pub fn print_info(dir: &Path, json: bool) -> Result<()> {
             o,
             "height       {} .. {} m; {} filled px, {} no-data px; {}",
             h.min_m, h.max_m, h.filled_pixels, h.no_data_pixels, h.path
+        )?;
+    }
+    if let Some(m) = &ts.products.mip {
+        writeln!(
+            o,
+            "mipmaps      {} ({:?}) {} .. {} m; {}, {}, {}",
+            m.products.join("+"),
+            m.precision,
+            m.global_min_m,
+            m.global_max_m,
+            m.max_path,
+            m.minmax_path,
+            m.face_path
         )?;
     }
     if let Some(a) = &ts.products.albedo {

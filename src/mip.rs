@@ -1,0 +1,1198 @@
+//! The mipmap stage: per height tile a maximum pyramid and a (min, max) extrema pyramid, per
+//! face and tile level a coarse pyramid of whole-tile extrema, and the body's global extrema.
+//! Specified in docs/mipmaps.md.
+//!
+//! Texel convention: level-0 texel (i, j) of a tile is interior pixel (i, j) and bounds the
+//! *bilinearly interpolated* height over that pixel's footprint [i−½, i+½]×[j−½, j+½] (pixel
+//! centres at integers). That footprint straddles four bilinear cells whose corners are the
+//! stored samples i−1..=i+1, j−1..=j+1, so the level-0 max (min) is the extreme of those 3×3
+//! samples — the halo supplies the ring outside the interior. Level k texel (x, y) is the
+//! extreme of its 2×2 children (one child, or two, at an odd edge), down to 1×1.
+//!
+//! No data: a NaN sample never becomes an extreme; a texel whose whole footprint is NaN is
+//! NaN ("no terrain here").
+//!
+//! The kernels fold raw samples into a NaN-free accumulator with `if v > acc { v } else { acc }`
+//! (one `maxps` on x86: a NaN `v` leaves `acc`), starting from −∞ (+∞ for the minimum), and
+//! turn a −∞ (+∞) result back into NaN. Heights are finite or NaN, never ±∞.
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use exr::prelude::{
+    AnyChannel, AnyChannels, Blocks, Compression, Encoding, FlatSamples, Image, Layer,
+    LayerAttributes, Levels, LineOrder, ReadChannels, ReadLayers, SmallVec, Vec2, WritableImage,
+};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::cube::Face;
+use crate::error::{Error, IoContext, Result};
+use crate::layout::TileId;
+use crate::manifest::{self, MipLevelRange, MipProduct, Tileset};
+use crate::progress::Progress;
+use crate::query;
+use crate::tileio::{self, TileCompression};
+
+pub const MAX_PATTERN: &str = "maxmip/{level}/{face}/{y}/{x}.exr";
+pub const MINMAX_PATTERN: &str = "minmax/{level}/{face}/{y}/{x}.exr";
+pub const FACE_PATTERN: &str = "minmax/{level}/{face}/face.exr";
+/// Written at the start of a mip run and removed at its end; a rerun with the same key resumes.
+pub const PARTIAL: &str = ".penumbra-mip-partial.json";
+/// Version of the mip products' layout and convention (part of the run key).
+pub const MIP_FORMAT: &str = "penumbra-mip-1";
+/// One-line statement of the texel convention, recorded in the manifest.
+pub const TEXEL_CONVENTION: &str =
+    "level-0 texel (i,j) = interior pixel (i,j), bounds the bilinear \
+     surface over [i-1/2,i+1/2]x[j-1/2,j+1/2] = extreme of stored samples i-1..i+1, j-1..j+1; \
+     level k texel = extreme of its 2x2 children (sizes halve rounding up); NaN = no data";
+
+/// Storage precision of the pyramids.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Precision {
+    /// f32: the extrema of the f32 heights, exactly.
+    #[default]
+    F32,
+    /// f16: max rounded up and min rounded down to the next f16, so bounds stay bounds.
+    F16,
+}
+
+impl std::str::FromStr for Precision {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "f32" => Ok(Precision::F32),
+            "f16" => Ok(Precision::F16),
+            _ => Err(format!("unknown precision '{s}': use f32 or f16")),
+        }
+    }
+}
+
+/// Smallest f16 ≥ `x` (NaN stays NaN; above 65504 gives +∞).
+pub fn f16_up(x: f32) -> half::f16 {
+    if x.is_nan() {
+        return half::f16::NAN;
+    }
+    let h = half::f16::from_f32(x);
+    if h.to_f32() >= x {
+        return h;
+    }
+    let b = h.to_bits();
+    half::f16::from_bits(match b {
+        0x8000 => 0x0001,
+        b if b & 0x8000 == 0 => b + 1,
+        b => b - 1,
+    })
+}
+
+/// Largest f16 ≤ `x` (NaN stays NaN; below −65504 gives −∞).
+pub fn f16_down(x: f32) -> half::f16 {
+    if x.is_nan() {
+        return half::f16::NAN;
+    }
+    let h = half::f16::from_f32(x);
+    if h.to_f32() <= x {
+        return h;
+    }
+    let b = h.to_bits();
+    half::f16::from_bits(match b {
+        0x0000 => 0x8001,
+        b if b & 0x8000 == 0 => b - 1,
+        b => b + 1,
+    })
+}
+
+// ---------------------------------------------------------------------------------------------
+// Kernels
+
+const NEG_INF: f32 = f32::NEG_INFINITY;
+const POS_INF: f32 = f32::INFINITY;
+
+/// Fold `v` into a NaN-free running maximum: a NaN `v` leaves `acc` (x86 `maxps v, acc`).
+#[inline(always)]
+fn fmax(acc: f32, v: f32) -> f32 {
+    if v > acc {
+        v
+    } else {
+        acc
+    }
+}
+
+#[inline(always)]
+fn fmin(acc: f32, v: f32) -> f32 {
+    if v < acc {
+        v
+    } else {
+        acc
+    }
+}
+
+/// −∞ (an all-NaN footprint) back to NaN.
+#[inline(always)]
+fn nan_if(v: f32, empty: f32) -> f32 {
+    if v == empty {
+        f32::NAN
+    } else {
+        v
+    }
+}
+
+/// Texels per side at each level for a `n`-texel level 0: n, ⌈n/2⌉, …, 1.
+pub fn level_sizes(n: usize) -> Vec<usize> {
+    let mut v = vec![n.max(1)];
+    while *v.last().unwrap() > 1 {
+        let s = *v.last().unwrap();
+        v.push(s.div_ceil(2));
+    }
+    v
+}
+
+/// A maximum pyramid: `max[k]` is level k, `sizes[k]²` texels, row-major.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MaxPyramid {
+    pub sizes: Vec<usize>,
+    pub max: Vec<Vec<f32>>,
+}
+
+/// A (min, max) pyramid: `min[k]`, `max[k]` are level k, `sizes[k]²` texels, row-major.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MinMaxPyramid {
+    pub sizes: Vec<usize>,
+    pub min: Vec<Vec<f32>>,
+    pub max: Vec<Vec<f32>>,
+}
+
+impl MaxPyramid {
+    /// An allocated pyramid for `n`-texel tiles, for [`max_pyramid_into`].
+    pub fn new(n: usize) -> MaxPyramid {
+        let sizes = level_sizes(n);
+        let max = sizes.iter().map(|&s| vec![0.0; s * s]).collect();
+        MaxPyramid { sizes, max }
+    }
+}
+
+impl MinMaxPyramid {
+    /// An allocated pyramid for `n`-texel tiles, for [`minmax_pyramid_into`].
+    pub fn new(n: usize) -> MinMaxPyramid {
+        let sizes = level_sizes(n);
+        let min = sizes.iter().map(|&s| vec![0.0; s * s]).collect();
+        let max = sizes.iter().map(|&s| vec![0.0; s * s]).collect();
+        MinMaxPyramid { sizes, min, max }
+    }
+
+    /// The whole-pyramid extrema (the 1×1 level).
+    pub fn top(&self) -> (f32, f32) {
+        (self.min.last().unwrap()[0], self.max.last().unwrap()[0])
+    }
+}
+
+/// Interior size of a stored tile, after checking the buffer against it.
+fn interior(height: &[f32], stored_size: usize, halo: usize) -> Result<usize> {
+    if halo < 1 || stored_size <= 2 * halo {
+        return Err(Error::usage(format!(
+            "mipmaps need a halo of at least 1 pixel and a non-empty interior (stored size \
+             {stored_size}, halo {halo})"
+        )));
+    }
+    if height.len() != stored_size * stored_size {
+        return Err(Error::usage(format!(
+            "height buffer holds {} samples, not {stored_size}²",
+            height.len()
+        )));
+    }
+    Ok(stored_size - 2 * halo)
+}
+
+/// Whether the AVX kernels can run here (detected once; the results are bit-identical to the
+/// portable code, so the output does not depend on it).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+fn avx() -> bool {
+    std::arch::is_x86_feature_detected!("avx")
+}
+
+/// `out[i]` = NaN-ignoring max of `row[i..i+3]` (−∞ when all NaN).
+#[inline]
+fn hmax3(row: &[f32], out: &mut [f32]) {
+    let n = out.len();
+    let row = &row[..n + 2];
+    #[allow(unused_mut)]
+    let mut done = 0;
+    #[cfg(target_arch = "x86_64")]
+    if avx() {
+        // SAFETY: AVX is present (checked above).
+        done = unsafe { simd::h3::<true>(row, out) };
+    }
+    for i in done..n {
+        out[i] = fmax(fmax(fmax(NEG_INF, row[i]), row[i + 1]), row[i + 2]);
+    }
+}
+
+#[inline]
+fn hminmax3(row: &[f32], lo: &mut [f32], hi: &mut [f32]) {
+    let n = lo.len();
+    let (row, hi) = (&row[..n + 2], &mut hi[..n]);
+    #[allow(unused_mut)]
+    let mut done = 0;
+    #[cfg(target_arch = "x86_64")]
+    if avx() {
+        // SAFETY: AVX is present (checked above).
+        done = unsafe { simd::h3_both(row, lo, hi) };
+    }
+    for i in done..n {
+        lo[i] = fmin(fmin(fmin(POS_INF, row[i]), row[i + 1]), row[i + 2]);
+        hi[i] = fmax(fmax(fmax(NEG_INF, row[i]), row[i + 1]), row[i + 2]);
+    }
+}
+
+/// `out[i]` = extreme of `a[i]`, `b[i]`, `c[i]` (NaN-free inputs), the empty value → NaN.
+#[inline]
+fn v3<const MAX: bool>(a: &[f32], b: &[f32], c: &[f32], out: &mut [f32]) {
+    let n = out.len();
+    let (a, b, c) = (&a[..n], &b[..n], &c[..n]);
+    #[allow(unused_mut)]
+    let mut done = 0;
+    #[cfg(target_arch = "x86_64")]
+    if avx() {
+        // SAFETY: AVX is present (checked above).
+        done = unsafe { simd::v3::<MAX>(a, b, c, out) };
+    }
+    for i in done..n {
+        out[i] = if MAX {
+            nan_if(fmax(fmax(a[i], b[i]), c[i]), NEG_INF)
+        } else {
+            nan_if(fmin(fmin(a[i], b[i]), c[i]), POS_INF)
+        };
+    }
+}
+
+fn vmax3(a: &[f32], b: &[f32], c: &[f32], out: &mut [f32]) {
+    v3::<true>(a, b, c, out)
+}
+
+fn vmin3(a: &[f32], b: &[f32], c: &[f32], out: &mut [f32]) {
+    v3::<false>(a, b, c, out)
+}
+
+/// Reduce rows `r0`, `r1` of a `w`-wide level into one row of ⌈w/2⌉ texels of the next
+/// (pairs of columns; the last column alone when `w` is odd). NaN-ignoring; NaN when all four
+/// are NaN.
+#[inline]
+fn reduce_row<const MAX: bool>(r0: &[f32], r1: &[f32], out: &mut [f32]) {
+    let w = r0.len();
+    let (r1, out) = (&r1[..w], &mut out[..w.div_ceil(2)]);
+    let empty = if MAX { NEG_INF } else { POS_INF };
+    let fold = |acc: f32, v: f32| if MAX { fmax(acc, v) } else { fmin(acc, v) };
+    let pairs = w / 2;
+    #[cfg(target_arch = "x86_64")]
+    let done = simd::reduce_pairs::<MAX>(&r0[..2 * pairs], &r1[..2 * pairs], &mut out[..pairs]);
+    #[cfg(not(target_arch = "x86_64"))]
+    let done = 0;
+    for x in done..pairs {
+        let v = fold(
+            fold(fold(fold(empty, r0[2 * x]), r0[2 * x + 1]), r1[2 * x]),
+            r1[2 * x + 1],
+        );
+        out[x] = nan_if(v, empty);
+    }
+    if w % 2 == 1 {
+        out[pairs] = nan_if(fold(fold(empty, r0[w - 1]), r1[w - 1]), empty);
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod simd {
+    //! SSE2 (part of every x86-64 CPU) for the 2×2 step: LLVM does not vectorize the
+    //! de-interleaving of column pairs on its own. `maxps v, acc` returns `acc` when `v` is NaN,
+    //! which is exactly the NaN-ignoring fold of the scalar code.
+    use std::arch::x86_64::*;
+
+    /// Reduces 4 output texels per step; returns how many outputs it wrote.
+    #[inline]
+    pub fn reduce_pairs<const MAX: bool>(r0: &[f32], r1: &[f32], out: &mut [f32]) -> usize {
+        let steps = out.len() / 4;
+        assert!(r0.len() >= steps * 8 && r1.len() >= steps * 8);
+        // SAFETY: SSE2 is always present on x86_64; every load reads r0/r1[8k..8k+8] and every
+        // store writes out[4k..4k+4] with k < steps, inside the slices (checked above).
+        unsafe {
+            let empty = _mm_set1_ps(if MAX {
+                f32::NEG_INFINITY
+            } else {
+                f32::INFINITY
+            });
+            let nan = _mm_set1_ps(f32::NAN);
+            let fold = |acc: __m128, v: __m128| {
+                if MAX {
+                    _mm_max_ps(v, acc)
+                } else {
+                    _mm_min_ps(v, acc)
+                }
+            };
+            for k in 0..steps {
+                let (p0, p1, q) = (
+                    r0.as_ptr().add(8 * k),
+                    r1.as_ptr().add(8 * k),
+                    out.as_mut_ptr().add(4 * k),
+                );
+                let a = fold(fold(empty, _mm_loadu_ps(p0)), _mm_loadu_ps(p1));
+                let b = fold(
+                    fold(empty, _mm_loadu_ps(p0.add(4))),
+                    _mm_loadu_ps(p1.add(4)),
+                );
+                let even = _mm_shuffle_ps::<0b10_00_10_00>(a, b);
+                let odd = _mm_shuffle_ps::<0b11_01_11_01>(a, b);
+                let m = fold(even, odd);
+                let is_empty = _mm_cmpeq_ps(m, empty);
+                let r = _mm_or_ps(_mm_andnot_ps(is_empty, m), _mm_and_ps(is_empty, nan));
+                _mm_storeu_ps(q, r);
+            }
+        }
+        steps * 4
+    }
+
+    // The AVX kernels below handle 8 outputs per step and return how many they wrote; the
+    // caller finishes the tail with the portable code. `_mm256_max_ps(v, acc)` is `acc` when `v`
+    // is NaN, like the scalar fold.
+
+    #[inline]
+    #[target_feature(enable = "avx")]
+    unsafe fn fold8<const MAX: bool>(acc: __m256, v: __m256) -> __m256 {
+        if MAX {
+            _mm256_max_ps(v, acc)
+        } else {
+            _mm256_min_ps(v, acc)
+        }
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx")]
+    unsafe fn empty8<const MAX: bool>() -> __m256 {
+        _mm256_set1_ps(if MAX {
+            f32::NEG_INFINITY
+        } else {
+            f32::INFINITY
+        })
+    }
+
+    /// `out[i]` = NaN-ignoring extreme of `row[i..i+3]`; `row.len() == out.len() + 2`.
+    #[target_feature(enable = "avx")]
+    pub unsafe fn h3<const MAX: bool>(row: &[f32], out: &mut [f32]) -> usize {
+        let steps = out.len() / 8;
+        assert!(row.len() >= steps * 8 + 2);
+        let e = empty8::<MAX>();
+        let (p, q) = (row.as_ptr(), out.as_mut_ptr());
+        for k in 0..steps {
+            let i = 8 * k;
+            let a = fold8::<MAX>(e, _mm256_loadu_ps(p.add(i)));
+            let a = fold8::<MAX>(a, _mm256_loadu_ps(p.add(i + 1)));
+            let a = fold8::<MAX>(a, _mm256_loadu_ps(p.add(i + 2)));
+            _mm256_storeu_ps(q.add(i), a);
+        }
+        steps * 8
+    }
+
+    /// [`h3`] for the minimum and the maximum from the same loads.
+    #[target_feature(enable = "avx")]
+    pub unsafe fn h3_both(row: &[f32], lo: &mut [f32], hi: &mut [f32]) -> usize {
+        let steps = lo.len().min(hi.len()) / 8;
+        assert!(row.len() >= steps * 8 + 2);
+        let (el, eh) = (empty8::<false>(), empty8::<true>());
+        let (p, ql, qh) = (row.as_ptr(), lo.as_mut_ptr(), hi.as_mut_ptr());
+        for k in 0..steps {
+            let i = 8 * k;
+            let (x, y, z) = (
+                _mm256_loadu_ps(p.add(i)),
+                _mm256_loadu_ps(p.add(i + 1)),
+                _mm256_loadu_ps(p.add(i + 2)),
+            );
+            let l = fold8::<false>(fold8::<false>(fold8::<false>(el, x), y), z);
+            let h = fold8::<true>(fold8::<true>(fold8::<true>(eh, x), y), z);
+            _mm256_storeu_ps(ql.add(i), l);
+            _mm256_storeu_ps(qh.add(i), h);
+        }
+        steps * 8
+    }
+
+    /// `out[i]` = extreme of NaN-free `a[i]`, `b[i]`, `c[i]`, the empty value turned to NaN.
+    #[target_feature(enable = "avx")]
+    pub unsafe fn v3<const MAX: bool>(a: &[f32], b: &[f32], c: &[f32], out: &mut [f32]) -> usize {
+        let steps = out.len() / 8;
+        assert!(a.len() >= steps * 8 && b.len() >= steps * 8 && c.len() >= steps * 8);
+        let (e, nan) = (empty8::<MAX>(), _mm256_set1_ps(f32::NAN));
+        let q = out.as_mut_ptr();
+        for k in 0..steps {
+            let i = 8 * k;
+            let m = fold8::<MAX>(
+                fold8::<MAX>(
+                    _mm256_loadu_ps(a.as_ptr().add(i)),
+                    _mm256_loadu_ps(b.as_ptr().add(i)),
+                ),
+                _mm256_loadu_ps(c.as_ptr().add(i)),
+            );
+            let is_empty = _mm256_cmp_ps::<_CMP_EQ_OQ>(m, e);
+            _mm256_storeu_ps(q.add(i), _mm256_blendv_ps(m, nan, is_empty));
+        }
+        steps * 8
+    }
+}
+
+/// Row `r` of level `k` has just been written: when it completes a pair of rows (or is the
+/// last row of an odd level), write the row of level k+1 they make, and so on up the pyramid,
+/// while the rows are still in cache.
+fn cascade<const MAX: bool>(sizes: &[usize], levels: &mut [Vec<f32>], k: usize, r: usize) {
+    let (mut k, mut r) = (k, r);
+    while k + 1 < levels.len() {
+        let w = sizes[k];
+        if r % 2 == 0 && r != w - 1 {
+            return;
+        }
+        let y = r / 2;
+        let (lo, hi) = levels.split_at_mut(k + 1);
+        let src = &lo[k];
+        let r0 = &src[2 * y * w..][..w];
+        let r1 = &src[(2 * y + 1).min(w - 1) * w..][..w];
+        let w2 = sizes[k + 1];
+        reduce_row::<MAX>(r0, r1, &mut hi[0][y * w2..(y + 1) * w2]);
+        k += 1;
+        r = y;
+    }
+}
+
+/// Level 0 of the max pyramid (separable 3×3 max, streaming stored rows through a ring of
+/// three horizontal results so the input is read once), cascading each finished row pair up.
+fn max_levels(h: &[f32], s: usize, halo: usize, sizes: &[usize], out: &mut [Vec<f32>]) {
+    let n = sizes[0];
+    let row = |r: usize| &h[r * s + halo - 1..r * s + halo + n + 1];
+    let mut ring = [vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]];
+    hmax3(row(halo - 1), &mut ring[0]);
+    hmax3(row(halo), &mut ring[1]);
+    for j in 0..n {
+        hmax3(row(j + halo + 1), &mut ring[(j + 2) % 3]);
+        vmax3(
+            &ring[j % 3],
+            &ring[(j + 1) % 3],
+            &ring[(j + 2) % 3],
+            &mut out[0][j * n..(j + 1) * n],
+        );
+        cascade::<true>(sizes, out, 0, j);
+    }
+}
+
+fn minmax_levels(
+    h: &[f32],
+    s: usize,
+    halo: usize,
+    sizes: &[usize],
+    lo: &mut [Vec<f32>],
+    hi: &mut [Vec<f32>],
+) {
+    let n = sizes[0];
+    let row = |r: usize| &h[r * s + halo - 1..r * s + halo + n + 1];
+    let mut rl = [vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]];
+    let mut rh = [vec![0.0f32; n], vec![0.0f32; n], vec![0.0f32; n]];
+    {
+        let ([l0, l1, _], [h0, h1, _]) = (&mut rl, &mut rh);
+        hminmax3(row(halo - 1), l0, h0);
+        hminmax3(row(halo), l1, h1);
+    }
+    for j in 0..n {
+        let k = (j + 2) % 3;
+        hminmax3(row(j + halo + 1), &mut rl[k], &mut rh[k]);
+        vmin3(
+            &rl[j % 3],
+            &rl[(j + 1) % 3],
+            &rl[k],
+            &mut lo[0][j * n..(j + 1) * n],
+        );
+        vmax3(
+            &rh[j % 3],
+            &rh[(j + 1) % 3],
+            &rh[k],
+            &mut hi[0][j * n..(j + 1) * n],
+        );
+        cascade::<false>(sizes, lo, 0, j);
+        cascade::<true>(sizes, hi, 0, j);
+    }
+}
+
+/// Reduce level 0 of `levels` up to 1×1.
+fn reduce_levels<const MAX: bool>(sizes: &[usize], levels: &mut [Vec<f32>]) {
+    for k in 0..levels.len() - 1 {
+        for r in 0..sizes[k] {
+            cascade::<MAX>(&sizes[..k + 2], &mut levels[..k + 2], k, r);
+        }
+    }
+}
+
+fn check_out(sizes: &[usize], levels: &[Vec<f32>], n: usize) -> Result<()> {
+    if sizes != level_sizes(n).as_slice()
+        || levels.len() != sizes.len()
+        || levels.iter().zip(sizes).any(|(l, &s)| l.len() != s * s)
+    {
+        return Err(Error::usage(format!(
+            "pyramid buffers do not fit a {n}-texel tile"
+        )));
+    }
+    Ok(())
+}
+
+/// The maximum pyramid of one stored height tile (`stored_size²` samples, halo included).
+pub fn max_pyramid(height: &[f32], stored_size: usize, halo: usize) -> Result<MaxPyramid> {
+    let n = interior(height, stored_size, halo)?;
+    let mut p = MaxPyramid::new(n);
+    max_pyramid_into(height, stored_size, halo, &mut p)?;
+    Ok(p)
+}
+
+/// As [`max_pyramid`], into buffers from [`MaxPyramid::new`] (no allocation of the levels).
+pub fn max_pyramid_into(
+    height: &[f32],
+    stored_size: usize,
+    halo: usize,
+    out: &mut MaxPyramid,
+) -> Result<()> {
+    let n = interior(height, stored_size, halo)?;
+    check_out(&out.sizes, &out.max, n)?;
+    max_levels(height, stored_size, halo, &out.sizes, &mut out.max);
+    Ok(())
+}
+
+/// The (min, max) pyramid of one stored height tile (`stored_size²` samples, halo included).
+pub fn minmax_pyramid(height: &[f32], stored_size: usize, halo: usize) -> Result<MinMaxPyramid> {
+    let n = interior(height, stored_size, halo)?;
+    let mut p = MinMaxPyramid::new(n);
+    minmax_pyramid_into(height, stored_size, halo, &mut p)?;
+    Ok(p)
+}
+
+/// As [`minmax_pyramid`], into buffers from [`MinMaxPyramid::new`].
+pub fn minmax_pyramid_into(
+    height: &[f32],
+    stored_size: usize,
+    halo: usize,
+    out: &mut MinMaxPyramid,
+) -> Result<()> {
+    let n = interior(height, stored_size, halo)?;
+    check_out(&out.sizes, &out.min, n)?;
+    check_out(&out.sizes, &out.max, n)?;
+    minmax_levels(
+        height,
+        stored_size,
+        halo,
+        &out.sizes,
+        &mut out.min,
+        &mut out.max,
+    );
+    Ok(())
+}
+
+/// The coarse pyramid of one face at one tile level: level 0 is the `g × g` grid of each
+/// tile's 1×1 (min, max) (NaN where a tile is absent), reduced 2×2 up to 1×1.
+pub fn face_pyramid(g: usize, min: Vec<f32>, max: Vec<f32>) -> MinMaxPyramid {
+    assert_eq!(min.len(), g * g);
+    assert_eq!(max.len(), g * g);
+    let sizes = level_sizes(g);
+    let mut lo = vec![min];
+    let mut hi = vec![max];
+    for &s in &sizes[1..] {
+        lo.push(vec![0.0; s * s]);
+        hi.push(vec![0.0; s * s]);
+    }
+    reduce_levels::<false>(&sizes, &mut lo);
+    reduce_levels::<true>(&sizes, &mut hi);
+    MinMaxPyramid {
+        sizes,
+        min: lo,
+        max: hi,
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Files
+
+fn encoding(compression: TileCompression) -> Encoding {
+    Encoding {
+        compression: match compression {
+            TileCompression::Zip => Compression::ZIP16,
+            TileCompression::None => Compression::Uncompressed,
+        },
+        blocks: Blocks::Tiles(Vec2(64, 64)),
+        line_order: LineOrder::Increasing,
+    }
+}
+
+fn channel(
+    name: &str,
+    levels: &[Vec<f32>],
+    precision: Precision,
+    is_max: bool,
+) -> AnyChannel<Levels<FlatSamples>> {
+    let data = levels
+        .iter()
+        .map(|l| match precision {
+            Precision::F32 => FlatSamples::F32(l.clone()),
+            Precision::F16 => FlatSamples::F16(
+                l.iter()
+                    .map(|&v| if is_max { f16_up(v) } else { f16_down(v) })
+                    .collect(),
+            ),
+        })
+        .collect();
+    AnyChannel::new(
+        name,
+        Levels::Mip {
+            rounding_mode: exr::math::RoundingMode::Up,
+            level_data: data,
+        },
+    )
+}
+
+/// Write a mip-mapped EXR with channel `max` and, when `min` is given, channel `min`.
+pub fn write_mip_exr(
+    path: &Path,
+    size: usize,
+    min: Option<&[Vec<f32>]>,
+    max: &[Vec<f32>],
+    precision: Precision,
+    compression: TileCompression,
+    name: &str,
+) -> Result<()> {
+    let mut list = vec![channel("max", max, precision, true)];
+    if let Some(m) = min {
+        list.push(channel("min", m, precision, false));
+    }
+    let layer = Layer::new(
+        (size, size),
+        LayerAttributes::named(name),
+        encoding(compression),
+        AnyChannels::sort(SmallVec::from_vec(list)),
+    );
+    let image = Image::from_layer(layer);
+    tileio::write_atomic(path, |f| {
+        let mut buf = std::io::Cursor::new(Vec::with_capacity(size * size * 8));
+        image
+            .write()
+            .non_parallel()
+            .to_buffered(&mut buf)
+            .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
+        f.write_all(buf.get_ref()).at(path)
+    })
+}
+
+/// The channels of a mip-mapped EXR, each as its levels (largest first) in f32.
+#[derive(Clone, Debug)]
+pub struct MipFile {
+    pub sizes: Vec<usize>,
+    pub channels: BTreeMap<String, Vec<Vec<f32>>>,
+}
+
+impl MipFile {
+    pub fn channel(&self, path: &Path, name: &str) -> Result<&Vec<Vec<f32>>> {
+        self.channels
+            .get(name)
+            .ok_or_else(|| Error::invalid(path, format!("mip EXR has no '{name}' channel")))
+    }
+}
+
+/// Read a file written by [`write_mip_exr`].
+pub fn read_mip_exr(path: &Path) -> Result<MipFile> {
+    let bytes = std::fs::read(path).at(path)?;
+    let bad =
+        |msg: String| Error::invalid(path, format!("{msg}; delete it and rerun `penumbra mip`"));
+    let image = exr::prelude::read()
+        .no_deep_data()
+        .all_resolution_levels()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .non_parallel()
+        .from_buffered(std::io::Cursor::new(bytes))
+        .map_err(|e| bad(format!("not a readable mipmap EXR ({e})")))?;
+    let layer = &image.layer_data;
+    let (w, h) = (layer.size.width(), layer.size.height());
+    if w != h {
+        return Err(bad(format!("mipmap is {w}×{h}, not square")));
+    }
+    let sizes = level_sizes(w);
+    let mut channels = BTreeMap::new();
+    for ch in &layer.channel_data.list {
+        let levels: Vec<Vec<f32>> = match &ch.sample_data {
+            Levels::Singular(s) => vec![s.values_as_f32().collect()],
+            Levels::Mip { level_data, .. } => level_data
+                .iter()
+                .map(|s| s.values_as_f32().collect())
+                .collect(),
+            Levels::Rip { .. } => return Err(bad("rip-mapped, not mip-mapped".into())),
+        };
+        if levels.len() != sizes.len() || levels.iter().zip(&sizes).any(|(l, &s)| l.len() != s * s)
+        {
+            return Err(bad(format!(
+                "channel '{}' does not hold the {} mip levels of a {w}² image",
+                ch.name,
+                sizes.len()
+            )));
+        }
+        channels.insert(ch.name.to_string(), levels);
+    }
+    Ok(MipFile { sizes, channels })
+}
+
+// ---------------------------------------------------------------------------------------------
+// Stage
+
+/// What the user chose.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct MipOptions {
+    pub precision: Precision,
+    pub compression: TileCompression,
+}
+
+/// What a run did.
+#[derive(Clone, Debug, Serialize)]
+pub struct MipReport {
+    pub out: PathBuf,
+    pub tiles: u64,
+    pub tiles_written: u64,
+    pub tiles_kept: u64,
+    pub face_pyramids: u64,
+    pub precision: Precision,
+    pub global_min_m: f64,
+    pub global_max_m: f64,
+    /// Height samples read (halos included) × 4 bytes.
+    pub input_bytes: u64,
+    pub up_to_date: bool,
+}
+
+fn nan_to_none(v: f32) -> Option<f64> {
+    (!v.is_nan()).then_some(v as f64)
+}
+
+/// Paths of a tile's two products.
+pub fn tile_paths(dir: &Path, id: TileId) -> (PathBuf, PathBuf) {
+    let f = id.face.name();
+    (
+        tileio::tile_path(dir, MAX_PATTERN, id.level, f, id.x, id.y),
+        tileio::tile_path(dir, MINMAX_PATTERN, id.level, f, id.x, id.y),
+    )
+}
+
+/// Path of a face pyramid.
+pub fn face_path(dir: &Path, level: u8, face: Face) -> PathBuf {
+    tileio::tile_path(dir, FACE_PATTERN, level, face.name(), 0, 0)
+}
+
+/// Read a height tile and compute its (min, max) pyramid, checking the tile's size.
+pub fn tile_pyramid(path: &Path, stored_size: usize, halo: usize) -> Result<MinMaxPyramid> {
+    let t = tileio::read_height_tile(path)?;
+    if t.size != stored_size {
+        return Err(Error::invalid(
+            path,
+            format!("tile is {}² but the manifest says {stored_size}²", t.size),
+        ));
+    }
+    minmax_pyramid(&t.height, t.size, halo)
+}
+
+/// Build every mip product of the tileset in `dir` and record them in its manifest.
+pub fn build_mips(dir: &Path, opts: &MipOptions, progress: &dyn Progress) -> Result<MipReport> {
+    let mut ts = Tileset::load(dir)?;
+    let manifest_path = dir.join(manifest::MANIFEST);
+    let height = ts.products.height.clone().ok_or_else(|| {
+        Error::invalid(
+            &manifest_path,
+            "tileset has no height product to build mipmaps from",
+        )
+    })?;
+    let lay = ts.layout;
+    if lay.halo < 1 {
+        return Err(Error::unsupported(
+            &manifest_path,
+            "mipmaps need a halo of at least 1 pixel: retile with --halo 1 or more",
+        ));
+    }
+    let (n, s, halo) = (lay.tile_size as usize, lay.stored_size(), lay.halo as usize);
+    let run_key = {
+        let mut h = blake3::Hasher::new();
+        h.update(env!("CARGO_PKG_VERSION").as_bytes());
+        h.update(MIP_FORMAT.as_bytes());
+        h.update(ts.run_key.as_bytes());
+        h.update(height.path.as_bytes());
+        h.update(serde_json::to_string(opts).unwrap_or_default().as_bytes());
+        h.finalize().to_hex().to_string()
+    };
+    let tiles: Vec<TileId> = ts.tile_set().into_iter().collect();
+    let tile_bytes = (s * s * 4) as u64;
+    let partial_path = dir.join(PARTIAL);
+    if let Some(m) = &ts.products.mip {
+        if m.run_key == run_key && !partial_path.exists() {
+            return Ok(MipReport {
+                out: dir.to_path_buf(),
+                tiles: tiles.len() as u64,
+                tiles_written: 0,
+                tiles_kept: tiles.len() as u64,
+                face_pyramids: 0,
+                precision: opts.precision,
+                global_min_m: m.global_min_m,
+                global_max_m: m.global_max_m,
+                input_bytes: 0,
+                up_to_date: true,
+            });
+        }
+    }
+    let previous = std::fs::read_to_string(&partial_path)
+        .ok()
+        .and_then(|s| serde_json::from_str::<serde_json::Value>(&s).ok())
+        .and_then(|v| v["run_key"].as_str().map(str::to_string));
+    let resume = previous.as_deref() == Some(run_key.as_str());
+    if !resume {
+        // Products of other heights or options are stale.
+        for sub in ["maxmip", "minmax"] {
+            let p = dir.join(sub);
+            if p.exists() {
+                std::fs::remove_dir_all(&p).map_err(|e| Error::io(&p, e))?;
+            }
+        }
+    }
+    tileio::write_atomic_bytes(
+        &partial_path,
+        serde_json::json!({ "run_key": run_key })
+            .to_string()
+            .as_bytes(),
+    )?;
+
+    progress.start("mipmaps", tiles.len() as u64);
+    let results: Vec<Result<(f32, f32, bool)>> = tiles
+        .par_iter()
+        .map(|&id| {
+            let r = mip_tile(dir, &ts, id, n, s, halo, opts, resume);
+            progress.inc(1);
+            r
+        })
+        .collect();
+    progress.finish();
+    let mut tops = BTreeMap::new();
+    let (mut written, mut kept) = (0u64, 0u64);
+    for (id, r) in tiles.iter().zip(results) {
+        let (lo, hi, k) = r?;
+        if k {
+            kept += 1;
+        } else {
+            written += 1;
+        }
+        tops.insert(*id, (lo, hi));
+    }
+
+    // Face pyramids of whole-tile extrema, and per-level and global ranges.
+    let mut ranges = Vec::new();
+    let mut face_pyramids = 0u64;
+    let (mut gmin, mut gmax) = (POS_INF, NEG_INF);
+    for level in 0..lay.levels {
+        let g = lay.tiles_per_side(level) as usize;
+        let (mut lmin, mut lmax) = (POS_INF, NEG_INF);
+        for face in Face::ALL {
+            let mut lo = vec![f32::NAN; g * g];
+            let mut hi = vec![f32::NAN; g * g];
+            let mut any = false;
+            for (id, &(a, b)) in tops.range(
+                TileId {
+                    level,
+                    face,
+                    x: 0,
+                    y: 0,
+                }..=TileId {
+                    level,
+                    face,
+                    x: u32::MAX,
+                    y: u32::MAX,
+                },
+            ) {
+                let k = id.y as usize * g + id.x as usize;
+                lo[k] = a;
+                hi[k] = b;
+                any = true;
+            }
+            if !any {
+                continue;
+            }
+            let p = face_pyramid(g, lo, hi);
+            let (a, b) = p.top();
+            lmin = fmin(lmin, a);
+            lmax = fmax(lmax, b);
+            write_mip_exr(
+                &face_path(dir, level, face),
+                g,
+                Some(&p.min),
+                &p.max,
+                Precision::F32,
+                opts.compression,
+                "penumbra-face-minmax",
+            )?;
+            face_pyramids += 1;
+        }
+        gmin = fmin(gmin, lmin);
+        gmax = fmax(gmax, lmax);
+        ranges.push(MipLevelRange {
+            level,
+            min_m: nan_to_none(nan_if(lmin, POS_INF)),
+            max_m: nan_to_none(nan_if(lmax, NEG_INF)),
+        });
+    }
+    if !(gmin.is_finite() && gmax.is_finite()) {
+        return Err(Error::invalid(
+            &manifest_path,
+            "every height tile is no data: nothing to build mipmaps from",
+        ));
+    }
+    let product = MipProduct {
+        products: vec!["max".into(), "minmax".into()],
+        max_path: MAX_PATTERN.into(),
+        max_channels: vec!["max".into()],
+        minmax_path: MINMAX_PATTERN.into(),
+        minmax_channels: vec!["min".into(), "max".into()],
+        face_path: FACE_PATTERN.into(),
+        precision: opts.precision,
+        face_precision: Precision::F32,
+        level_rounding: "up".into(),
+        texel: TEXEL_CONVENTION.into(),
+        global_min_m: gmin as f64,
+        global_max_m: gmax as f64,
+        levels: ranges,
+        run_key,
+    };
+    let (gmin, gmax) = (product.global_min_m, product.global_max_m);
+    ts.products.mip = Some(product);
+    let json = serde_json::to_string_pretty(&ts).expect("manifest serialises");
+    tileio::write_atomic_bytes(&manifest_path, json.as_bytes())?;
+    std::fs::remove_file(&partial_path).map_err(|e| Error::io(&partial_path, e))?;
+    Ok(MipReport {
+        out: dir.to_path_buf(),
+        tiles: tiles.len() as u64,
+        tiles_written: written,
+        tiles_kept: kept,
+        face_pyramids,
+        precision: opts.precision,
+        global_min_m: gmin,
+        global_max_m: gmax,
+        input_bytes: written * tile_bytes,
+        up_to_date: false,
+    })
+}
+
+/// One tile: (1×1 min, 1×1 max, kept from an earlier run).
+#[allow(clippy::too_many_arguments)]
+fn mip_tile(
+    dir: &Path,
+    ts: &Tileset,
+    id: TileId,
+    n: usize,
+    s: usize,
+    halo: usize,
+    opts: &MipOptions,
+    resume: bool,
+) -> Result<(f32, f32, bool)> {
+    let (pmax, pmm) = tile_paths(dir, id);
+    if resume && pmax.exists() && pmm.exists() {
+        if let Ok(f) = read_mip_exr(&pmm) {
+            if f.sizes[0] == n {
+                if let (Some(lo), Some(hi)) = (f.channels.get("min"), f.channels.get("max")) {
+                    return Ok((lo.last().unwrap()[0], hi.last().unwrap()[0], true));
+                }
+            }
+        }
+    }
+    let pattern = &ts.products.height.as_ref().expect("checked").path;
+    let hpath = tileio::tile_path(dir, pattern, id.level, id.face.name(), id.x, id.y);
+    let p = tile_pyramid(&hpath, s, halo)?;
+    write_mip_exr(
+        &pmax,
+        n,
+        None,
+        &p.max,
+        opts.precision,
+        opts.compression,
+        "penumbra-maxmip",
+    )?;
+    write_mip_exr(
+        &pmm,
+        n,
+        Some(&p.min),
+        &p.max,
+        opts.precision,
+        opts.compression,
+        "penumbra-minmax",
+    )?;
+    let (lo, hi) = p.top();
+    // f16 files hold rounded bounds: the face pyramid uses the same rounded values.
+    Ok(match opts.precision {
+        Precision::F32 => (lo, hi, false),
+        Precision::F16 => (f16_down(lo).to_f32(), f16_up(hi).to_f32(), false),
+    })
+}
+
+// ---------------------------------------------------------------------------------------------
+// Query
+
+/// The texel of a mip level that contains a point.
+#[derive(Clone, Debug, Serialize)]
+pub struct MipAnswer {
+    pub lat_deg: f64,
+    pub lon_deg: f64,
+    /// Tile level whose tiles the pyramid belongs to.
+    pub tile_level: u8,
+    /// Mip level asked for: 0..=`tile_mip_levels`−1 inside the tile, above that the face
+    /// pyramid (`tile_mip_levels`−1 + f is face-pyramid level f).
+    pub level: u32,
+    /// Levels of a tile's own pyramid (tile_size … 1).
+    pub tile_mip_levels: u32,
+    /// Highest level accepted (the face's 1×1).
+    pub max_level: u32,
+    /// `tile` or `face`.
+    pub scope: String,
+    pub face: String,
+    pub tile: [u32; 2],
+    /// Fractional interior pixel at `tile_level` (centres at integers).
+    pub pixel: [f64; 2],
+    /// Texel (column, row) at this level, in the tile (`scope` tile) or the face grid (face).
+    pub texel: [u32; 2],
+    /// Texels per side at this level.
+    pub texels: u32,
+    /// Lower and upper bound of the interpolated surface over the texel (null: no data).
+    pub min_m: Option<f64>,
+    pub max_m: Option<f64>,
+    pub file: String,
+}
+
+/// The texel containing (lat, lon) at mip `level` of the tiles at `tile_level` (default the
+/// finest).
+pub fn query(
+    dir: &Path,
+    lat: f64,
+    lon: f64,
+    level: u32,
+    tile_level: Option<u8>,
+) -> Result<MipAnswer> {
+    query::check_latlon(lat, lon)?;
+    let ts = Tileset::load(dir)?;
+    let tl = query::pick_level(&ts, tile_level)?;
+    let mp = ts.products.mip.as_ref().ok_or_else(|| {
+        Error::usage(format!(
+            "{} has no mipmaps: run `penumbra mip {}` first",
+            dir.display(),
+            dir.display()
+        ))
+    })?;
+    let n = ts.layout.tile_size as usize;
+    let m = level_sizes(n).len() as u32;
+    let max_level = m - 1 + tl as u32;
+    if level > max_level {
+        return Err(Error::usage(format!(
+            "mip level {level} does not exist: tile level {tl} has mip levels 0..={max_level} \
+             (0..={} inside a {n}-px tile, then the face pyramid up to the face's 1×1)",
+            m - 1
+        )));
+    }
+    let (tile, px, py) = query::locate(&ts, lat, lon, tl);
+    let clampi = |p: f64| ((p + 0.5).floor().max(0.0) as u64).min(n as u64 - 1) as u32;
+    let (i0, j0) = (clampi(px), clampi(py));
+    let (scope, file, texel, texels, lo, hi);
+    if level < m {
+        if !ts.has_tile(tile) {
+            return Err(Error::usage(format!(
+                "no height tile covers {lat}°, {lon}° at level {tl} (tile {tile}): the source DEM \
+                 does not reach there; `penumbra info {}` lists the coverage",
+                dir.display()
+            )));
+        }
+        let path = tileio::tile_path(dir, &mp.minmax_path, tl, tile.face.name(), tile.x, tile.y);
+        let f = read_mip_exr(&path)?;
+        if f.sizes[0] != n {
+            return Err(Error::invalid(
+                &path,
+                format!("mipmap is {}² but tiles are {n}²", f.sizes[0]),
+            ));
+        }
+        let k = level as usize;
+        let w = f.sizes[k];
+        let (x, y) = (i0 >> level, j0 >> level);
+        let idx = y as usize * w + x as usize;
+        scope = "tile";
+        texel = [x, y];
+        texels = w as u32;
+        lo = f.channel(&path, "min")?[k][idx];
+        hi = f.channel(&path, "max")?[k][idx];
+        file = path;
+    } else {
+        let fl = level - (m - 1);
+        let path = tileio::tile_path(dir, &mp.face_path, tl, tile.face.name(), 0, 0);
+        if !path.exists() {
+            return Err(Error::usage(format!(
+                "no tile of face {} at level {tl} has data: no face pyramid there",
+                tile.face
+            )));
+        }
+        let f = read_mip_exr(&path)?;
+        let g = ts.layout.tiles_per_side(tl) as usize;
+        if f.sizes[0] != g {
+            return Err(Error::invalid(
+                &path,
+                format!(
+                    "face pyramid is {}² but level {tl} has {g}² tiles",
+                    f.sizes[0]
+                ),
+            ));
+        }
+        let k = fl as usize;
+        let w = f.sizes[k];
+        let (x, y) = (tile.x >> fl, tile.y >> fl);
+        let idx = y as usize * w + x as usize;
+        scope = "face";
+        texel = [x, y];
+        texels = w as u32;
+        lo = f.channel(&path, "min")?[k][idx];
+        hi = f.channel(&path, "max")?[k][idx];
+        file = path;
+    }
+    Ok(MipAnswer {
+        lat_deg: lat,
+        lon_deg: lon,
+        tile_level: tl,
+        level,
+        tile_mip_levels: m,
+        max_level,
+        scope: scope.into(),
+        face: tile.face.name().into(),
+        tile: [tile.x, tile.y],
+        pixel: [px, py],
+        texel,
+        texels,
+        min_m: nan_to_none(lo),
+        max_m: nan_to_none(hi),
+        file: file.display().to_string(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_halve_rounding_up() {
+        assert_eq!(level_sizes(8), vec![8, 4, 2, 1]);
+        assert_eq!(level_sizes(24), vec![24, 12, 6, 3, 2, 1]);
+        assert_eq!(level_sizes(1), vec![1]);
+    }
+
+    #[test]
+    fn f16_rounding_is_directed() {
+        for x in [
+            0.1f32, -0.1, 1e-8, -1e-8, 21229.3, -8068.7, 65519.0, 70000.0, -70000.0,
+        ] {
+            assert!(f16_up(x).to_f32() >= x, "{x}");
+            assert!(f16_down(x).to_f32() <= x, "{x}");
+        }
+        assert!(f16_up(f32::NAN).is_nan() && f16_down(f32::NAN).is_nan());
+        assert_eq!(f16_up(2.0).to_f32(), 2.0);
+    }
+}
