@@ -1,7 +1,6 @@
 //! Mipmaps: conservative bounds of the interpolated surface at every level, equality with a
 //! naive sequential reference, the face pyramid across tiles, determinism, bad input, the CLI.
 
-use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Output;
 
@@ -14,7 +13,7 @@ use penumbra::progress::NoProgress;
 use penumbra::tileio::{self, HeightTile};
 use penumbra::tiling::{tile_dem, TileOptions};
 
-use crate::util::{global_dem, penumbra_bin, shared_data};
+use crate::util::{global_dem, penumbra_bin, shared_data, snapshot};
 
 /// xorshift64*: deterministic and dependency-free.
 struct Rng(u64);
@@ -297,24 +296,6 @@ fn small_tileset(dir: &Path) {
     };
     let moon = Body::preset("moon").unwrap();
     tile_dem(&global_dem(360), &moon, dir, &opts, None, &NoProgress).unwrap();
-}
-
-/// Every file below `dir` with its bytes, by relative path.
-fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
-    let mut out = BTreeMap::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                let rel = p.strip_prefix(dir).unwrap().display().to_string();
-                out.insert(rel, std::fs::read(&p).unwrap());
-            }
-        }
-    }
-    out
 }
 
 fn copy_dir(from: &Path, to: &Path) {

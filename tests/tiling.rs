@@ -1,16 +1,15 @@
-use std::collections::{BTreeMap, BTreeSet};
-use std::path::Path;
+use std::collections::BTreeSet;
 
 use penumbra::body::Body;
 use penumbra::cube::{self, Face};
-use penumbra::dem::{Crs, Dem, DemParts, GeoRef, Resampling, Samples};
+use penumbra::dem::{Crs, Dem, GeoRef, Resampling};
 use penumbra::layout::TileId;
 use penumbra::manifest::{self, Tileset};
 use penumbra::progress::NoProgress;
 use penumbra::tileio;
 use penumbra::tiling::{tile_dem, TileOptions};
 
-use crate::util::{analytic, global_dem};
+use crate::util::{analytic, dem_from, global_dem, snapshot};
 
 fn small_opts() -> TileOptions {
     TileOptions {
@@ -23,24 +22,6 @@ fn small_opts() -> TileOptions {
 
 fn moon() -> Body {
     Body::preset("moon").unwrap()
-}
-
-/// Every file below `dir` with its bytes, by relative path.
-fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
-    let mut out = BTreeMap::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                let rel = p.strip_prefix(dir).unwrap().display().to_string();
-                out.insert(rel, std::fs::read(&p).unwrap());
-            }
-        }
-    }
-    out
 }
 
 fn tile_with_threads(dem: &Dem, opts: &TileOptions, threads: usize) -> tempfile::TempDir {
@@ -123,23 +104,7 @@ fn coverage_matches_brute_force_for_a_regional_dem() {
             v.push(analytic(georef.y0 - r as f64 * d, georef.x0 + c as f64 * d) as f32);
         }
     }
-    let dem = Dem::new(
-        DemParts {
-            width: w,
-            height: h,
-            samples: Samples::Owned(v),
-            scale: 1.0,
-            offset: 0.0,
-            nodata: None,
-            georef,
-            datum_radius_m: None,
-            target: None,
-            sources: vec![],
-            format: "regional".into(),
-        },
-        64,
-    )
-    .unwrap();
+    let dem = dem_from(georef, w, h, v, "regional");
     let dir = tempfile::tempdir().unwrap();
     let opts = TileOptions {
         tile_size: 32,

@@ -1,4 +1,5 @@
-use std::path::PathBuf;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 
 use penumbra::dem::{Crs, Dem, DemParts, GeoRef, Samples};
 
@@ -40,11 +41,22 @@ pub fn global_dem(w: usize) -> Dem {
             v.push(analytic(lat, lon) as f32);
         }
     }
+    dem_from(georef, w, h, v, "analytic test raster")
+}
+
+pub fn penumbra_bin() -> std::process::Command {
+    let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"));
+    c.arg("--quiet");
+    c
+}
+
+/// A DEM over `values` (row-major, `w × h`, metres) placed by `georef`.
+pub fn dem_from(georef: GeoRef, w: usize, h: usize, values: Vec<f32>, label: &str) -> Dem {
     Dem::new(
         DemParts {
             width: w,
             height: h,
-            samples: Samples::Owned(v),
+            samples: Samples::Owned(values),
             scale: 1.0,
             offset: 0.0,
             nodata: None,
@@ -52,15 +64,27 @@ pub fn global_dem(w: usize) -> Dem {
             datum_radius_m: None,
             target: None,
             sources: vec![],
-            format: "analytic test raster".into(),
+            format: label.into(),
         },
         64,
     )
     .unwrap()
 }
 
-pub fn penumbra_bin() -> std::process::Command {
-    let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"));
-    c.arg("--quiet");
-    c
+/// Every file below `dir` with its bytes, by relative path.
+pub fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let rel = p.strip_prefix(dir).unwrap().display().to_string();
+                out.insert(rel, std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    out
 }
