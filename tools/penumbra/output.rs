@@ -210,14 +210,14 @@ pub fn print_info(dir: &Path, json: bool) -> Result<()> {
     if let Some(h) = &ts.products.height {
         writeln!(
             o,
-            "height       {} .. {} m; {} filled px, {} no-data px; {}",
+            "height       {:.1} .. {:.1} m; {} filled px, {} no-data px; {}",
             h.min_m, h.max_m, h.filled_pixels, h.no_data_pixels, h.path
         )?;
     }
     if let Some(m) = &ts.products.mip {
         writeln!(
             o,
-            "mipmaps      {} ({:?}) {} .. {} m; {}, {}, {}",
+            "mipmaps      {} ({:?}) {:.1} .. {:.1} m; {}, {}, {}",
             m.products.join("+"),
             m.precision,
             m.global_min_m,
