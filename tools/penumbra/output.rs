@@ -114,7 +114,7 @@ fn write_mip_line(out: &mut impl Write, m: &MipReport) -> Result<()> {
     } else {
         writeln!(
             out,
-            "{}: mipmaps of {} tiles ({} written, {} kept), {} face pyramids, {:?}; heights {} .. {} m",
+            "{}: mipmaps of {} tiles ({} written, {} kept), {} face pyramids, {:?}; heights {:.1} .. {:.1} m",
             m.out.display(),
             m.tiles,
             m.tiles_written,
