@@ -44,6 +44,19 @@ pub enum SampleType {
 }
 
 impl SampleType {
+    /// The name people and sidecars use: uint8, int16, uint16, int32, uint32, float32, float64.
+    pub fn name(self) -> &'static str {
+        match self {
+            SampleType::U8 => "uint8",
+            SampleType::I16 => "int16",
+            SampleType::U16 => "uint16",
+            SampleType::I32 => "int32",
+            SampleType::U32 => "uint32",
+            SampleType::F32 => "float32",
+            SampleType::F64 => "float64",
+        }
+    }
+
     pub fn size(self) -> usize {
         match self {
             SampleType::U8 => 1,

@@ -737,16 +737,7 @@ fn sample_kind(c: &Ctx, ty: &str, bits: u64) -> Result<(SampleType, ByteOrder, &
             )))
         }
     };
-    let name = match st {
-        SampleType::U8 => "uint8",
-        SampleType::I16 => "int16",
-        SampleType::U16 => "uint16",
-        SampleType::I32 => "int32",
-        SampleType::U32 => "uint32",
-        SampleType::F32 => "float32",
-        SampleType::F64 => "float64",
-    };
-    Ok((st, order, name))
+    Ok((st, order, st.name()))
 }
 
 /// The void value as the raw DN the sampler compares against.

@@ -397,18 +397,6 @@ fn parse_order(o: &str) -> Option<ByteOrder> {
     }
 }
 
-pub(crate) fn type_name(st: SampleType) -> &'static str {
-    match st {
-        SampleType::U8 => "uint8",
-        SampleType::I16 => "int16",
-        SampleType::U16 => "uint16",
-        SampleType::I32 => "int32",
-        SampleType::U32 => "uint32",
-        SampleType::F32 => "float32",
-        SampleType::F64 => "float64",
-    }
-}
-
 pub(crate) fn crs_name(crs: &Crs) -> &'static str {
     match crs {
         Crs::Geographic => "geographic",
@@ -530,7 +518,7 @@ pub fn read(path: &Path) -> Result<DemParts> {
             format!(
                 "truncated: sidecar {} says {need} bytes ({w}×{h} {}{}), file has {len}",
                 sidecar_path.display(),
-                type_name(st),
+                st.name(),
                 if header > 0 {
                     format!(" after {header} header bytes")
                 } else {
@@ -546,7 +534,7 @@ pub fn read(path: &Path) -> Result<DemParts> {
                 "file has {len} bytes but sidecar {} describes {need} ({w}×{h} {}{}): check \
                  width/height and the sample type, or set header_bytes",
                 sidecar_path.display(),
-                type_name(st),
+                st.name(),
                 if header > 0 {
                     format!(" after {header} header bytes")
                 } else {
@@ -563,7 +551,7 @@ pub fn read(path: &Path) -> Result<DemParts> {
     };
     let format = format!(
         "raw {}{} + JSON sidecar, {}",
-        type_name(st),
+        st.name(),
         if st.size() > 1 {
             format!(" {order_name}")
         } else {
