@@ -236,6 +236,20 @@ pub fn coverage_of(tiles: &BTreeSet<TileId>, levels: u8) -> Vec<LevelCoverage> {
         .collect()
 }
 
+/// The run key recorded in a stage's in-progress marker, if there is a readable one.
+pub fn partial_run_key(marker: &Path) -> Option<String> {
+    let text = std::fs::read_to_string(marker).ok()?;
+    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
+    v["run_key"].as_str().map(str::to_string)
+}
+
+/// Record that a run with `run_key` is under way (atomically); a rerun with the same key keeps
+/// what that run already wrote.
+pub fn write_partial(marker: &Path, run_key: &str) -> Result<()> {
+    let json = serde_json::json!({ "run_key": run_key }).to_string();
+    crate::tileio::write_atomic_bytes(marker, json.as_bytes())
+}
+
 /// blake3 of a file, streamed through a memory map.
 pub fn hash_file(path: &Path) -> Result<SourceFile> {
     let meta = std::fs::metadata(path).at(path)?;

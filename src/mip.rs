@@ -1062,10 +1062,7 @@ pub fn build_mips(dir: &Path, opts: &MipOptions, progress: &dyn Progress) -> Res
             });
         }
     }
-    let previous = std::fs::read_to_string(&partial_path)
-        .ok()
-        .and_then(|s| serde_json::from_str::<serde_json::Value>(&s).ok())
-        .and_then(|v| v["run_key"].as_str().map(str::to_string));
+    let previous = manifest::partial_run_key(&partial_path);
     let resume = previous.as_deref() == Some(run_key.as_str());
     if !resume {
         // Products of other heights or options are stale.
@@ -1076,12 +1073,7 @@ pub fn build_mips(dir: &Path, opts: &MipOptions, progress: &dyn Progress) -> Res
             }
         }
     }
-    tileio::write_atomic_bytes(
-        &partial_path,
-        serde_json::json!({ "run_key": run_key })
-            .to_string()
-            .as_bytes(),
-    )?;
+    manifest::write_partial(&partial_path, &run_key)?;
 
     progress.start("mipmaps", tiles.len() as u64);
     let results: Vec<Result<(f32, f32, bool)>> = tiles

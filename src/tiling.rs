@@ -208,10 +208,7 @@ pub fn tile_dem(
             });
         }
     }
-    let previous_key = std::fs::read_to_string(&partial_path)
-        .ok()
-        .and_then(|s| serde_json::from_str::<serde_json::Value>(&s).ok())
-        .and_then(|v| v["run_key"].as_str().map(str::to_string));
+    let previous_key = manifest::partial_run_key(&partial_path);
     let resume = previous_key.as_deref() == Some(run_key.as_str());
     if !resume && (manifest_path.exists() || partial_path.exists()) {
         // A tileset made with other inputs or parameters: its tiles are stale.
@@ -223,12 +220,7 @@ pub fn tile_dem(
         }
         let _ = std::fs::remove_file(&manifest_path);
     }
-    tileio::write_atomic_bytes(
-        &partial_path,
-        serde_json::json!({ "run_key": run_key })
-            .to_string()
-            .as_bytes(),
-    )?;
+    manifest::write_partial(&partial_path, &run_key)?;
 
     // Candidate tiles: every finest-level tile a footprint point falls in, and their ancestors.
     let finest = levels - 1;
