@@ -11,6 +11,7 @@ pub mod body;
 pub mod cube;
 pub mod dem;
 pub mod error;
+pub mod horizon;
 pub mod layout;
 pub mod manifest;
 pub mod mip;

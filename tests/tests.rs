@@ -17,3 +17,5 @@ mod readers;
 mod realdata;
 // Max and min/max mipmaps: bounds of the interpolated surface, reference twin, CLI.
 mod mip;
+// Horizon maps: fast sweep against brute force, analytic terrains, stiff cases, the CLI.
+mod horizon;
