@@ -2,8 +2,8 @@
 //!
 //! A [`Plan`] lists the stages to run; each stage reads the tileset the previous one left and
 //! records its product in the manifest. Stages a scene does not select are not run and leave
-//! nothing behind. Today: tiling, then mipmaps; horizons and Fourier pyramids join as they are
-//! built.
+//! nothing behind. Today: tiling, mipmaps, and (when levels are asked for) raw horizon maps;
+//! Fourier pyramids join as they are built.
 
 use std::path::{Path, PathBuf};
 
@@ -12,6 +12,7 @@ use serde::Serialize;
 use crate::body::Body;
 use crate::dem::{self, Dem};
 use crate::error::{Error, Result};
+use crate::horizon::{self, HorizonOptions, HorizonReport};
 use crate::mip::{self, MipOptions, MipReport};
 use crate::progress::Progress;
 use crate::scene::{self, SceneSpec};
@@ -25,6 +26,9 @@ pub enum Stage {
     Tile,
     /// Maximum and (min, max) mipmaps of the height tiles (needs `Tile` first).
     Mip,
+    /// Raw horizon maps of the levels in [`HorizonOptions::levels`] (needs `Tile`; uses the
+    /// mipmaps' global extrema when `Mip` ran).
+    Horizon,
 }
 
 /// Where the terrain comes from.
@@ -40,6 +44,7 @@ pub struct Plan {
     pub stages: Vec<Stage>,
     pub tile: TileOptions,
     pub mip: MipOptions,
+    pub horizon: HorizonOptions,
 }
 
 impl Default for Plan {
@@ -48,6 +53,7 @@ impl Default for Plan {
             stages: vec![Stage::Tile, Stage::Mip],
             tile: TileOptions::default(),
             mip: MipOptions::default(),
+            horizon: HorizonOptions::default(),
         }
     }
 }
@@ -58,6 +64,7 @@ pub struct BakeReport {
     pub stages: Vec<Stage>,
     pub tile: Option<TileReport>,
     pub mip: Option<MipReport>,
+    pub horizon: Option<HorizonReport>,
 }
 
 pub fn bake(input: &Input, out: &Path, plan: &Plan, progress: &dyn Progress) -> Result<BakeReport> {
@@ -66,6 +73,7 @@ pub fn bake(input: &Input, out: &Path, plan: &Plan, progress: &dyn Progress) -> 
         stages: plan.stages.clone(),
         tile: None,
         mip: None,
+        horizon: None,
     };
     for stage in &plan.stages {
         match stage {
@@ -92,6 +100,9 @@ pub fn bake(input: &Input, out: &Path, plan: &Plan, progress: &dyn Progress) -> 
                 report.tile = Some(r);
             }
             Stage::Mip => report.mip = Some(mip::build_mips(out, &plan.mip, progress)?),
+            Stage::Horizon => {
+                report.horizon = Some(horizon::build_horizons(out, &plan.horizon, progress)?)
+            }
         }
     }
     Ok(report)

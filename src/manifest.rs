@@ -128,6 +128,47 @@ pub struct Products {
     /// Absent in tilesets made before the mipmap stage existed.
     #[serde(default)]
     pub mip: Option<MipProduct>,
+    /// Raw horizon maps (docs/horizons.md); absent unless the horizon stage ran.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub horizon: Option<HorizonProduct>,
+}
+
+/// Raw horizon maps: per height tile one EXR of `azimuths` stacked planes.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct HorizonProduct {
+    /// Path pattern, one EXR per height tile of the levels listed.
+    pub path: String,
+    /// The one channel: elevation angle in degrees above the local horizontal.
+    pub channel: String,
+    /// Sample type: `f16` or `f32`.
+    pub precision: String,
+    /// Azimuth samples per pixel (A); plane k holds plane azimuth 360·k/A degrees.
+    pub azimuths: usize,
+    /// The azimuth convention in one line.
+    pub azimuth: String,
+    /// How the planes are stored in the image.
+    pub layout: String,
+    /// `fast` or `reference`.
+    pub method: String,
+    /// Tile levels that have horizon maps.
+    pub levels: Vec<u8>,
+    /// Lowest and highest terrain of the body used to bound the distance searched (m).
+    pub terrain_min_m: f64,
+    pub terrain_max_m: f64,
+    /// Per level: the distance any terrain could still rise above the horizon (km, at the
+    /// largest tile maximum) and the context margin actually searched (px), with the number
+    /// of tiles whose margin was capped by `max_margin_px`.
+    pub distances: Vec<HorizonLevelDistance>,
+    /// Hash of the tool version, the height tiles' run key and the horizon options.
+    pub run_key: String,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct HorizonLevelDistance {
+    pub level: u8,
+    pub needed_km: f64,
+    pub max_margin_px: u64,
+    pub tiles_capped: u64,
 }
 
 /// Tiles present at one level, as row runs `[y, x_first, x_last]` per face.

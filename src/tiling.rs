@@ -324,6 +324,7 @@ pub fn tile_dem(
                     west_lon_deg: a.west_lon_deg,
                 }),
             mip: None,
+            horizon: None,
         },
         coverage: manifest::coverage_of(&present, levels),
         parameters,

@@ -19,3 +19,6 @@ mod realdata;
 mod mip;
 // Horizon maps: fast sweep against brute force, analytic terrains, stiff cases, the CLI.
 mod horizon;
+
+// Horizon stiff and extreme cases: spikes, cones, cliffs, corner, pole, voids, seam, threads.
+mod horizon_cases;

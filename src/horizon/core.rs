@@ -153,10 +153,10 @@ impl Context {
     /// Ground metres per plane pixel along plane azimuth `phi` at raster pixel (x, y), at
     /// radius `r`.
     #[inline]
-    fn metres_per_px(&self, x: f64, y: f64, phi: f64, r: f64) -> f64 {
+    fn metres_per_px(&self, x: f64, y: f64, cos: f64, sin: f64, r: f64) -> f64 {
         let (u, v) = self.uv(x, y);
         let rho2 = 1.0 + u * u + v * v;
-        let wp = u * phi.cos() + v * phi.sin();
+        let wp = u * cos + v * sin;
         r * (2.0 / self.face_pixels) * (1.0 - wp * wp / rho2).max(0.0).sqrt() / rho2.sqrt()
     }
 
@@ -166,7 +166,13 @@ impl Context {
     /// needed neighbour has no data. Both methods include it, so a bare sphere reads 0 at h = 0.
     #[inline]
     pub fn slope0(&self, x0: usize, y0: usize, phi: f64) -> f64 {
-        let (cx, cy) = (phi.cos(), -phi.sin());
+        self.slope0_cs(x0, y0, phi.cos(), phi.sin())
+    }
+
+    /// [`Context::slope0`] with cos φ and sin φ given.
+    #[inline]
+    pub fn slope0_cs(&self, x0: usize, y0: usize, cos: f64, sin: f64) -> f64 {
+        let (cx, cy) = (cos, -sin);
         let (x, y) = (x0 as i64, y0 as i64);
         let h0 = self.at(x, y) as f64;
         let mut dh = 0.0;
@@ -178,7 +184,7 @@ impl Context {
             let hy = self.at(x, y + cy.signum() as i64) as f64;
             dh += (hy - h0) * cy.abs();
         }
-        dh / self.metres_per_px(x0 as f64, y0 as f64, phi, self.radius_m + h0)
+        dh / self.metres_per_px(x0 as f64, y0 as f64, cos, sin, self.radius_m + h0)
     }
 }
 
@@ -205,11 +211,11 @@ pub fn horizons(ctx: &Context, rect: Rect, a: usize, method: Method) -> Vec<f32>
     }
     match method {
         Method::Fast => out.par_chunks_mut(plane).enumerate().for_each_init(
-            || (vec![0.0f64; plane], Vec::new()),
-            |(acc, hull), (k, dst)| {
+            || (vec![0.0f64; plane], Scratch::default()),
+            |(acc, scratch), (k, dst)| {
                 let phi = plane_azimuth(k, a);
                 acc.iter_mut().for_each(|v| *v = f64::NEG_INFINITY);
-                sweep::<true>(ctx, rect, phi, acc, hull);
+                sweep::<true>(ctx, rect, phi, acc, scratch);
                 finish(ctx, rect, phi, acc, dst);
             },
         ),
@@ -244,8 +250,8 @@ pub fn horizons_scan(ctx: &Context, rect: Rect, a: usize) -> Vec<f32> {
     let mut out = vec![0.0f32; plane * a];
     for (k, dst) in out.chunks_mut(plane).enumerate() {
         let phi = plane_azimuth(k, a);
-        let (mut acc, mut pts) = (vec![f64::NEG_INFINITY; plane], Vec::new());
-        sweep::<false>(ctx, rect, phi, &mut acc, &mut pts);
+        let (mut acc, mut scratch) = (vec![f64::NEG_INFINITY; plane], Scratch::default());
+        sweep::<false>(ctx, rect, phi, &mut acc, &mut scratch);
         finish(ctx, rect, phi, &acc, dst);
     }
     out
@@ -253,6 +259,7 @@ pub fn horizons_scan(ctx: &Context, rect: Rect, a: usize) -> Vec<f32> {
 
 /// Elevations (degrees) from the blended line slopes and the zero-distance slope.
 fn finish(ctx: &Context, rect: Rect, phi: f64, acc: &[f64], dst: &mut [f32]) {
+    let (cos, sin) = (phi.cos(), phi.sin());
     for j in 0..rect.h {
         for i in 0..rect.w {
             let (x, y) = (rect.x0 + i, rect.y0 + j);
@@ -262,7 +269,7 @@ fn finish(ctx: &Context, rect: Rect, phi: f64, acc: &[f64], dst: &mut [f32]) {
                 continue;
             }
             let mut t = acc[o];
-            let s0 = ctx.slope0(x, y, phi);
+            let s0 = ctx.slope0_cs(x, y, cos, sin);
             if s0 > t {
                 t = s0;
             }
@@ -340,6 +347,9 @@ struct Pt {
     y: f64,
     /// Line parameter (major-axis coordinate) of the sample.
     p: f64,
+    /// 1 / |A + p·B|: the sample's direction without its height, for re-placing it at
+    /// another height.
+    inv: f64,
 }
 
 #[inline]
@@ -355,7 +365,6 @@ struct Line<'a, const HULL: bool> {
     a1: f64,
     b0: f64,
     b1: f64,
-    radius: f64,
 }
 
 impl<const HULL: bool> Line<'_, HULL> {
@@ -364,20 +373,32 @@ impl<const HULL: bool> Line<'_, HULL> {
     fn pos(&self, p: f64, r: f64) -> Pt {
         let a = self.a0 + p * self.a1;
         let b = self.b0 + p * self.b1;
-        let k = r / (a * a + b * b).sqrt();
+        let inv = 1.0 / (a * a + b * b).sqrt();
+        let k = r * inv;
         Pt {
             x: b * k,
             y: a * k,
             p,
+            inv,
+        }
+    }
+
+    /// Point `v`'s direction at radius `r`.
+    #[inline]
+    fn at_radius(&self, v: Pt, r: f64) -> Pt {
+        let a = self.a0 + v.p * self.a1;
+        let b = self.b0 + v.p * self.b1;
+        let k = r * v.inv;
+        Pt {
+            x: b * k,
+            y: a * k,
+            p: v.p,
+            inv: v.inv,
         }
     }
 
     #[inline]
-    fn push(&mut self, p: f64, h: f32) {
-        if h.is_nan() {
-            return;
-        }
-        let q = self.pos(p, self.radius + h as f64);
+    fn push(&mut self, q: Pt) {
         if HULL {
             // Pop while the top is on the body's side of (or on) the segment from the one
             // below it to the new point: the chain keeps turning clockwise.
@@ -446,99 +467,126 @@ fn slope(o: Pt, q: Pt) -> f64 {
     }
 }
 
-const NB: usize = 1;
-const SUB: i32 = 0;
+/// Raster access in (major, minor) = (p, q) coordinates of one sweep.
+struct Grid<'a> {
+    h: &'a [f32],
+    /// Index steps for +1 in p and in q.
+    sp: usize,
+    sq: usize,
+    np: i64,
+    nq: i64,
+}
+
+impl Grid<'_> {
+    #[inline(always)]
+    fn at(&self, p: i64, q: i64) -> f32 {
+        self.h[p as usize * self.sp + q as usize * self.sq]
+    }
+
+    /// Bilinear height at (p, q) in the raster (callers check the range), no-data taps left
+    /// out (as [`Context::bilinear`]).
+    #[inline(always)]
+    fn bilinear(&self, p: f64, q: f64) -> f32 {
+        let (p0, q0) = (p as i64, q as i64);
+        let (fp, fq) = (p - p0 as f64, q - q0 as f64);
+        let i = p0 as usize * self.sp + q0 as usize * self.sq;
+        let p1 = if p0 + 1 < self.np { self.sp } else { 0 };
+        let q1 = if q0 + 1 < self.nq { self.sq } else { 0 };
+        let (a, b, c, d) = (self.h[i], self.h[i + p1], self.h[i + q1], self.h[i + p1 + q1]);
+        let (wa, wb, wc, wd) = (
+            (1.0 - fp) * (1.0 - fq),
+            fp * (1.0 - fq),
+            (1.0 - fp) * fq,
+            fp * fq,
+        );
+        if !(a.is_nan() || b.is_nan() || c.is_nan() || d.is_nan()) {
+            return (wa * a as f64 + wb * b as f64 + wc * c as f64 + wd * d as f64) as f32;
+        }
+        let (mut acc, mut ws) = (0.0, 0.0);
+        for (v, w) in [(a, wa), (b, wb), (c, wc), (d, wd)] {
+            if w > 0.0 && !v.is_nan() {
+                acc += w * v as f64;
+                ws += w;
+            }
+        }
+        if ws > 0.0 {
+            (acc / ws) as f32
+        } else {
+            f32::NAN
+        }
+    }
+
+    #[inline(always)]
+    fn inside(&self, p: f64, q: f64) -> bool {
+        p >= 0.0 && q >= 0.0 && p <= (self.np - 1) as f64 && q <= (self.nq - 1) as f64
+    }
+}
 
 /// The fast sweep for one plane azimuth: lines parallel to the look direction, one pixel apart
-/// along the minor axis, swept from the far end of the raster towards the observers; each
-/// observer queries the two lines that bracket it at its own column and blends their slopes by
-/// distance. Accumulates into `acc_t` (weighted slopes) and `acc_w` (weights).
+/// along the minor axis, swept from the far end of the raster towards the observers, each
+/// keeping the upper convex hull of its profile (samples where it crosses pixel columns and
+/// rows — exact bilinear values — and the midpoints between). An observer asks the two lines
+/// that bracket it at its own column for the hull vertex it sees highest; that vertex and its
+/// hull neighbours are then evaluated on the observer's own ray at the same distance, and the
+/// highest wins. Writes the best slope per observer into `acc` (max).
 fn sweep<const HULL: bool>(
     ctx: &Context,
     rect: Rect,
     phi: f64,
     acc: &mut [f64],
-    pts: &mut Vec<Pt>,
+    scratch: &mut Scratch,
 ) {
     let (dx, dy) = (phi.cos(), -phi.sin());
     let xmajor = dx.abs() >= dy.abs();
-    // (p, q) = (major, minor) raster axes.
     let (dp, dq) = if xmajor { (dx, dy) } else { (dy, dx) };
     let t = dq / dp;
     let look: i64 = if dp > 0.0 { 1 } else { -1 };
     let step = -look;
-    let (np, nq) = if xmajor {
-        (ctx.width as i64, ctx.height as i64)
+    let g = if xmajor {
+        Grid {
+            h: &ctx.heights,
+            sp: 1,
+            sq: ctx.width,
+            np: ctx.width as i64,
+            nq: ctx.height as i64,
+        }
     } else {
-        (ctx.height as i64, ctx.width as i64)
+        Grid {
+            h: &ctx.heights,
+            sp: ctx.width,
+            sq: 1,
+            np: ctx.height as i64,
+            nq: ctx.width as i64,
+        }
     };
+    let (np, nq) = (g.np, g.nq);
     let (rp0, rp1, rq0, rq1) = if xmajor {
         (rect.x0, rect.x0 + rect.w, rect.y0, rect.y0 + rect.h)
     } else {
         (rect.y0, rect.y0 + rect.h, rect.x0, rect.x0 + rect.w)
     };
     let (rp0, rp1, rq0, rq1) = (rp0 as i64, rp1 as i64, rq0 as i64, rq1 as i64);
-    // Raster (x, y) of (p, q).
-    let xy = |p: f64, q: f64| if xmajor { (p, q) } else { (q, p) };
-    let at = |p: i64, q: i64| {
-        if xmajor {
-            ctx.at(p, q)
-        } else {
-            ctx.at(q, p)
-        }
-    };
-    // Linear interpolation between two taps, a no-data tap left out.
-    let lerp = |a: f32, b: f32, f: f64| -> f32 {
-        if f == 0.0 {
-            a
-        } else if a.is_nan() {
-            b
-        } else if b.is_nan() {
-            a
-        } else {
-            (a as f64 + (b as f64 - a as f64) * f) as f32
-        }
-    };
-    // Sample at integer major coordinate p, minor coordinate y (exact bilinear there).
-    let column_sample = |p: i64, y: f64| -> f32 {
-        if !(y >= 0.0 && y <= (nq - 1) as f64) || p < 0 || p >= np {
-            return f32::NAN;
-        }
-        let q0 = y.floor();
-        let f = y - q0;
-        let q0 = q0 as i64;
-        lerp(at(p, q0), if f > 0.0 { at(p, q0 + 1) } else { f32::NAN }, f)
-    };
-    let row_sample = |pc: f64, q: i64| -> f32 {
-        if !(pc >= 0.0 && pc <= (np - 1) as f64) || q < 0 || q >= nq {
-            return f32::NAN;
-        }
-        let p0 = pc.floor();
-        let f = pc - p0;
-        let p0 = p0 as i64;
-        lerp(at(p0, q), if f > 0.0 { at(p0 + 1, q) } else { f32::NAN }, f)
-    };
-    // Sweep range in p: from the raster's far end (in the look direction) to the observers'
-    // last column.
+    // (i, j) offsets of an observer in `acc`: index = i·si + j·sj with (p, q) relative.
+    let (si, sj) = if xmajor { (1, rect.w) } else { (rect.w, 1) };
+    // Sweep from the raster's far end (in the look direction) to the observers' last column.
     let (p_first, p_last) = if look > 0 {
         (np - 1, rp0)
     } else {
         (0, rp1 - 1)
     };
-    // Lines: q_m(p) = m + t·p. Those that bracket an observer column.
-    let m_at = |p: i64, q: f64| q - t * p as f64;
+    // Lines q_m(p) = m + t·p that bracket an observer.
+    let m_at = |p: i64, q: i64| q as f64 - t * p as f64;
     let ms = [
-        m_at(rp0, rq0 as f64),
-        m_at(rp0, (rq1 - 1) as f64),
-        m_at(rp1 - 1, rq0 as f64),
-        m_at(rp1 - 1, (rq1 - 1) as f64),
+        m_at(rp0, rq0),
+        m_at(rp0, rq1 - 1),
+        m_at(rp1 - 1, rq0),
+        m_at(rp1 - 1, rq1 - 1),
     ];
     let m_lo = ms.iter().cloned().fold(f64::INFINITY, f64::min).floor() as i64 - 1;
     let m_hi = ms.iter().cloned().fold(f64::NEG_INFINITY, f64::max).ceil() as i64 + 1;
     let (n, ua, va) = ctx.face.axes();
-    // Plane point of (p, q): n + u U + v V with u, v affine in (x, y).
     let plane = |p: f64, q: f64| -> Vec3 {
-        let (x, y) = xy(p, q);
+        let (x, y) = if xmajor { (p, q) } else { (q, p) };
         let (u, v) = ctx.uv(x, y);
         [
             n[0] + u * ua[0] + v * va[0],
@@ -546,111 +594,182 @@ fn sweep<const HULL: bool>(
             n[2] + u * ua[2] + v * va[2],
         ]
     };
-    let rw = rect.w as i64;
+    let radius = ctx.radius_m;
     for m in m_lo..=m_hi {
         let mf = m as f64;
+        // The part of the sweep where the line is within a pixel of the raster.
+        let (mut pa, mut pb) = (p_first.min(p_last), p_first.max(p_last));
+        if t != 0.0 {
+            let (e0, e1) = ((-1.0 - mf) / t, (nq as f64 - mf) / t);
+            let (lo, hi) = (e0.min(e1), e0.max(e1));
+            pa = pa.max(lo.floor() as i64);
+            pb = pb.min(hi.ceil() as i64);
+        } else if mf < -1.0 || mf > nq as f64 {
+            continue;
+        }
+        if pa > pb {
+            continue;
+        }
+        let (start, stop) = if step < 0 { (pb, pa) } else { (pa, pb) };
         // Line frame: A + p·B spans a plane through the body centre; e1 = up at the middle of
         // the swept range, e2 = the sweep direction.
         let a_pt = plane(0.0, mf);
         let b_pt = plane(1.0, mf + t);
         let bv = [b_pt[0] - a_pt[0], b_pt[1] - a_pt[1], b_pt[2] - a_pt[2]];
-        let pm = 0.5 * (p_first + p_last) as f64;
+        let pm = 0.5 * (start + stop) as f64;
         let e1 = normalize(plane(pm, mf + t * pm));
         let sb = [step as f64 * bv[0], step as f64 * bv[1], step as f64 * bv[2]];
         let k = dot(sb, e1);
         let e2 = normalize([sb[0] - k * e1[0], sb[1] - k * e1[1], sb[2] - k * e1[2]]);
-        pts.clear();
+        let mut hull = std::mem::take(&mut scratch.hull);
+        hull.clear();
         let mut line = Line::<HULL> {
-            pts: &mut *pts,
+            pts: &mut hull,
             a0: dot(a_pt, e1),
             a1: dot(bv, e1),
             b0: dot(a_pt, e2),
             b1: dot(bv, e2),
-            radius: ctx.radius_m,
         };
-        let (mut fa, mut fb) = (usize::MAX, usize::MAX);
-        let mut p = p_first;
+        // 1. The line's samples in sweep order, and where each observer column comes.
+        let sc = &mut *scratch;
+        sc.p.clear();
+        sc.h.clear();
+        sc.marks.clear();
         let mut prev_y = f64::NAN;
-        // The last crossing pushed (p, q): the bilinear surface is quadratic between two
-        // crossings, so the midpoint of each such segment is sampled too.
+        // The last crossing: the bilinear surface is quadratic between two crossings, so the
+        // midpoint of each such segment is sampled too.
         let mut last: Option<(f64, f64)> = None;
-        let mut push = |line: &mut Line<HULL>, last: &mut Option<(f64, f64)>, pc: f64, qc: f64, v: f32| {
-            if let Some((lp, lq)) = *last {
-                let (mp, mq) = (0.5 * (lp + pc), 0.5 * (lq + qc));
-                let (x, y) = xy(mp, mq);
-                line.push(mp, ctx.bilinear(x, y));
-            }
-            *last = Some((pc, qc));
-            line.push(pc, v);
-        };
+        let mut p = start;
         loop {
             let y = mf + t * p as f64;
             // The row crossing between the previous column and this one lies ahead of this
-            // column's observers (one at most as |t| ≤ 1; none when it falls within 1e-6 px of
-            // a column, where it would duplicate the column's sample).
+            // column's observers (one at most as |t| ≤ 1; none within 1e-6 px of a column,
+            // where it would duplicate the column's sample).
             if !prev_y.is_nan() {
                 let (lo, hi) = if prev_y < y { (prev_y, y) } else { (y, prev_y) };
                 let kq = lo.ceil();
-                if kq > lo + 1e-6 && kq < hi - 1e-6 {
+                if kq > lo + 1e-6 && kq < hi - 1e-6 && kq >= 0.0 && kq <= (nq - 1) as f64 {
                     let pc = (kq - mf) / t;
-                    push(&mut line, &mut last, pc, kq, row_sample(pc, kq as i64));
+                    if let Some((lp, lq)) = last {
+                        let (mp, mq) = (0.5 * (lp + pc), 0.5 * (lq + kq));
+                        sc.p.push(mp);
+                        sc.h.push(g.bilinear(mp, mq));
+                    }
+                    last = Some((pc, kq));
+                    sc.p.push(pc);
+                    sc.h.push(g.bilinear(pc, kq));
                 }
             }
             prev_y = y;
             if p >= rp0 && p < rp1 {
-                let qa = y.ceil();
-                let f = qa - y;
-                let qa = qa as i64;
-                for (q0, w, finger) in [(qa, 1.0 - f, &mut fa), (qa - 1, f, &mut fb)] {
-                    if w <= 0.0 || q0 < rq0 || q0 >= rq1 {
-                        continue;
-                    }
-                    let h0 = at(p, q0);
-                    if h0.is_nan() {
-                        continue;
-                    }
-                    let o = line.pos(p as f64, ctx.radius_m + h0 as f64);
-                    let Some(iv) = line.query(o, finger) else {
-                        continue;
-                    };
-                    // The line only guides: the candidate is evaluated on the observer's own
-                    // ray at the same distance (the vertex and its hull neighbours).
-                    let mut best = f64::NEG_INFINITY;
-                    let (nb, sub) = (NB, SUB);
-                    let lo = iv.saturating_sub(nb);
-                    let hi = (iv + nb).min(line.pts.len() - 1);
-                    for c in lo..=hi {
-                      for sdx in -sub..=sub {
-                        let pv = line.pts[c].p + sdx as f64 * 0.25;
-                        let (x, y) = xy(pv, q0 as f64 + t * (pv - p as f64));
-                        let hv = ctx.bilinear(x, y);
-                        if hv.is_nan() {
-                            continue;
-                        }
-                        let sl = slope(o, line.pos(pv, ctx.radius_m + hv as f64));
-                        if sl > best {
-                            best = sl;
-                        }
-                      }
-                    }
-                    let (i, j) = if xmajor {
-                        (p - rect.x0 as i64, q0 - rect.y0 as i64)
-                    } else {
-                        (q0 - rect.x0 as i64, p - rect.y0 as i64)
-                    };
-                    let idx = (j * rw + i) as usize;
-                    if best > acc[idx] {
-                        acc[idx] = best;
-                    }
-                }
+                sc.marks.push((sc.p.len(), p, y));
             }
-            push(&mut line, &mut last, p as f64, y, column_sample(p, y));
-            if p == p_last {
+            if y >= 0.0 && y <= (nq - 1) as f64 {
+                if let Some((lp, lq)) = last {
+                    let (mp, mq) = (0.5 * (lp + p as f64), 0.5 * (lq + y));
+                    sc.p.push(mp);
+                    sc.h.push(g.bilinear(mp, mq));
+                }
+                last = Some((p as f64, y));
+                sc.p.push(p as f64);
+                sc.h.push(g.bilinear(p as f64, y));
+            } else {
+                last = None;
+            }
+            if p == stop {
                 break;
             }
             p += step;
         }
+        // 2. Their positions in the line's plane (independent: vectorised, no latency chain).
+        let len = sc.p.len();
+        sc.x.resize(len, 0.0);
+        sc.y.resize(len, 0.0);
+        sc.inv.resize(len, 0.0);
+        let (a0, a1, b0, b1) = (line.a0, line.a1, line.b0, line.b1);
+        for i in 0..len {
+            let pp = sc.p[i];
+            let (a, b) = (a0 + pp * a1, b0 + pp * b1);
+            let inv = 1.0 / (a * a + b * b).sqrt();
+            let k = (radius + sc.h[i] as f64) * inv;
+            sc.x[i] = b * k;
+            sc.y[i] = a * k;
+            sc.inv[i] = inv;
+        }
+        // 3. The hull, and the observers' queries where their columns come.
+        let mut fingers = [usize::MAX; 2];
+        let mut mi = 0;
+        for i in 0..=len {
+            while mi < sc.marks.len() && sc.marks[mi].0 == i {
+                let (_, p, y) = sc.marks[mi];
+                mi += 1;
+                let qa = y.ceil();
+                let f = qa - y;
+                let qa = qa as i64;
+                for (side, q0, w) in [(0, qa, 1.0 - f), (1, qa - 1, f)] {
+                    if w <= 0.0 || q0 < rq0 || q0 >= rq1 {
+                        continue;
+                    }
+                    let h0 = g.at(p, q0);
+                    if h0.is_nan() {
+                        continue;
+                    }
+                    let o = line.pos(p as f64, radius + h0 as f64);
+                    let Some(iv) = line.query(o, &mut fingers[side]) else {
+                        continue;
+                    };
+                    // The line only guides: the vertex and its hull neighbours are evaluated
+                    // on the observer's own ray at the same distance.
+                    let hi = (iv + 1).min(line.pts.len() - 1);
+                    let mut best: Option<Pt> = None;
+                    for c in iv.saturating_sub(1)..=hi {
+                        let v = line.pts[c];
+                        let qv = q0 as f64 + t * (v.p - p as f64);
+                        if !g.inside(v.p, qv) {
+                            continue;
+                        }
+                        let hv = g.bilinear(v.p, qv);
+                        if hv.is_nan() {
+                            continue;
+                        }
+                        let c = line.at_radius(v, radius + hv as f64);
+                        if best.is_none_or(|b| cross(o, c, b) > 0.0) {
+                            best = Some(c);
+                        }
+                    }
+                    if let Some(b) = best {
+                        let sl = slope(o, b);
+                        let idx = (p - rp0) as usize * si + (q0 - rq0) as usize * sj;
+                        if sl > acc[idx] {
+                            acc[idx] = sl;
+                        }
+                    }
+                }
+            }
+            if i < len && !sc.h[i].is_nan() {
+                line.push(Pt {
+                    x: sc.x[i],
+                    y: sc.y[i],
+                    p: sc.p[i],
+                    inv: sc.inv[i],
+                });
+            }
+        }
+        drop(line);
+        scratch.hull = hull;
     }
+}
+
+/// Per-line buffers of the sweep, reused from line to line.
+#[derive(Default)]
+pub(crate) struct Scratch {
+    hull: Vec<Pt>,
+    p: Vec<f64>,
+    h: Vec<f32>,
+    x: Vec<f64>,
+    y: Vec<f64>,
+    inv: Vec<f64>,
+    marks: Vec<(usize, i64, f64)>,
 }
 
 /// Compass azimuth (degrees clockwise from local north, in [0, 360)) of plane azimuth `phi`

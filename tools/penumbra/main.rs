@@ -14,6 +14,7 @@ use penumbra::bake::{self, Input, Plan, Stage};
 use penumbra::body::Body;
 use penumbra::cube::Projection;
 use penumbra::dem::Resampling;
+use penumbra::horizon::{HorizonOptions, HorizonPrecision, Method};
 use penumbra::mip::{MipOptions, Precision};
 use penumbra::scene::SceneSpec;
 use penumbra::tileio::TileCompression;
@@ -41,8 +42,31 @@ enum Command {
     /// Cut a DEM into cube-face tiles.
     Tile(TileArgs),
     /// Run every stage a scene needs (the embedded default scene when no --dem is given):
-    /// tiling, then mipmaps.
+    /// tiling, then mipmaps, then horizon maps for --horizon-levels.
     Bake(BakeArgs),
+    /// Compute the raw horizon maps of a tileset: per pixel the horizon elevation in A azimuths,
+    /// seeing across tiles and faces as far as any terrain could rise above it.
+    Horizon {
+        /// Tileset folder.
+        dir: PathBuf,
+        /// Tile levels to compute, comma-separated (default: every level).
+        #[arg(long, value_delimiter = ',')]
+        levels: Option<Vec<u8>>,
+        #[command(flatten)]
+        flags: HorizonFlags,
+        /// Sample type of the stored maps: f16 (default) or f32.
+        #[arg(long, default_value = "f16")]
+        precision: HorizonPrecision,
+        /// EXR compression of the maps: zip (lossless) or none.
+        #[arg(long, default_value = "zip")]
+        compression: TileCompression,
+        /// Refuse a run whose maps would exceed this many GiB before compression.
+        #[arg(long, default_value_t = 8.0)]
+        max_output_gib: f64,
+        /// Print the report as JSON.
+        #[arg(long)]
+        json: bool,
+    },
     /// Build the maximum and (min, max) mipmaps of a tileset's height tiles.
     Mip {
         /// Tileset folder.
@@ -106,6 +130,37 @@ enum QueryCommand {
         #[arg(long)]
         json: bool,
     },
+    /// The horizon of the pixel that contains a latitude/longitude: elevation per azimuth,
+    /// azimuths clockwise from local north (read from stored maps, else computed on demand).
+    Horizon {
+        dir: PathBuf,
+        /// Planetocentric latitude, degrees.
+        #[arg(long, allow_hyphen_values = true)]
+        lat: f64,
+        /// East longitude, degrees (−180..360).
+        #[arg(long, allow_hyphen_values = true)]
+        lon: f64,
+        /// Tile level (0 = coarsest; default the finest).
+        #[arg(long)]
+        level: Option<u8>,
+        #[command(flatten)]
+        flags: HorizonFlags,
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+#[derive(Args, Clone)]
+struct HorizonFlags {
+    /// Azimuth samples per pixel (plane azimuths 360·k/A from the face's +U axis).
+    #[arg(long, default_value_t = 360)]
+    azimuths: usize,
+    /// fast (upper-hull sweep) or reference (brute-force march, ½-pixel steps).
+    #[arg(long, default_value = "fast")]
+    method: Method,
+    /// Largest context margin around a tile, in pixels of its level.
+    #[arg(long, default_value_t = 4096)]
+    max_margin_px: u64,
 }
 
 #[derive(Args, Clone)]
@@ -216,6 +271,10 @@ struct BakeArgs {
     flags: TileFlags,
     #[command(flatten)]
     mip: MipFlags,
+    /// Also compute raw horizon maps for these tile levels (comma-separated), 360 azimuths,
+    /// fast method, f16.
+    #[arg(long, value_delimiter = ',')]
+    horizon_levels: Option<Vec<u8>>,
 }
 
 fn body_arg(b: &BodyArgs) -> Result<Option<Body>> {
@@ -239,6 +298,7 @@ fn run(cli: Cli) -> Result<()> {
                 stages: vec![Stage::Tile],
                 tile: a.flags.options(),
                 mip: MipOptions::default(),
+                horizon: HorizonOptions::default(),
             };
             let input = Input::Dem {
                 path: a.dem.clone(),
@@ -249,11 +309,16 @@ fn run(cli: Cli) -> Result<()> {
             output::print_bake(&report, t0.elapsed().as_secs_f64(), a.flags.json)?;
         }
         Command::Bake(a) => {
-            let plan = Plan {
+            let mut plan = Plan {
                 tile: a.flags.options(),
                 mip: a.mip.options(a.flags.compression),
                 ..Plan::default()
             };
+            if let Some(levels) = &a.horizon_levels {
+                plan.stages.push(Stage::Horizon);
+                plan.horizon.levels = Some(levels.clone());
+                plan.horizon.compression = a.flags.compression;
+            }
             let input = match &a.dem {
                 Some(p) => Input::Dem {
                     path: p.clone(),
@@ -283,6 +348,28 @@ fn run(cli: Cli) -> Result<()> {
             let report = penumbra::mip::build_mips(&dir, &flags.options(compression), &progress)?;
             output::print_mip(&report, t0.elapsed().as_secs_f64(), json)?;
         }
+        Command::Horizon {
+            dir,
+            levels,
+            flags,
+            precision,
+            compression,
+            max_output_gib,
+            json,
+        } => {
+            let opts = HorizonOptions {
+                levels,
+                azimuths: flags.azimuths,
+                method: flags.method,
+                precision,
+                compression,
+                max_margin_px: flags.max_margin_px,
+                max_output_gib,
+            };
+            let t0 = std::time::Instant::now();
+            let report = penumbra::horizon::build_horizons(&dir, &opts, &progress)?;
+            output::print_horizon(&report, t0.elapsed().as_secs_f64(), json)?;
+        }
         Command::Info { dir, json } => output::print_info(&dir, json)?,
         Command::Query(QueryCommand::Height {
             dir,
@@ -304,6 +391,25 @@ fn run(cli: Cli) -> Result<()> {
         }) => {
             let ans = penumbra::mip::query(&dir, lat, lon, level, tile_level)?;
             output::print_mip_answer(&ans, json)?;
+        }
+        Command::Query(QueryCommand::Horizon {
+            dir,
+            lat,
+            lon,
+            level,
+            flags,
+            json,
+        }) => {
+            let ans = penumbra::horizon::query(
+                &dir,
+                lat,
+                lon,
+                level,
+                flags.method,
+                flags.azimuths,
+                flags.max_margin_px,
+            )?;
+            output::print_horizon_answer(&ans, json)?;
         }
         Command::Bench(b) => bench::run(b, cli.quiet)?,
     }

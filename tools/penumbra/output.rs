@@ -8,6 +8,7 @@ use anyhow::Result;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use penumbra::bake::BakeReport;
+use penumbra::horizon::{HorizonAnswer, HorizonReport};
 use penumbra::manifest::Tileset;
 use penumbra::mip::{MipAnswer, MipReport};
 use penumbra::query::HeightAnswer;
@@ -99,7 +100,89 @@ pub fn print_bake(r: &BakeReport, wall_s: f64, json: bool) -> Result<()> {
     if let Some(m) = &r.mip {
         write_mip_line(&mut out, m)?;
     }
+    if let Some(h) = &r.horizon {
+        write_horizon_line(&mut out, h)?;
+    }
     writeln!(out, "{wall_s:.2} s")?;
+    Ok(())
+}
+
+fn write_horizon_line(out: &mut impl Write, h: &HorizonReport) -> Result<()> {
+    if h.up_to_date {
+        writeln!(
+            out,
+            "{}: horizons up to date ({} tiles)",
+            h.out.display(),
+            h.tiles
+        )?;
+        return Ok(());
+    }
+    writeln!(
+        out,
+        "{}: horizons of {} tiles at levels {:?} ({} written, {} kept), {} azimuths, {} method",
+        h.out.display(),
+        h.tiles,
+        h.levels,
+        h.tiles_written,
+        h.tiles_kept,
+        h.azimuths,
+        h.method.name()
+    )?;
+    for d in &h.distances {
+        let capped = if d.tiles_capped > 0 {
+            format!(", {} tiles capped by --max-margin-px", d.tiles_capped)
+        } else {
+            String::new()
+        };
+        writeln!(
+            out,
+            "  level {}: terrain can rise above the horizon up to {:.1} km away; margin searched up to {} px{capped}",
+            d.level, d.needed_km, d.max_margin_px
+        )?;
+    }
+    Ok(())
+}
+
+pub fn print_horizon(r: &HorizonReport, wall_s: f64, json: bool) -> Result<()> {
+    if json {
+        let mut v = serde_json::to_value(r)?;
+        v["wall_s"] = serde_json::json!(wall_s);
+        v["peak_rss_mib"] = serde_json::json!(peak_rss_mib());
+        return print_json(&v);
+    }
+    let mut out = std::io::stdout().lock();
+    write_horizon_line(&mut out, r)?;
+    if r.pixel_azimuths > 0 {
+        writeln!(
+            out,
+            "{wall_s:.2} s, {:.1} M pixel·azimuths/s",
+            r.pixel_azimuths as f64 / wall_s / 1e6
+        )?;
+    } else {
+        writeln!(out, "{wall_s:.2} s")?;
+    }
+    Ok(())
+}
+
+pub fn print_horizon_answer(a: &HorizonAnswer, json: bool) -> Result<()> {
+    if json {
+        return print_json(a);
+    }
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "pixel centre {:.6}°, {:.6}° (level {}, face {}, tile {}/{}, pixel {},{}), height {:.1} m, {} horizon ({}), {} azimuths",
+        a.lat_deg, a.lon_deg, a.level, a.face, a.tile[0], a.tile[1], a.pixel[0], a.pixel[1],
+        a.height_m, a.method.name(), a.source, a.azimuths
+    )?;
+    writeln!(out, "azimuth°  elevation°  (clockwise from north)")?;
+    let step = (a.azimuths / 36).max(1);
+    for k in (0..a.azimuths).step_by(step) {
+        writeln!(out, "{:8.2}  {:10.3}", a.azimuth_deg[k], a.elevation_deg[k])?;
+    }
+    if step > 1 {
+        writeln!(out, "(every {step}th of {}; --json prints all)", a.azimuths)?;
+    }
     Ok(())
 }
 

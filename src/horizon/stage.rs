@@ -1,0 +1,885 @@
+//! The horizon stage over a tileset: a context raster per tile (the tile, its neighbours and
+//! the neighbouring faces as far as any terrain could rise above the horizon), the horizons of
+//! its pixels, and the raw maps on disk; plus the on-demand query of one point.
+
+use std::collections::HashMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+use exr::prelude::*;
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::core::{compass_azimuth_deg, horizons, plane_azimuth, Context, Method, Rect};
+use crate::cube::{Face, Projection};
+use crate::error::{Error, IoContext, Result};
+use crate::layout::TileId;
+use crate::manifest::{self, HorizonLevelDistance, HorizonProduct, Tileset};
+use crate::progress::Progress;
+use crate::query;
+use crate::tileio::{self, HeightTile, TileCompression};
+
+pub const PATTERN: &str = "horizon/{level}/{face}/{y}/{x}.exr";
+/// Written at the start of a horizon run and removed at its end.
+pub const PARTIAL: &str = ".penumbra-horizon-partial.json";
+/// Version of the horizon products' layout and convention (part of the run key).
+pub const FORMAT: &str = "penumbra-horizon-1";
+pub const AZIMUTH_CONVENTION: &str = "plane azimuth on the tile's cube face: counter-clockwise \
+     from the face's +U axis towards +V, degrees; plane k = 360*k/A; compass azimuth differs per \
+     pixel (docs/horizons.md)";
+pub const LAYOUT: &str = "image tile_size wide and A*tile_size high: rows k*n..(k+1)*n hold \
+     plane k, row-major like the height tile's interior (no halo)";
+/// Largest |u|, |v| a context reaches on a face's extended plane (71.6° from the face centre
+/// along an axis).
+const PLANE_LIMIT: f64 = 3.0;
+
+/// Storage precision of the raw maps.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum HorizonPrecision {
+    /// Half floats: 0.0078° steps below 16°, 0.031° below 64°, 0.0625° up to 90°.
+    #[default]
+    F16,
+    F32,
+}
+
+impl std::str::FromStr for HorizonPrecision {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "f16" => Ok(HorizonPrecision::F16),
+            "f32" => Ok(HorizonPrecision::F32),
+            _ => Err(format!("unknown precision '{s}' (f16, f32)")),
+        }
+    }
+}
+
+impl HorizonPrecision {
+    pub fn name(self) -> &'static str {
+        match self {
+            HorizonPrecision::F16 => "f16",
+            HorizonPrecision::F32 => "f32",
+        }
+    }
+}
+
+/// What the user chose.
+#[derive(Clone, Debug, Serialize)]
+pub struct HorizonOptions {
+    /// Tile levels to compute (None: every level).
+    pub levels: Option<Vec<u8>>,
+    pub azimuths: usize,
+    pub method: Method,
+    pub precision: HorizonPrecision,
+    pub compression: TileCompression,
+    /// Largest context margin around a tile, in pixels of its level.
+    pub max_margin_px: u64,
+    /// Refuse a run whose raw maps would exceed this many GiB (uncompressed).
+    pub max_output_gib: f64,
+}
+
+impl Default for HorizonOptions {
+    fn default() -> Self {
+        HorizonOptions {
+            levels: None,
+            azimuths: 360,
+            method: Method::Fast,
+            precision: HorizonPrecision::F16,
+            compression: TileCompression::Zip,
+            max_margin_px: 4096,
+            max_output_gib: 8.0,
+        }
+    }
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct HorizonReport {
+    pub out: PathBuf,
+    pub levels: Vec<u8>,
+    pub azimuths: usize,
+    pub method: Method,
+    pub tiles: u64,
+    pub tiles_written: u64,
+    pub tiles_kept: u64,
+    /// Observer pixels × azimuths computed in this run.
+    pub pixel_azimuths: u64,
+    pub distances: Vec<HorizonLevelDistance>,
+    pub up_to_date: bool,
+}
+
+// ---------------------------------------------------------------------------------------------
+// Height tiles on demand
+
+/// Height tiles of one tileset, loaded once and shared by the contexts that need them.
+pub struct TileSource<'a> {
+    dir: &'a Path,
+    ts: &'a Tileset,
+    pattern: String,
+    cache: Mutex<HashMap<TileId, (Option<Arc<HeightTile>>, u64)>>,
+    epoch: std::sync::atomic::AtomicU64,
+}
+
+impl<'a> TileSource<'a> {
+    pub fn new(dir: &'a Path, ts: &'a Tileset) -> Result<TileSource<'a>> {
+        let pattern = ts
+            .products
+            .height
+            .as_ref()
+            .ok_or_else(|| {
+                Error::invalid(
+                    dir.join(manifest::MANIFEST),
+                    "tileset has no height product to compute horizons from",
+                )
+            })?
+            .path
+            .clone();
+        Ok(TileSource {
+            dir,
+            ts,
+            pattern,
+            cache: Mutex::new(HashMap::new()),
+            epoch: 0.into(),
+        })
+    }
+
+    /// The height tile `id`, or None where the tileset has none (coverage gap).
+    pub fn get(&self, id: TileId) -> Result<Option<Arc<HeightTile>>> {
+        let epoch = self.epoch.load(std::sync::atomic::Ordering::Relaxed);
+        if let Some(e) = self.cache.lock().unwrap().get_mut(&id) {
+            e.1 = epoch;
+            return Ok(e.0.clone());
+        }
+        let t = if self.ts.has_tile(id) {
+            let p = tileio::tile_path(
+                self.dir,
+                &self.pattern,
+                id.level,
+                id.face.name(),
+                id.x,
+                id.y,
+            );
+            let t = tileio::read_height_tile(&p)?;
+            let s = self.ts.layout.stored_size();
+            if t.size != s {
+                return Err(Error::invalid(
+                    &p,
+                    format!("tile is {}² but the manifest says {s}²", t.size),
+                ));
+            }
+            Some(Arc::new(t))
+        } else {
+            None
+        };
+        self.cache.lock().unwrap().insert(id, (t.clone(), epoch));
+        Ok(t)
+    }
+
+    /// Forget tiles not used since the previous context when the cache holds more than
+    /// `budget` bytes.
+    fn next_context(&self, budget: u64) {
+        let e = self
+            .epoch
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let s = self.ts.layout.stored_size() as u64;
+        let mut c = self.cache.lock().unwrap();
+        if c.len() as u64 * s * s * 5 > budget {
+            c.retain(|_, v| v.1 >= e);
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Context
+
+/// How far a tile's context reaches.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct Reach {
+    /// Angular distance (rad) within which terrain could rise above some pixel's horizon.
+    pub needed_rad: f64,
+    /// Margin around the tile needed for it, and the margin used (capped), in pixels.
+    pub needed_px: u64,
+    pub margin_px: u64,
+}
+
+/// The terrain range used to bound distances: the mipmaps' global extrema when the mip stage
+/// ran, else the height product's range.
+pub fn terrain_range(ts: &Tileset) -> Option<(f64, f64)> {
+    if let Some(m) = &ts.products.mip {
+        return Some((m.global_min_m, m.global_max_m));
+    }
+    ts.products.height.as_ref().map(|h| (h.min_m, h.max_m))
+}
+
+/// The distance beyond which no terrain can rise above the horizon of a pixel at most
+/// `top_m` high: the tangent from the highest observer grazing the lowest terrain reaches
+/// the lowest sphere after acos((R+min)/(R+top)) and climbs out to the highest terrain after
+/// another acos((R+min)/(R+max)). Any pixel's horizon is at least that tangent's elevation.
+pub fn reach_rad(radius: f64, min_m: f64, max_m: f64, top_m: f64) -> f64 {
+    let a = ((radius + min_m) / (radius + top_m.max(min_m))).min(1.0).acos();
+    let b = ((radius + min_m) / (radius + max_m.max(min_m))).min(1.0).acos();
+    a + b
+}
+
+/// Margin (px) around tile `id` that holds every point within angular distance `rad` of the
+/// tile, measured on `id.face`'s extended plane: from points along the tile's border, the
+/// points `rad` away in 64 directions, projected onto the plane (a point within `rad` of the
+/// tile is within `rad` of its border or inside it); the sampling gap between directions is
+/// covered by a 1 % + 2 px allowance.
+fn margin_for(ts: &Tileset, id: TileId, rad: f64, cap: u64) -> Reach {
+    let lay = ts.layout;
+    let s = lay.face_pixels(id.level) as f64;
+    let n = lay.tile_size as i64;
+    let (n3, u3, v3) = id.face.axes();
+    let mut need = 0.0f64;
+    const EDGE: i64 = 16;
+    const DIRS: usize = 64;
+    for e in 0..4 * EDGE {
+        let (i, j) = match e / EDGE {
+            0 => ((e % EDGE) * n / EDGE, 0),
+            1 => (n, (e % EDGE) * n / EDGE),
+            2 => (n - (e % EDGE) * n / EDGE, n),
+            _ => (0, n - (e % EDGE) * n / EDGE),
+        };
+        // Corner of pixel (i, j): global pixel edge coordinates.
+        let (gx, gy) = (id.x as f64 * n as f64 + i as f64, id.y as f64 * n as f64 + j as f64);
+        let (u, v) = (-1.0 + 2.0 * gx / s, 1.0 - 2.0 * gy / s);
+        let p = crate::cube::face_uv_to_dir(id.face, u, v);
+        // A tangent basis at p.
+        let a = {
+            let k = u3[0] * p[0] + u3[1] * p[1] + u3[2] * p[2];
+            let t = [u3[0] - k * p[0], u3[1] - k * p[1], u3[2] - k * p[2]];
+            let l = (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt();
+            [t[0] / l, t[1] / l, t[2] / l]
+        };
+        let b = [
+            p[1] * a[2] - p[2] * a[1],
+            p[2] * a[0] - p[0] * a[2],
+            p[0] * a[1] - p[1] * a[0],
+        ];
+        for k in 0..DIRS {
+            let th = std::f64::consts::TAU * k as f64 / DIRS as f64;
+            let (c, sn) = (th.cos(), th.sin());
+            let q = [
+                p[0] * rad.cos() + (a[0] * c + b[0] * sn) * rad.sin(),
+                p[1] * rad.cos() + (a[1] * c + b[1] * sn) * rad.sin(),
+                p[2] * rad.cos() + (a[2] * c + b[2] * sn) * rad.sin(),
+            ];
+            let z = q[0] * n3[0] + q[1] * n3[1] + q[2] * n3[2];
+            let (qu, qv) = if z > 1e-9 {
+                (
+                    ((q[0] * u3[0] + q[1] * u3[1] + q[2] * u3[2]) / z)
+                        .clamp(-PLANE_LIMIT, PLANE_LIMIT),
+                    ((q[0] * v3[0] + q[1] * v3[1] + q[2] * v3[2]) / z)
+                        .clamp(-PLANE_LIMIT, PLANE_LIMIT),
+                )
+            } else {
+                (PLANE_LIMIT, PLANE_LIMIT)
+            };
+            let (qx, qy) = ((qu + 1.0) / 2.0 * s, (1.0 - qv) / 2.0 * s);
+            let (tx0, ty0) = (id.x as f64 * n as f64, id.y as f64 * n as f64);
+            let dxm = (tx0 - qx).max(qx - (tx0 + n as f64)).max(0.0);
+            let dym = (ty0 - qy).max(qy - (ty0 + n as f64)).max(0.0);
+            need = need.max(dxm).max(dym);
+        }
+    }
+    let needed = (need * 1.01 + 2.0).ceil() as u64;
+    Reach {
+        needed_rad: rad,
+        needed_px: needed,
+        margin_px: needed.min(cap.max(1)),
+    }
+}
+
+/// Bounding box (global pixels of `face` at `level`, half-open) of every tile of the level
+/// projected onto `face`'s plane, or None when none projects there.
+fn coverage_box(ts: &Tileset, level: u8, face: Face) -> Option<(i64, i64, i64, i64)> {
+    let lay = ts.layout;
+    let s = lay.face_pixels(level) as f64;
+    let n = lay.tile_size as i64;
+    let mut bx = (i64::MAX, i64::MAX, i64::MIN, i64::MIN);
+    let mut grow = |x: i64, y: i64| {
+        bx.0 = bx.0.min(x);
+        bx.1 = bx.1.min(y);
+        bx.2 = bx.2.max(x);
+        bx.3 = bx.3.max(y);
+    };
+    for id in ts.tile_set().into_iter().filter(|t| t.level == level) {
+        if id.face == face {
+            let (x, y) = (id.x as i64 * n, id.y as i64 * n);
+            grow(x, y);
+            grow(x + n, y + n);
+            continue;
+        }
+        // Another face: a lattice over the tile, projected where it is in front of `face`.
+        for j in 0..=8 {
+            for i in 0..=8 {
+                let d = lay.pixel_dir(id, (i * n) / 8, (j * n) / 8);
+                if let Some((u, v)) = crate::cube::dir_to_uv_on(face, d) {
+                    if u.abs() <= PLANE_LIMIT && v.abs() <= PLANE_LIMIT {
+                        let gx = ((u + 1.0) / 2.0 * s).floor() as i64;
+                        let gy = ((1.0 - v) / 2.0 * s).floor() as i64;
+                        grow(gx - n / 8 - 2, gy - n / 8 - 2);
+                        grow(gx + n / 8 + 2, gy + n / 8 + 2);
+                    }
+                }
+            }
+        }
+    }
+    (bx.0 <= bx.2).then_some(bx)
+}
+
+/// The context raster of tile `id` with `margin` pixels around it (clipped to the level's
+/// coverage and to the face plane's usable part), and the tile's interior within it.
+pub fn context_for(
+    src: &TileSource,
+    id: TileId,
+    margin: u64,
+    cover: Option<(i64, i64, i64, i64)>,
+) -> Result<(Context, Rect)> {
+    let ts = src.ts;
+    let lay = ts.layout;
+    let s = lay.face_pixels(id.level) as i64;
+    let n = lay.tile_size as i64;
+    let halo = lay.halo as f64;
+    let m = margin as i64;
+    let (tx, ty) = (id.x as i64 * n, id.y as i64 * n);
+    let (mut x0, mut y0, mut x1, mut y1) = (tx - m, ty - m, tx + n + m, ty + n + m);
+    if let Some((bx0, by0, bx1, by1)) = cover {
+        x0 = x0.max(bx0.min(tx));
+        y0 = y0.max(by0.min(ty));
+        x1 = x1.min(bx1.max(tx + n));
+        y1 = y1.min(by1.max(ty + n));
+    }
+    // |u|, |v| ≤ PLANE_LIMIT.
+    let lim = ((PLANE_LIMIT - 1.0) / 2.0 * s as f64) as i64;
+    x0 = x0.max(-lim);
+    y0 = y0.max(-lim);
+    x1 = x1.min(s + lim);
+    y1 = y1.min(s + lim);
+    let (w, h) = ((x1 - x0) as usize, (y1 - y0) as usize);
+    let mut ctx = Context {
+        face: id.face,
+        face_pixels: s as f64,
+        origin: (x0, y0),
+        width: w,
+        height: h,
+        heights: vec![f32::NAN; w * h],
+        radius_m: ts.body.radius_m,
+    };
+    let per = lay.tiles_per_side(id.level) as i64;
+    let tile_at = |face: Face, x: i64, y: i64| TileId {
+        level: id.level,
+        face,
+        x: x as u32,
+        y: y as u32,
+    };
+    let rows: Vec<Result<()>> = {
+        let mut heights = std::mem::take(&mut ctx.heights);
+        let c = &ctx;
+        let r = heights
+            .par_chunks_mut(w)
+            .enumerate()
+            .map(|(r, row)| -> Result<()> {
+                let gy = y0 + r as i64;
+                let mut last: Option<(TileId, Option<Arc<HeightTile>>)> = None;
+                let mut get = |t: TileId| -> Result<Option<Arc<HeightTile>>> {
+                    if let Some((lt, a)) = &last {
+                        if *lt == t {
+                            return Ok(a.clone());
+                        }
+                    }
+                    let a = src.get(t)?;
+                    last = Some((t, a.clone()));
+                    Ok(a)
+                };
+                for (xi, out) in row.iter_mut().enumerate() {
+                    let gx = x0 + xi as i64;
+                    if (0..s).contains(&gx) && (0..s).contains(&gy) {
+                        let t = tile_at(id.face, (gx / n).min(per - 1), (gy / n).min(per - 1));
+                        if let Some(tile) = get(t)? {
+                            let (i, j) = (
+                                (gx - t.x as i64 * n) as usize + lay.halo as usize,
+                                (gy - t.y as i64 * n) as usize + lay.halo as usize,
+                            );
+                            *out = tile.height[j * tile.size + i];
+                        }
+                    } else {
+                        let d = c.dir(xi as f64, r as f64);
+                        let loc = lay.locate(id.level, d);
+                        if let Some(tile) = get(loc.tile)? {
+                            *out = tile.bilinear(loc.px + halo, loc.py + halo);
+                        }
+                    }
+                }
+                Ok(())
+            })
+            .collect();
+        ctx.heights = heights;
+        r
+    };
+    for r in rows {
+        r?;
+    }
+    let rect = Rect {
+        x0: (tx - x0) as usize,
+        y0: (ty - y0) as usize,
+        w: n as usize,
+        h: n as usize,
+    };
+    Ok((ctx, rect))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Files
+
+/// Write one tile's raw maps: `a` planes of `n²` elevations (degrees) stacked vertically.
+pub fn write_horizon_exr(
+    path: &Path,
+    n: usize,
+    a: usize,
+    elev: &[f32],
+    precision: HorizonPrecision,
+    compression: TileCompression,
+) -> Result<()> {
+    assert_eq!(elev.len(), n * n * a);
+    let samples = match precision {
+        HorizonPrecision::F32 => FlatSamples::F32(elev.to_vec()),
+        HorizonPrecision::F16 => FlatSamples::F16(elev.iter().map(|&v| f16::from_f32(v)).collect()),
+    };
+    let layer = Layer::new(
+        (n, n * a),
+        LayerAttributes::named("penumbra-horizon"),
+        match compression {
+            TileCompression::Zip => Encoding::SMALL_LOSSLESS,
+            TileCompression::None => Encoding::UNCOMPRESSED,
+        },
+        AnyChannels::sort(SmallVec::from_vec(vec![AnyChannel::new(
+            "elevation",
+            samples,
+        )])),
+    );
+    let image = Image::from_layer(layer);
+    tileio::write_atomic(path, |f| {
+        let mut buf = std::io::Cursor::new(Vec::with_capacity(n * n * a * 2));
+        image
+            .write()
+            .to_buffered(&mut buf)
+            .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
+        f.write_all(buf.get_ref()).at(path)
+    })
+}
+
+/// Read a file of [`write_horizon_exr`] for tiles of `n` pixels: the `a` planes as f32.
+pub fn read_horizon_exr(path: &Path, n: usize) -> Result<(usize, Vec<f32>)> {
+    let bytes = std::fs::read(path).at(path)?;
+    let bad = |msg: String| {
+        Error::invalid(
+            path,
+            format!("{msg}; delete it and rerun `penumbra horizon`"),
+        )
+    };
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_buffered(std::io::Cursor::new(bytes))
+        .map_err(|e| bad(format!("not a readable horizon EXR ({e})")))?;
+    let layer = &image.layer_data;
+    let (w, h) = (layer.size.width(), layer.size.height());
+    if w != n || h % n != 0 || h == 0 {
+        return Err(bad(format!(
+            "horizon map is {w}×{h}, not {n} wide and a multiple of {n} high"
+        )));
+    }
+    let ch = layer
+        .channel_data
+        .list
+        .iter()
+        .find(|c| c.name.to_string() == "elevation")
+        .ok_or_else(|| bad("no 'elevation' channel".into()))?;
+    Ok((h / n, ch.sample_data.values_as_f32().collect()))
+}
+
+pub fn tile_path(dir: &Path, id: TileId) -> PathBuf {
+    tileio::tile_path(dir, PATTERN, id.level, id.face.name(), id.x, id.y)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Stage
+
+fn check_layout(dir: &Path, ts: &Tileset) -> Result<()> {
+    if ts.layout.projection != Projection::Gnomonic {
+        return Err(Error::unsupported(
+            dir.join(manifest::MANIFEST),
+            format!(
+                "horizons need a gnomonic tileset (straight lines on a face are then great \
+                 circles); this one is {}: retile with --projection gnomonic",
+                ts.layout.projection.name()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+fn check_azimuths(a: usize) -> Result<()> {
+    if !(4..=4096).contains(&a) {
+        return Err(Error::usage(format!(
+            "--azimuths {a} is outside 4..=4096"
+        )));
+    }
+    Ok(())
+}
+
+/// Compute and store the raw horizon maps of the levels asked.
+pub fn build_horizons(
+    dir: &Path,
+    opts: &HorizonOptions,
+    progress: &dyn Progress,
+) -> Result<HorizonReport> {
+    let mut ts = Tileset::load(dir)?;
+    let manifest_path = dir.join(manifest::MANIFEST);
+    check_layout(dir, &ts)?;
+    check_azimuths(opts.azimuths)?;
+    let height = ts.products.height.clone().ok_or_else(|| {
+        Error::invalid(
+            &manifest_path,
+            "tileset has no height product to compute horizons from",
+        )
+    })?;
+    let (tmin, tmax) = terrain_range(&ts).ok_or_else(|| {
+        Error::invalid(&manifest_path, "tileset records no height range")
+    })?;
+    let lay = ts.layout;
+    let levels: Vec<u8> = match &opts.levels {
+        None => (0..lay.levels).collect(),
+        Some(l) => {
+            let mut l = l.clone();
+            l.sort_unstable();
+            l.dedup();
+            if let Some(&bad) = l.iter().find(|&&x| x >= lay.levels) {
+                return Err(Error::usage(format!(
+                    "level {bad} does not exist: this tileset has levels 0..={}",
+                    lay.levels - 1
+                )));
+            }
+            l
+        }
+    };
+    let tiles: Vec<TileId> = ts
+        .tile_set()
+        .into_iter()
+        .filter(|t| levels.contains(&t.level))
+        .collect();
+    let n = lay.tile_size as usize;
+    let bytes_per = match opts.precision {
+        HorizonPrecision::F16 => 2.0,
+        HorizonPrecision::F32 => 4.0,
+    };
+    let gib = tiles.len() as f64 * (n * n * opts.azimuths) as f64 * bytes_per / (1u64 << 30) as f64;
+    if gib > opts.max_output_gib {
+        return Err(Error::usage(format!(
+            "horizons for levels {levels:?} would write {gib:.1} GiB before compression ({} tiles \
+             × {n}² pixels × {} azimuths × {bytes_per} bytes): choose fewer levels with --levels, \
+             fewer --azimuths, or raise --max-output-gib",
+            tiles.len(),
+            opts.azimuths
+        )));
+    }
+    let run_key = {
+        let mut h = blake3::Hasher::new();
+        h.update(env!("CARGO_PKG_VERSION").as_bytes());
+        h.update(FORMAT.as_bytes());
+        h.update(ts.run_key.as_bytes());
+        h.update(height.path.as_bytes());
+        h.update(serde_json::to_string(opts).unwrap_or_default().as_bytes());
+        h.update(format!("{tmin} {tmax}").as_bytes());
+        h.finalize().to_hex().to_string()
+    };
+    let partial_path = dir.join(PARTIAL);
+    if let Some(p) = &ts.products.horizon {
+        if p.run_key == run_key
+            && !partial_path.exists()
+            && tiles.iter().all(|&id| tile_path(dir, id).exists())
+        {
+            return Ok(HorizonReport {
+                out: dir.to_path_buf(),
+                levels,
+                azimuths: opts.azimuths,
+                method: opts.method,
+                tiles: tiles.len() as u64,
+                tiles_written: 0,
+                tiles_kept: tiles.len() as u64,
+                pixel_azimuths: 0,
+                distances: p.distances.clone(),
+                up_to_date: true,
+            });
+        }
+    }
+    let resume = manifest::partial_run_key(&partial_path).as_deref() == Some(run_key.as_str());
+    if !resume {
+        let p = dir.join("horizon");
+        if p.exists() {
+            std::fs::remove_dir_all(&p).map_err(|e| Error::io(&p, e))?;
+        }
+        if ts.products.horizon.take().is_some() {
+            let json = serde_json::to_string_pretty(&ts).expect("manifest serialises");
+            tileio::write_atomic_bytes(&manifest_path, json.as_bytes())?;
+        }
+    }
+    manifest::write_partial(&partial_path, &run_key)?;
+
+    let src = TileSource::new(dir, &ts)?;
+    let mut covers = HashMap::new();
+    let mut dist: Vec<HorizonLevelDistance> = levels
+        .iter()
+        .map(|&level| HorizonLevelDistance {
+            level,
+            needed_km: 0.0,
+            max_margin_px: 0,
+            tiles_capped: 0,
+        })
+        .collect();
+    let (mut written, mut kept, mut pixaz) = (0u64, 0u64, 0u64);
+    progress.start("horizons", tiles.len() as u64);
+    for &id in &tiles {
+        let out = tile_path(dir, id);
+        if resume && out.exists() && read_horizon_exr(&out, n).is_ok_and(|(a, _)| a == opts.azimuths)
+        {
+            kept += 1;
+            progress.inc(1);
+            continue;
+        }
+        let tile = src.get(id)?.expect("listed tiles exist");
+        let top = interior_max(&tile, lay.halo as usize, n);
+        let elev = if let Some(top) = top {
+            let rad = reach_rad(ts.body.radius_m, tmin, tmax, top as f64);
+            let reach = margin_for(&ts, id, rad, opts.max_margin_px);
+            let d = dist.iter_mut().find(|d| d.level == id.level).unwrap();
+            d.needed_km = d.needed_km.max(rad * ts.body.radius_m / 1000.0);
+            d.max_margin_px = d.max_margin_px.max(reach.margin_px);
+            if reach.margin_px < reach.needed_px {
+                d.tiles_capped += 1;
+            }
+            let cover = *covers
+                .entry((id.level, id.face))
+                .or_insert_with(|| coverage_box(&ts, id.level, id.face));
+            let (ctx, rect) = context_for(&src, id, reach.margin_px, cover)?;
+            src.next_context(1 << 30);
+            pixaz += (n * n * opts.azimuths) as u64;
+            horizons(&ctx, rect, opts.azimuths, opts.method)
+        } else {
+            vec![f32::NAN; n * n * opts.azimuths]
+        };
+        write_horizon_exr(
+            &out,
+            n,
+            opts.azimuths,
+            &elev,
+            opts.precision,
+            opts.compression,
+        )?;
+        written += 1;
+        progress.inc(1);
+    }
+    progress.finish();
+    let mut done_levels = ts
+        .products
+        .horizon
+        .as_ref()
+        .filter(|_| resume)
+        .map(|p| p.levels.clone())
+        .unwrap_or_default();
+    done_levels.extend(&levels);
+    done_levels.sort_unstable();
+    done_levels.dedup();
+    ts.products.horizon = Some(HorizonProduct {
+        path: PATTERN.into(),
+        channel: "elevation".into(),
+        precision: opts.precision.name().into(),
+        azimuths: opts.azimuths,
+        azimuth: AZIMUTH_CONVENTION.into(),
+        layout: LAYOUT.into(),
+        method: opts.method.name().into(),
+        levels: done_levels,
+        terrain_min_m: tmin,
+        terrain_max_m: tmax,
+        distances: dist.clone(),
+        run_key,
+    });
+    let json = serde_json::to_string_pretty(&ts).expect("manifest serialises");
+    tileio::write_atomic_bytes(&manifest_path, json.as_bytes())?;
+    std::fs::remove_file(&partial_path).map_err(|e| Error::io(&partial_path, e))?;
+    Ok(HorizonReport {
+        out: dir.to_path_buf(),
+        levels,
+        azimuths: opts.azimuths,
+        method: opts.method,
+        tiles: tiles.len() as u64,
+        tiles_written: written,
+        tiles_kept: kept,
+        pixel_azimuths: pixaz,
+        distances: dist,
+        up_to_date: false,
+    })
+}
+
+/// Highest interior height of a stored tile (None when it is all no data).
+fn interior_max(t: &HeightTile, halo: usize, n: usize) -> Option<f32> {
+    let mut m = f32::NEG_INFINITY;
+    for j in 0..n {
+        for &v in &t.height[(j + halo) * t.size + halo..][..n] {
+            if v > m {
+                m = v;
+            }
+        }
+    }
+    m.is_finite().then_some(m)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Query
+
+/// The horizon of the pixel that contains a point.
+#[derive(Clone, Debug, Serialize)]
+pub struct HorizonAnswer {
+    /// The point asked for.
+    pub query_lat_deg: f64,
+    pub query_lon_deg: f64,
+    /// Centre of the pixel whose horizon this is.
+    pub lat_deg: f64,
+    pub lon_deg: f64,
+    pub height_m: f64,
+    pub level: u8,
+    pub face: String,
+    pub tile: [u32; 2],
+    /// Interior pixel (column, row) of the tile.
+    pub pixel: [u32; 2],
+    pub method: Method,
+    /// `stored` (read from the horizon maps) or `computed` (on demand).
+    pub source: String,
+    pub azimuths: usize,
+    /// Compass azimuth of each sample, degrees clockwise from local north, ascending.
+    pub azimuth_deg: Vec<f64>,
+    /// Horizon elevation above the local horizontal, degrees, for each azimuth.
+    pub elevation_deg: Vec<f64>,
+    /// The same samples' plane azimuths (the stored convention), degrees.
+    pub plane_azimuth_deg: Vec<f64>,
+    /// Context searched around the pixel's tile when computed (pixels; 0 when stored).
+    pub margin_px: u64,
+    pub needed_margin_px: u64,
+}
+
+pub fn query(
+    dir: &Path,
+    lat: f64,
+    lon: f64,
+    level: Option<u8>,
+    method: Method,
+    azimuths: usize,
+    max_margin_px: u64,
+) -> Result<HorizonAnswer> {
+    query::check_latlon(lat, lon)?;
+    check_azimuths(azimuths)?;
+    let ts = Tileset::load(dir)?;
+    check_layout(dir, &ts)?;
+    let level = query::pick_level(&ts, level)?;
+    let (tile, px, py) = query::locate(&ts, lat, lon, level);
+    if !ts.has_tile(tile) {
+        return Err(Error::usage(format!(
+            "no height tile covers {lat}°, {lon}° at level {level} (tile {tile}): the source DEM \
+             does not reach there; `penumbra info {}` lists the coverage",
+            dir.display()
+        )));
+    }
+    let lay = ts.layout;
+    let n = lay.tile_size as usize;
+    let (i, j) = (
+        (px.round().max(0.0) as usize).min(n - 1),
+        (py.round().max(0.0) as usize).min(n - 1),
+    );
+    let src = TileSource::new(dir, &ts)?;
+    let t = src.get(tile)?.expect("covered");
+    let h = lay.halo as usize;
+    let height = t.height[(j + h) * t.size + i + h];
+    if height.is_nan() {
+        return Err(Error::usage(format!(
+            "the pixel at {lat}°, {lon}° (level {level}, tile {tile}, pixel {i},{j}) has no data: \
+             it has no horizon"
+        )));
+    }
+    // Stored maps of the same method and azimuth count.
+    let stored = ts.products.horizon.as_ref().filter(|p| {
+        p.azimuths == azimuths && p.method == method.name() && p.levels.contains(&level)
+    });
+    let (elev, source, margin, needed) = match stored {
+        Some(_) => {
+            let (a, planes) = read_horizon_exr(&tile_path(dir, tile), n)?;
+            if a != azimuths {
+                return Err(Error::invalid(
+                    tile_path(dir, tile),
+                    format!("holds {a} azimuths, the manifest says {azimuths}"),
+                ));
+            }
+            let e: Vec<f32> = (0..a).map(|k| planes[k * n * n + j * n + i]).collect();
+            (e, "stored", 0, 0)
+        }
+        None => {
+            let (tmin, tmax) = terrain_range(&ts).ok_or_else(|| {
+                Error::invalid(dir.join(manifest::MANIFEST), "tileset records no height range")
+            })?;
+            let top = interior_max(&t, h, n).unwrap_or(height);
+            let rad = reach_rad(ts.body.radius_m, tmin, tmax, top as f64);
+            let reach = margin_for(&ts, tile, rad, max_margin_px);
+            let cover = coverage_box(&ts, level, tile.face);
+            let (ctx, rect) = context_for(&src, tile, reach.margin_px, cover)?;
+            let one = Rect {
+                x0: rect.x0 + i,
+                y0: rect.y0 + j,
+                w: 1,
+                h: 1,
+            };
+            (
+                horizons(&ctx, one, azimuths, method),
+                "computed",
+                reach.margin_px,
+                reach.needed_px,
+            )
+        }
+    };
+    let (s, tt) = lay.pixel_st(tile, i as i64, j as i64);
+    let d = lay.st_to_dir(tile.face, s, tt);
+    let (plat, plon) = crate::cube::dir_to_latlon(d);
+    let mut rows: Vec<(f64, f64, f64)> = (0..azimuths)
+        .map(|k| {
+            let phi = plane_azimuth(k, azimuths);
+            (
+                compass_azimuth_deg(tile.face, s, tt, phi),
+                elev[k] as f64,
+                phi.to_degrees(),
+            )
+        })
+        .collect();
+    rows.sort_by(|a, b| a.0.total_cmp(&b.0));
+    Ok(HorizonAnswer {
+        query_lat_deg: lat,
+        query_lon_deg: lon,
+        lat_deg: plat.to_degrees(),
+        lon_deg: plon.to_degrees(),
+        height_m: height as f64,
+        level,
+        face: tile.face.name().into(),
+        tile: [tile.x, tile.y],
+        pixel: [i as u32, j as u32],
+        method,
+        source: source.into(),
+        azimuths,
+        azimuth_deg: rows.iter().map(|r| r.0).collect(),
+        elevation_deg: rows.iter().map(|r| r.1).collect(),
+        plane_azimuth_deg: rows.iter().map(|r| r.2).collect(),
+        margin_px: margin,
+        needed_margin_px: needed,
+    })
+}
