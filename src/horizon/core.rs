@@ -211,25 +211,26 @@ pub fn horizons(ctx: &Context, rect: Rect, a: usize, method: Method) -> Vec<f32>
     }
     match method {
         Method::Fast => out.par_chunks_mut(plane).enumerate().for_each_init(
-            || (vec![0.0f64; plane], Scratch::default()),
-            |(acc, scratch), (k, dst)| {
+            || (vec![0.0f64; plane], vec![0.0f64; plane], Scratch::default()),
+            |(acc, acc_s, scratch), (k, dst)| {
                 let phi = plane_azimuth(k, a);
                 acc.iter_mut().for_each(|v| *v = f64::NEG_INFINITY);
-                sweep::<true>(ctx, rect, phi, acc, scratch);
-                finish(ctx, rect, phi, acc, dst);
+                sweep::<true>(ctx, rect, phi, acc, acc_s, scratch);
+                finish(ctx, rect, phi, acc, acc_s, dst);
             },
         ),
         Method::Reference => {
             let hmax = ctx.max_height();
             out.par_chunks_mut(plane)
                 .enumerate()
-                .for_each(|(k, dst)| reference(ctx, rect, plane_azimuth(k, a), hmax, 0.5, dst))
+                .for_each(|(k, dst)| reference(ctx, rect, plane_azimuth(k, a), hmax, 0.0, dst))
         }
     }
     out
 }
 
-/// The reference with another step than ½ pixel (tests: how far the ½-pixel reference is
+/// The reference sampling every `step` plane pixels instead of the exact cell-by-cell search
+/// (tests: how far a sampled march is
 /// from the continuous answer).
 #[doc(hidden)]
 pub fn horizons_reference_step(ctx: &Context, rect: Rect, a: usize, step: f64) -> Vec<f32> {
@@ -250,25 +251,35 @@ pub fn horizons_scan(ctx: &Context, rect: Rect, a: usize) -> Vec<f32> {
     let mut out = vec![0.0f32; plane * a];
     for (k, dst) in out.chunks_mut(plane).enumerate() {
         let phi = plane_azimuth(k, a);
-        let (mut acc, mut scratch) = (vec![f64::NEG_INFINITY; plane], Scratch::default());
-        sweep::<false>(ctx, rect, phi, &mut acc, &mut scratch);
-        finish(ctx, rect, phi, &acc, dst);
+        let (mut acc, mut acc_s) = (vec![f64::NEG_INFINITY; plane], vec![0.0; plane]);
+        let mut scratch = Scratch::default();
+        sweep::<false>(ctx, rect, phi, &mut acc, &mut acc_s, &mut scratch);
+        finish(ctx, rect, phi, &acc, &acc_s, dst);
     }
     out
 }
 
 /// Elevations (degrees) from the blended line slopes and the zero-distance slope.
-fn finish(ctx: &Context, rect: Rect, phi: f64, acc: &[f64], dst: &mut [f32]) {
+fn finish(ctx: &Context, rect: Rect, phi: f64, acc: &[f64], acc_s: &[f64], dst: &mut [f32]) {
     let (cos, sin) = (phi.cos(), phi.sin());
     for j in 0..rect.h {
         for i in 0..rect.w {
             let (x, y) = (rect.x0 + i, rect.y0 + j);
             let o = j * rect.w + i;
-            if ctx.at(x as i64, y as i64).is_nan() {
+            let h0 = ctx.at(x as i64, y as i64);
+            if h0.is_nan() {
                 dst[o] = f32::NAN;
                 continue;
             }
             let mut t = acc[o];
+            let ray = Ray::new(ctx, x, y, cos, sin);
+            // The lines pass up to a pixel from the observer: next to it, and around the
+            // sweep's winner, the observer's own ray is searched exactly.
+            t = t.max(ray.max_over(ctx, 0.0, NEAR, f64::NEG_INFINITY).0);
+            if acc[o] > f64::NEG_INFINITY {
+                let sw = acc_s[o];
+                t = t.max(ray.max_over(ctx, (sw - WINDOW).max(NEAR), sw + WINDOW, t).0);
+            }
             let s0 = ctx.slope0_cs(x, y, cos, sin);
             if s0 > t {
                 t = s0;
@@ -278,32 +289,165 @@ fn finish(ctx: &Context, rect: Rect, phi: f64, acc: &[f64], dst: &mut [f32]) {
     }
 }
 
-/// Brute-force horizons of `rect` in plane azimuth `phi`: from each pixel centre, samples every
-/// ½ plane pixel along the straight plane line (a great circle), bilinear heights, exact
-/// spherical geometry; stops where no terrain up to `hmax` could rise above the best so far.
+/// Distance (plane pixels) from the observer searched exactly by the fast method.
+const NEAR: f64 = 1.5;
+/// Half-width (plane pixels) of the window searched exactly around the sweep's winner.
+const WINDOW: f64 = 0.75;
+
+/// An observer's ray in a context raster: the plane line (x0, y0) + s·(cos φ, −sin φ), s in
+/// plane pixels, which is a great circle.
+struct Ray {
+    x0: f64,
+    y0: f64,
+    cx: f64,
+    cy: f64,
+    p: Vec3,
+    h0: f64,
+    r0: f64,
+    /// Curvature drop per plane pixel², metres (for locating maxima inside a cell only).
+    kappa: f64,
+    /// Metres per plane pixel along the ray at the observer (ditto).
+    g: f64,
+}
+
+impl Ray {
+    fn new(ctx: &Context, x: usize, y: usize, cos: f64, sin: f64) -> Ray {
+        let h0 = ctx.at(x as i64, y as i64) as f64;
+        let r0 = ctx.radius_m + h0;
+        let g = ctx.metres_per_px(x as f64, y as f64, cos, sin, r0);
+        Ray {
+            x0: x as f64,
+            y0: y as f64,
+            cx: cos,
+            cy: -sin,
+            p: ctx.dir(x as f64, y as f64),
+            h0,
+            r0,
+            kappa: g * g / (2.0 * r0),
+            g,
+        }
+    }
+
+    /// Slope (tan of elevation) of the terrain at distance `s`: bilinear height, exact
+    /// spherical geometry; −∞ outside the raster or over no data.
+    #[inline]
+    fn slope_at(&self, ctx: &Context, s: f64) -> f64 {
+        let (x, y) = (self.x0 + s * self.cx, self.y0 + s * self.cy);
+        let v = ctx.bilinear(x, y);
+        if v.is_nan() {
+            return f64::NEG_INFINITY;
+        }
+        let q = ctx.dir(x, y);
+        let p = self.p;
+        let d = [q[0] - p[0], q[1] - p[1], q[2] - p[2]];
+        let one_minus_cos = 0.5 * dot(d, d);
+        let cr = [
+            p[1] * q[2] - p[2] * q[1],
+            p[2] * q[0] - p[0] * q[2],
+            p[0] * q[1] - p[1] * q[0],
+        ];
+        let sin = dot(cr, cr).sqrt();
+        let r = ctx.radius_m + v as f64;
+        ((r - self.r0) - r * one_minus_cos) / (r * sin)
+    }
+
+    /// The largest slope over the continuous bilinear surface along the ray for s in
+    /// (s_from, s_to], and where it is. Cell by cell: along the ray the bilinear height is a
+    /// quadratic in s, so with the curvature drop the slope (A + B·s + C·s²)/(g·s) peaks
+    /// inside a cell only at s* = √(A/C); the crossings and s* are evaluated exactly.
+    fn max_over(&self, ctx: &Context, s_from: f64, s_to: f64, floor: f64) -> (f64, f64) {
+        let (mut best, mut at) = (floor, f64::NAN);
+        let mut s = s_from;
+        let (w1, h1) = ((ctx.width - 1) as f64, (ctx.height - 1) as f64);
+        while s < s_to {
+            let (x, y) = (self.x0 + s * self.cx, self.y0 + s * self.cy);
+            if !(x >= 0.0 && y >= 0.0 && x <= w1 && y <= h1) {
+                break;
+            }
+            let dsx = next_crossing(x, self.cx);
+            let dsy = next_crossing(y, self.cy);
+            let s_next = (s + dsx.min(dsy)).min(s_to);
+            if s_next > s_from || s > s_from {
+                let sl = self.slope_at(ctx, s_next);
+                if sl > best {
+                    best = sl;
+                    at = s_next;
+                }
+            }
+            // The cell the segment lies in.
+            let sm = 0.5 * (s + s_next);
+            let (ix, iy) = (
+                (self.x0 + sm * self.cx).floor(),
+                (self.y0 + sm * self.cy).floor(),
+            );
+            let (xi, yi) = (ix as i64, iy as i64);
+            let (h00, h10, h01, h11) = (
+                ctx.at(xi, yi) as f64,
+                ctx.at(xi + 1, yi) as f64,
+                ctx.at(xi, yi + 1) as f64,
+                ctx.at(xi + 1, yi + 1) as f64,
+            );
+            if !(h00.is_nan() || h10.is_nan() || h01.is_nan() || h11.is_nan()) {
+                let (a, b, c) = (h10 - h00, h01 - h00, h11 - h10 - h01 + h00);
+                let (ex, ey) = (self.x0 - ix, self.y0 - iy);
+                let ca = h00 + a * ex + b * ey + c * ex * ey - self.h0;
+                let cc = c * self.cx * self.cy - self.kappa;
+                if ca != 0.0 && cc != 0.0 && ca / cc > 0.0 {
+                    let st = (ca / cc).sqrt();
+                    if st > s && st < s_next && st > s_from {
+                        let sl = self.slope_at(ctx, st);
+                        if sl > best {
+                            best = sl;
+                            at = st;
+                        }
+                    }
+                }
+            }
+            s = s_next;
+        }
+        let _ = self.g;
+        (best, at)
+    }
+}
+
+/// Distance along a coordinate moving at `d` per unit s from `x` to the next integer (a tiny
+/// step past an exact integer).
+#[inline]
+fn next_crossing(x: f64, d: f64) -> f64 {
+    if d > 1e-12 {
+        let n = x.floor() + 1.0;
+        ((n - x) / d).max(1e-9)
+    } else if d < -1e-12 {
+        let n = x.ceil() - 1.0;
+        ((x - n) / -d).max(1e-9)
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// Brute-force horizons of `rect` in plane azimuth `phi`: from each pixel centre along the
+/// straight plane line (a great circle), exact spherical geometry; with `step` = 0 the
+/// continuous bilinear surface cell by cell ([`Ray::max_over`]), else samples every `step`
+/// plane pixels. Stops where no terrain up to `hmax` could rise above the best so far.
 fn reference(ctx: &Context, rect: Rect, phi: f64, hmax: f32, step: f64, dst: &mut [f32]) {
-    let (cx, cy) = (phi.cos(), -phi.sin());
+    let (cos, sin) = (phi.cos(), phi.sin());
     let r_max = ctx.radius_m + hmax as f64;
     for j in 0..rect.h {
         for i in 0..rect.w {
             let (x0, y0) = (rect.x0 + i, rect.y0 + j);
-            let h0 = ctx.at(x0 as i64, y0 as i64);
             let o = j * rect.w + i;
-            if h0.is_nan() {
+            if ctx.at(x0 as i64, y0 as i64).is_nan() {
                 dst[o] = f32::NAN;
                 continue;
             }
-            let r0 = ctx.radius_m + h0 as f64;
-            let p = ctx.dir(x0 as f64, y0 as f64);
-            let s0 = ctx.slope0(x0, y0, phi);
+            let ray = Ray::new(ctx, x0, y0, cos, sin);
+            let s0 = ctx.slope0_cs(x0, y0, cos, sin);
             let mut best = if s0.is_nan() { f64::NEG_INFINITY } else { s0 };
-            let mut k = 1u32;
+            // Chunks of 8 pixels (or `step` samples), each preceded by the stopping test.
+            let chunk = if step > 0.0 { step } else { 8.0 };
+            let mut s = 0.0;
             loop {
-                let (x, y) = (
-                    x0 as f64 + step * k as f64 * cx,
-                    y0 as f64 + step * k as f64 * cy,
-                );
-                k += 1;
+                let (x, y) = (ray.x0 + s * ray.cx, ray.y0 + s * ray.cy);
                 if !(x >= 0.0
                     && y >= 0.0
                     && x <= (ctx.width - 1) as f64
@@ -311,28 +455,32 @@ fn reference(ctx: &Context, rect: Rect, phi: f64, hmax: f32, step: f64, dst: &mu
                 {
                     break;
                 }
-                let q = ctx.dir(x, y);
-                let d = [q[0] - p[0], q[1] - p[1], q[2] - p[2]];
-                let one_minus_cos = 0.5 * dot(d, d);
-                let cr = [
-                    p[1] * q[2] - p[2] * q[1],
-                    p[2] * q[0] - p[0] * q[2],
-                    p[0] * q[1] - p[1] * q[0],
-                ];
-                let sin = dot(cr, cr).sqrt();
-                // Highest conceivable terrain here, as a slope: it only falls with distance.
-                if ((r_max - r0) - r_max * one_minus_cos) <= best * r_max * sin {
-                    break;
+                if s > 0.0 {
+                    // Highest conceivable terrain here, as a slope: it only falls with
+                    // distance, so nothing farther can beat `best`.
+                    let q = ctx.dir(x, y);
+                    let p = ray.p;
+                    let d = [q[0] - p[0], q[1] - p[1], q[2] - p[2]];
+                    let one_minus_cos = 0.5 * dot(d, d);
+                    let cr = [
+                        p[1] * q[2] - p[2] * q[1],
+                        p[2] * q[0] - p[0] * q[2],
+                        p[0] * q[1] - p[1] * q[0],
+                    ];
+                    let sn = dot(cr, cr).sqrt();
+                    if ((r_max - ray.r0) - r_max * one_minus_cos) <= best * r_max * sn {
+                        break;
+                    }
                 }
-                let v = ctx.bilinear(x, y);
-                if v.is_nan() {
-                    continue;
+                if step > 0.0 {
+                    let sl = ray.slope_at(ctx, s + step);
+                    if sl > best {
+                        best = sl;
+                    }
+                } else {
+                    best = best.max(ray.max_over(ctx, s, s + chunk, best).0);
                 }
-                let r = ctx.radius_m + v as f64;
-                let t = ((r - r0) - r * one_minus_cos) / (r * sin);
-                if t > best {
-                    best = t;
-                }
+                s += chunk;
             }
             dst[o] = best.atan().to_degrees() as f32;
         }
@@ -534,6 +682,7 @@ fn sweep<const HULL: bool>(
     rect: Rect,
     phi: f64,
     acc: &mut [f64],
+    acc_s: &mut [f64],
     scratch: &mut Scratch,
 ) {
     let (dx, dy) = (phi.cos(), -phi.sin());
@@ -742,6 +891,8 @@ fn sweep<const HULL: bool>(
                         let idx = (p - rp0) as usize * si + (q0 - rq0) as usize * sj;
                         if sl > acc[idx] {
                             acc[idx] = sl;
+                            // Distance along the ray, plane pixels.
+                            acc_s[idx] = (b.p - p as f64) / dp;
                         }
                     }
                 }
