@@ -115,9 +115,9 @@ impl Context {
         {
             return f32::NAN;
         }
-        let (fx0, fy0) = (x.floor(), y.floor());
-        let (fx, fy) = (x - fx0, y - fy0);
-        let (xi, yi) = (fx0 as i64, fy0 as i64);
+        // x, y ≥ 0 here, so truncation is floor (and needs no libm call on baseline x86-64).
+        let (xi, yi) = (x as i64, y as i64);
+        let (fx, fy) = (x - xi as f64, y - yi as f64);
         let mut acc = 0.0f64;
         let mut wsum = 0.0f64;
         for (dx, dy, w) in [
@@ -301,13 +301,15 @@ struct Ray {
     y0: f64,
     cx: f64,
     cy: f64,
-    p: Vec3,
     h0: f64,
     r0: f64,
+    /// The ray's great-circle plane, with the observer's direction as first axis: the plane
+    /// point at distance s is (a0 + s·a1, s·b1) there.
+    a0: f64,
+    a1: f64,
+    b1: f64,
     /// Curvature drop per plane pixel², metres (for locating maxima inside a cell only).
     kappa: f64,
-    /// Metres per plane pixel along the ray at the observer (ditto).
-    g: f64,
 }
 
 impl Ray {
@@ -315,40 +317,41 @@ impl Ray {
         let h0 = ctx.at(x as i64, y as i64) as f64;
         let r0 = ctx.radius_m + h0;
         let g = ctx.metres_per_px(x as f64, y as f64, cos, sin, r0);
+        let p0 = ctx.plane_point(x as f64, y as f64);
+        let p1 = ctx.plane_point(x as f64 + cos, y as f64 - sin);
+        let w = [p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]];
+        let n0 = dot(p0, p0).sqrt();
+        let ph = [p0[0] / n0, p0[1] / n0, p0[2] / n0];
+        let a1 = dot(w, ph);
+        let perp = [w[0] - a1 * ph[0], w[1] - a1 * ph[1], w[2] - a1 * ph[2]];
         Ray {
             x0: x as f64,
             y0: y as f64,
             cx: cos,
             cy: -sin,
-            p: ctx.dir(x as f64, y as f64),
             h0,
             r0,
+            a0: n0,
+            a1,
+            b1: dot(perp, perp).sqrt(),
             kappa: g * g / (2.0 * r0),
-            g,
         }
     }
 
     /// Slope (tan of elevation) of the terrain at distance `s`: bilinear height, exact
-    /// spherical geometry; −∞ outside the raster or over no data.
+    /// spherical geometry — with cos ψ = a/‖(a,b)‖ and sin ψ = b/‖(a,b)‖ the slope
+    /// (r cos ψ − r0)/(r sin ψ) is (r·a − r0·‖(a,b)‖)/(r·b); −∞ outside the raster or over no
+    /// data.
     #[inline]
     fn slope_at(&self, ctx: &Context, s: f64) -> f64 {
-        let (x, y) = (self.x0 + s * self.cx, self.y0 + s * self.cy);
-        let v = ctx.bilinear(x, y);
+        let v = ctx.bilinear(self.x0 + s * self.cx, self.y0 + s * self.cy);
         if v.is_nan() {
             return f64::NEG_INFINITY;
         }
-        let q = ctx.dir(x, y);
-        let p = self.p;
-        let d = [q[0] - p[0], q[1] - p[1], q[2] - p[2]];
-        let one_minus_cos = 0.5 * dot(d, d);
-        let cr = [
-            p[1] * q[2] - p[2] * q[1],
-            p[2] * q[0] - p[0] * q[2],
-            p[0] * q[1] - p[1] * q[0],
-        ];
-        let sin = dot(cr, cr).sqrt();
+        let (a, b) = (self.a0 + s * self.a1, s * self.b1);
+        let n = (a * a + b * b).sqrt();
         let r = ctx.radius_m + v as f64;
-        ((r - self.r0) - r * one_minus_cos) / (r * sin)
+        (r * a - self.r0 * n) / (r * b)
     }
 
     /// The largest slope over the continuous bilinear surface along the ray for s in
@@ -376,9 +379,10 @@ impl Ray {
             }
             // The cell the segment lies in.
             let sm = 0.5 * (s + s_next);
+            // Inside the raster, so ≥ 0: truncation is floor.
             let (ix, iy) = (
-                (self.x0 + sm * self.cx).floor(),
-                (self.y0 + sm * self.cy).floor(),
+                ((self.x0 + sm * self.cx) as i64) as f64,
+                ((self.y0 + sm * self.cy) as i64) as f64,
             );
             let (xi, yi) = (ix as i64, iy as i64);
             let (h00, h10, h01, h11) = (
@@ -405,8 +409,18 @@ impl Ray {
             }
             s = s_next;
         }
-        let _ = self.g;
         (best, at)
+    }
+}
+
+/// `x.ceil()` without a libm call on baseline x86-64 (|x| < 2⁶³).
+#[inline(always)]
+fn ceil(x: f64) -> f64 {
+    let t = (x as i64) as f64;
+    if t < x {
+        t + 1.0
+    } else {
+        t
     }
 }
 
@@ -414,11 +428,12 @@ impl Ray {
 /// step past an exact integer).
 #[inline]
 fn next_crossing(x: f64, d: f64) -> f64 {
+    // x ≥ 0 (inside the raster): truncation is floor.
+    let fl = (x as i64) as f64;
     if d > 1e-12 {
-        let n = x.floor() + 1.0;
-        ((n - x) / d).max(1e-9)
+        ((fl + 1.0 - x) / d).max(1e-9)
     } else if d < -1e-12 {
-        let n = x.ceil() - 1.0;
+        let n = if fl == x { x - 1.0 } else { fl };
         ((x - n) / -d).max(1e-9)
     } else {
         f64::INFINITY
@@ -458,17 +473,9 @@ fn reference(ctx: &Context, rect: Rect, phi: f64, hmax: f32, step: f64, dst: &mu
                 if s > 0.0 {
                     // Highest conceivable terrain here, as a slope: it only falls with
                     // distance, so nothing farther can beat `best`.
-                    let q = ctx.dir(x, y);
-                    let p = ray.p;
-                    let d = [q[0] - p[0], q[1] - p[1], q[2] - p[2]];
-                    let one_minus_cos = 0.5 * dot(d, d);
-                    let cr = [
-                        p[1] * q[2] - p[2] * q[1],
-                        p[2] * q[0] - p[0] * q[2],
-                        p[0] * q[1] - p[1] * q[0],
-                    ];
-                    let sn = dot(cr, cr).sqrt();
-                    if ((r_max - ray.r0) - r_max * one_minus_cos) <= best * r_max * sn {
+                    let (a, b) = (ray.a0 + s * ray.a1, s * ray.b1);
+                    let n = (a * a + b * b).sqrt();
+                    if (r_max * a - ray.r0 * n) <= best * r_max * b {
                         break;
                     }
                 }
@@ -796,7 +803,7 @@ fn sweep<const HULL: bool>(
             // where it would duplicate the column's sample).
             if !prev_y.is_nan() {
                 let (lo, hi) = if prev_y < y { (prev_y, y) } else { (y, prev_y) };
-                let kq = lo.ceil();
+                let kq = ceil(lo);
                 if kq > lo + 1e-6 && kq < hi - 1e-6 && kq >= 0.0 && kq <= (nq - 1) as f64 {
                     let pc = (kq - mf) / t;
                     if let Some((lp, lq)) = last {
@@ -852,7 +859,7 @@ fn sweep<const HULL: bool>(
             while mi < sc.marks.len() && sc.marks[mi].0 == i {
                 let (_, p, y) = sc.marks[mi];
                 mi += 1;
-                let qa = y.ceil();
+                let qa = ceil(y);
                 let f = qa - y;
                 let qa = qa as i64;
                 for (side, q0, w) in [(0, qa, 1.0 - f), (1, qa - 1, f)] {
