@@ -107,13 +107,16 @@ impl Context {
         self.heights[y as usize * self.width + x as usize]
     }
 
-    /// Bilinear height at fractional raster pixel (x, y): taps with zero weight and no-data
+    /// Bilinear height at fractional raster pixel (x, y), in f64 (near the observer the height
+    /// differences are millimetres, below an f32's resolution of a height): taps with zero weight and no-data
     /// taps are left out and the rest renormalised; NaN when none is left or (x, y) is outside.
     #[inline]
-    pub fn bilinear(&self, x: f64, y: f64) -> f32 {
-        if !(x >= 0.0 && y >= 0.0 && x <= (self.width - 1) as f64 && y <= (self.height - 1) as f64)
-        {
-            return f32::NAN;
+    pub fn bilinear64(&self, x: f64, y: f64) -> f64 {
+        // A point computed to lie on the raster's edge may land a rounding error outside.
+        let (wm, hm) = ((self.width - 1) as f64, (self.height - 1) as f64);
+        let (x, y) = (snap(x, wm), snap(y, hm));
+        if !(x >= 0.0 && y >= 0.0 && x <= wm && y <= hm) {
+            return f64::NAN;
         }
         // x, y ≥ 0 here, so truncation is floor (and needs no libm call on baseline x86-64).
         let (xi, yi) = (x as i64, y as i64);
@@ -137,10 +140,16 @@ impl Context {
             wsum += w;
         }
         if wsum > 0.0 {
-            (acc / wsum) as f32
+            acc / wsum
         } else {
-            f32::NAN
+            f64::NAN
         }
+    }
+
+    /// [`Context::bilinear64`] rounded to f32.
+    #[inline]
+    pub fn bilinear(&self, x: f64, y: f64) -> f32 {
+        self.bilinear64(x, y) as f32
     }
 
     /// Largest height in the raster (NaN-free), or −∞ when it holds no terrain.
@@ -188,6 +197,18 @@ impl Context {
     }
 }
 
+/// `x` moved onto [0, hi] when it is within 1e-9 of it.
+#[inline(always)]
+fn snap(x: f64, hi: f64) -> f64 {
+    if x < 0.0 && x > -1e-9 {
+        0.0
+    } else if x > hi && x < hi + 1e-9 {
+        hi
+    } else {
+        x
+    }
+}
+
 #[inline]
 fn normalize(p: Vec3) -> Vec3 {
     let n = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
@@ -215,7 +236,7 @@ pub fn horizons(ctx: &Context, rect: Rect, a: usize, method: Method) -> Vec<f32>
             |(acc, acc_s, scratch), (k, dst)| {
                 let phi = plane_azimuth(k, a);
                 acc.iter_mut().for_each(|v| *v = f64::NEG_INFINITY);
-                sweep::<true>(ctx, rect, phi, acc, acc_s, scratch);
+                sweep(ctx, rect, phi, acc, acc_s, scratch);
                 finish(ctx, rect, phi, acc, acc_s, dst);
             },
         ),
@@ -243,22 +264,6 @@ pub fn horizons_reference_step(ctx: &Context, rect: Rect, a: usize, step: f64) -
     out
 }
 
-/// The fast sweep with every line sample kept and scanned instead of the hull (same samples,
-/// same blending): isolates the hull logic in tests. Quadratic per line; tests only.
-#[doc(hidden)]
-pub fn horizons_scan(ctx: &Context, rect: Rect, a: usize) -> Vec<f32> {
-    let plane = rect.w * rect.h;
-    let mut out = vec![0.0f32; plane * a];
-    for (k, dst) in out.chunks_mut(plane).enumerate() {
-        let phi = plane_azimuth(k, a);
-        let (mut acc, mut acc_s) = (vec![f64::NEG_INFINITY; plane], vec![0.0; plane]);
-        let mut scratch = Scratch::default();
-        sweep::<false>(ctx, rect, phi, &mut acc, &mut acc_s, &mut scratch);
-        finish(ctx, rect, phi, &acc, &acc_s, dst);
-    }
-    out
-}
-
 /// Elevations (degrees) from the blended line slopes and the zero-distance slope.
 fn finish(ctx: &Context, rect: Rect, phi: f64, acc: &[f64], acc_s: &[f64], dst: &mut [f32]) {
     let (cos, sin) = (phi.cos(), phi.sin());
@@ -271,8 +276,14 @@ fn finish(ctx: &Context, rect: Rect, phi: f64, acc: &[f64], acc_s: &[f64], dst: 
                 dst[o] = f32::NAN;
                 continue;
             }
-            let mut t = acc[o];
             let ray = Ray::new(ctx, x, y, cos, sin);
+            // The sweep's winner, evaluated exactly: every value reported is then the
+            // elevation of a real point of this ray (so fast ≤ reference).
+            let mut t = if acc[o] > f64::NEG_INFINITY {
+                ray.slope_at(ctx, acc_s[o])
+            } else {
+                f64::NEG_INFINITY
+            };
             // The lines pass up to a pixel from the observer: next to it, and around the
             // sweep's winner, the observer's own ray is searched exactly.
             t = t.max(ray.max_over(ctx, 0.0, NEAR, f64::NEG_INFINITY).0);
@@ -290,7 +301,7 @@ fn finish(ctx: &Context, rect: Rect, phi: f64, acc: &[f64], acc_s: &[f64], dst: 
 }
 
 /// Distance (plane pixels) from the observer searched exactly by the fast method.
-const NEAR: f64 = 1.5;
+const NEAR: f64 = 4.0;
 /// Half-width (plane pixels) of the window searched exactly around the sweep's winner.
 const WINDOW: f64 = 0.75;
 
@@ -344,13 +355,13 @@ impl Ray {
     /// data.
     #[inline]
     fn slope_at(&self, ctx: &Context, s: f64) -> f64 {
-        let v = ctx.bilinear(self.x0 + s * self.cx, self.y0 + s * self.cy);
+        let v = ctx.bilinear64(self.x0 + s * self.cx, self.y0 + s * self.cy);
         if v.is_nan() {
             return f64::NEG_INFINITY;
         }
         let (a, b) = (self.a0 + s * self.a1, s * self.b1);
         let n = (a * a + b * b).sqrt();
-        let r = ctx.radius_m + v as f64;
+        let r = ctx.radius_m + v;
         (r * a - self.r0 * n) / (r * b)
     }
 
@@ -512,9 +523,8 @@ fn cross(o: Pt, a: Pt, b: Pt) -> f64 {
     (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x)
 }
 
-/// One line's profile: the upper hull of the samples seen so far (or all of them when not
-/// `HULL`), and the line's plane frame.
-struct Line<'a, const HULL: bool> {
+/// One line's profile: the upper hull of the samples seen so far, and the line's plane frame.
+struct Line<'a> {
     pts: &'a mut Vec<Pt>,
     a0: f64,
     a1: f64,
@@ -522,7 +532,7 @@ struct Line<'a, const HULL: bool> {
     b1: f64,
 }
 
-impl<const HULL: bool> Line<'_, HULL> {
+impl Line<'_> {
     /// Position of line parameter `p` at radius `r`.
     #[inline]
     fn pos(&self, p: f64, r: f64) -> Pt {
@@ -554,16 +564,14 @@ impl<const HULL: bool> Line<'_, HULL> {
 
     #[inline]
     fn push(&mut self, q: Pt) {
-        if HULL {
-            // Pop while the top is on the body's side of (or on) the segment from the one
-            // below it to the new point: the chain keeps turning clockwise.
-            while self.pts.len() >= 2 {
-                let n = self.pts.len();
-                if cross(self.pts[n - 2], self.pts[n - 1], q) >= 0.0 {
-                    self.pts.pop();
-                } else {
-                    break;
-                }
+        // Pop while the top is on the body's side of (or on) the segment from the one below it
+        // to the new point: the chain keeps turning clockwise.
+        while self.pts.len() >= 2 {
+            let n = self.pts.len();
+            if cross(self.pts[n - 2], self.pts[n - 1], q) >= 0.0 {
+                self.pts.pop();
+            } else {
+                break;
             }
         }
         self.pts.push(q);
@@ -579,29 +587,19 @@ impl<const HULL: bool> Line<'_, HULL> {
         }
         // `better(a, b)`: a is seen higher than b from o.
         let better = |a: Pt, b: Pt| cross(o, a, b) > 0.0;
-        Some(if HULL {
-            // Seen from o the elevation along the hull is unimodal: climb from the finger.
-            let mut i = (*finger).min(h.len() - 1);
-            if i + 1 < h.len() && better(h[i + 1], h[i]) {
-                while i + 1 < h.len() && better(h[i + 1], h[i]) {
-                    i += 1;
-                }
-            } else {
-                while i > 0 && better(h[i - 1], h[i]) {
-                    i -= 1;
-                }
+        // Seen from o the elevation along the hull is unimodal: climb from the finger.
+        let mut i = (*finger).min(h.len() - 1);
+        if i + 1 < h.len() && better(h[i + 1], h[i]) {
+            while i + 1 < h.len() && better(h[i + 1], h[i]) {
+                i += 1;
             }
-            *finger = i;
-            i
         } else {
-            let mut b = 0;
-            for i in 1..h.len() {
-                if better(h[i], h[b]) {
-                    b = i;
-                }
+            while i > 0 && better(h[i - 1], h[i]) {
+                i -= 1;
             }
-            b
-        })
+        }
+        *finger = i;
+        Some(i)
     }
 }
 
@@ -647,7 +645,12 @@ impl Grid<'_> {
         let i = p0 as usize * self.sp + q0 as usize * self.sq;
         let p1 = if p0 + 1 < self.np { self.sp } else { 0 };
         let q1 = if q0 + 1 < self.nq { self.sq } else { 0 };
-        let (a, b, c, d) = (self.h[i], self.h[i + p1], self.h[i + q1], self.h[i + p1 + q1]);
+        let (a, b, c, d) = (
+            self.h[i],
+            self.h[i + p1],
+            self.h[i + q1],
+            self.h[i + p1 + q1],
+        );
         let (wa, wb, wc, wd) = (
             (1.0 - fp) * (1.0 - fq),
             fp * (1.0 - fq),
@@ -684,7 +687,7 @@ impl Grid<'_> {
 /// that bracket it at its own column for the hull vertex it sees highest; that vertex and its
 /// hull neighbours are then evaluated on the observer's own ray at the same distance, and the
 /// highest wins. Writes the best slope per observer into `acc` (max).
-fn sweep<const HULL: bool>(
+fn sweep(
     ctx: &Context,
     rect: Rect,
     phi: f64,
@@ -774,12 +777,16 @@ fn sweep<const HULL: bool>(
         let bv = [b_pt[0] - a_pt[0], b_pt[1] - a_pt[1], b_pt[2] - a_pt[2]];
         let pm = 0.5 * (start + stop) as f64;
         let e1 = normalize(plane(pm, mf + t * pm));
-        let sb = [step as f64 * bv[0], step as f64 * bv[1], step as f64 * bv[2]];
+        let sb = [
+            step as f64 * bv[0],
+            step as f64 * bv[1],
+            step as f64 * bv[2],
+        ];
         let k = dot(sb, e1);
         let e2 = normalize([sb[0] - k * e1[0], sb[1] - k * e1[1], sb[2] - k * e1[2]]);
         let mut hull = std::mem::take(&mut scratch.hull);
         hull.clear();
-        let mut line = Line::<HULL> {
+        let mut line = Line {
             pts: &mut hull,
             a0: dot(a_pt, e1),
             a1: dot(bv, e1),
@@ -965,5 +972,61 @@ pub fn compass_azimuth_deg(face: Face, u: f64, v: f64, phi: f64) -> f64 {
         north[2] * p[0] - north[0] * p[2],
         north[0] * p[1] - north[1] * p[0],
     ];
-    dot(t, east).atan2(dot(t, north)).to_degrees().rem_euclid(360.0)
+    dot(t, east)
+        .atan2(dot(t, north))
+        .to_degrees()
+        .rem_euclid(360.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The hull query finds the sample seen highest among *all* samples pushed so far, from
+    /// observers beyond them at random heights, with the finger carried between queries.
+    #[test]
+    fn hull_query_equals_a_scan_of_every_sample() {
+        let mut st = 0x9E37_79B9_7F4A_7C15u64;
+        let mut rnd = || {
+            st ^= st << 13;
+            st ^= st >> 7;
+            st ^= st << 17;
+            (st >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let r = 1_737_400.0;
+        for trial in 0..200 {
+            // A line through the body's plane: a = 1 (towards the observer), b = p·spacing.
+            let spacing = [1e-5, 1e-3, 5e-2][trial % 3];
+            let mut hull = Vec::new();
+            let mut line = Line {
+                pts: &mut hull,
+                a0: 1.0,
+                a1: 0.0,
+                b0: 0.0,
+                b1: spacing,
+            };
+            let mut all = Vec::new();
+            let mut finger = usize::MAX;
+            let relief = [10.0, 1000.0, 20_000.0][trial % 3];
+            for i in 0..300 {
+                let p = i as f64;
+                let q = line.pos(p, r + relief * (rnd() - 0.5));
+                line.push(q);
+                all.push(q);
+                if i % 7 == 6 {
+                    let o = line.pos(p + 1.0 + rnd() * 3.0, r + relief * (rnd() - 0.5));
+                    let iv = line.query(o, &mut finger).unwrap();
+                    let best = all
+                        .iter()
+                        .map(|&v| slope(o, v))
+                        .fold(f64::NEG_INFINITY, f64::max);
+                    let got = slope(o, line.pts[iv]);
+                    assert!(
+                        (got - best).abs() <= 1e-9 * (1.0 + best.abs()),
+                        "trial {trial} step {i}: hull {got} scan {best}"
+                    );
+                }
+            }
+        }
+    }
 }

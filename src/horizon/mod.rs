@@ -11,8 +11,7 @@ mod core;
 mod stage;
 
 pub use self::core::{
-    compass_azimuth_deg, horizons, horizons_reference_step, horizons_scan, plane_azimuth, Context,
-    Method, Rect,
+    compass_azimuth_deg, horizons, horizons_reference_step, plane_azimuth, Context, Method, Rect,
 };
 pub use self::stage::{
     build_horizons, context_for, query, reach_rad, read_horizon_exr, terrain_range, tile_path,

@@ -216,8 +216,12 @@ pub fn terrain_range(ts: &Tileset) -> Option<(f64, f64)> {
 /// the lowest sphere after acos((R+min)/(R+top)) and climbs out to the highest terrain after
 /// another acos((R+min)/(R+max)). Any pixel's horizon is at least that tangent's elevation.
 pub fn reach_rad(radius: f64, min_m: f64, max_m: f64, top_m: f64) -> f64 {
-    let a = ((radius + min_m) / (radius + top_m.max(min_m))).min(1.0).acos();
-    let b = ((radius + min_m) / (radius + max_m.max(min_m))).min(1.0).acos();
+    let a = ((radius + min_m) / (radius + top_m.max(min_m)))
+        .min(1.0)
+        .acos();
+    let b = ((radius + min_m) / (radius + max_m.max(min_m)))
+        .min(1.0)
+        .acos();
     a + b
 }
 
@@ -242,7 +246,10 @@ fn margin_for(ts: &Tileset, id: TileId, rad: f64, cap: u64) -> Reach {
             _ => (0, n - (e % EDGE) * n / EDGE),
         };
         // Corner of pixel (i, j): global pixel edge coordinates.
-        let (gx, gy) = (id.x as f64 * n as f64 + i as f64, id.y as f64 * n as f64 + j as f64);
+        let (gx, gy) = (
+            id.x as f64 * n as f64 + i as f64,
+            id.y as f64 * n as f64 + j as f64,
+        );
         let (u, v) = (-1.0 + 2.0 * gx / s, 1.0 - 2.0 * gy / s);
         let p = crate::cube::face_uv_to_dir(id.face, u, v);
         // A tangent basis at p.
@@ -526,9 +533,7 @@ fn check_layout(dir: &Path, ts: &Tileset) -> Result<()> {
 
 fn check_azimuths(a: usize) -> Result<()> {
     if !(4..=4096).contains(&a) {
-        return Err(Error::usage(format!(
-            "--azimuths {a} is outside 4..=4096"
-        )));
+        return Err(Error::usage(format!("--azimuths {a} is outside 4..=4096")));
     }
     Ok(())
 }
@@ -549,9 +554,8 @@ pub fn build_horizons(
             "tileset has no height product to compute horizons from",
         )
     })?;
-    let (tmin, tmax) = terrain_range(&ts).ok_or_else(|| {
-        Error::invalid(&manifest_path, "tileset records no height range")
-    })?;
+    let (tmin, tmax) = terrain_range(&ts)
+        .ok_or_else(|| Error::invalid(&manifest_path, "tileset records no height range"))?;
     let lay = ts.layout;
     let levels: Vec<u8> = match &opts.levels {
         None => (0..lay.levels).collect(),
@@ -646,7 +650,9 @@ pub fn build_horizons(
     progress.start("horizons", tiles.len() as u64);
     for &id in &tiles {
         let out = tile_path(dir, id);
-        if resume && out.exists() && read_horizon_exr(&out, n).is_ok_and(|(a, _)| a == opts.azimuths)
+        if resume
+            && out.exists()
+            && read_horizon_exr(&out, n).is_ok_and(|(a, _)| a == opts.azimuths)
         {
             kept += 1;
             progress.inc(1);
@@ -828,7 +834,10 @@ pub fn query(
         }
         None => {
             let (tmin, tmax) = terrain_range(&ts).ok_or_else(|| {
-                Error::invalid(dir.join(manifest::MANIFEST), "tileset records no height range")
+                Error::invalid(
+                    dir.join(manifest::MANIFEST),
+                    "tileset records no height range",
+                )
             })?;
             let top = interior_max(&t, h, n).unwrap_or(height);
             let rad = reach_rad(ts.body.radius_m, tmin, tmax, top as f64);
