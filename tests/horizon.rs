@@ -83,29 +83,6 @@ fn stats(a: &[f32], b: &[f32]) -> (f64, f64, usize) {
     ((ss / n.max(1) as f64).sqrt(), mx, n)
 }
 
-fn read_npy_f32(path: &std::path::Path) -> (usize, usize, Vec<f32>) {
-    let b = std::fs::read(path).unwrap();
-    let hl = u16::from_le_bytes([b[8], b[9]]) as usize;
-    let header = std::str::from_utf8(&b[10..10 + hl]).unwrap();
-    let shape = header
-        .split("'shape': (")
-        .nth(1)
-        .unwrap()
-        .split(')')
-        .next()
-        .unwrap();
-    let dims: Vec<usize> = shape
-        .split(',')
-        .filter(|s| !s.trim().is_empty())
-        .map(|s| s.trim().parse().unwrap())
-        .collect();
-    let data = b[10 + hl..]
-        .chunks_exact(4)
-        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-        .collect();
-    (dims[1], dims[0], data)
-}
-
 /// Heights of a whole DEM in `../shared/data` as a raster (row-major), or None (skip).
 fn shared_raster(rel: &str) -> Option<(usize, usize, Vec<f32>)> {
     let p = shared_data()?.join(rel);
@@ -305,4 +282,182 @@ fn fast_matches_reference_on_ldem4_polar_tiles() {
         );
         assert!(rms <= 0.05 && max <= 0.5, "rms {rms} max {max}");
     }
+}
+
+fn json(o: &std::process::Output) -> serde_json::Value {
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+#[test]
+fn cli_horizon_and_query_horizon() {
+    use crate::util::{global_dem, penumbra_bin};
+    use penumbra::body::Body;
+    use penumbra::progress::NoProgress;
+    use penumbra::tiling::{tile_dem, TileOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("t");
+    let opts = TileOptions {
+        tile_size: 32,
+        halo: 2,
+        levels: Some(2),
+        ..Default::default()
+    };
+    tile_dem(
+        &global_dem(360),
+        &Body::preset("moon").unwrap(),
+        &out,
+        &opts,
+        None,
+        &NoProgress,
+    )
+    .unwrap();
+    let o = out.to_str().unwrap();
+    let run = |args: &[&str]| penumbra_bin().args(args).output().unwrap();
+
+    // Computed on demand (nothing stored yet): both methods, compass azimuths ascending.
+    let q = |method: &str| {
+        json(&run(&[
+            "query",
+            "horizon",
+            o,
+            "--lat",
+            "-12.5",
+            "--lon",
+            "200",
+            "--azimuths",
+            "36",
+            "--method",
+            method,
+            "--json",
+        ]))
+    };
+    let fast = q("fast");
+    let reference = q("reference");
+    assert_eq!(fast["source"], "computed");
+    let az: Vec<f64> = serde_json::from_value(fast["azimuth_deg"].clone()).unwrap();
+    let ef: Vec<f64> = serde_json::from_value(fast["elevation_deg"].clone()).unwrap();
+    let er: Vec<f64> = serde_json::from_value(reference["elevation_deg"].clone()).unwrap();
+    assert_eq!((az.len(), ef.len(), er.len()), (36, 36, 36));
+    assert!(az.windows(2).all(|w| w[0] < w[1]) && az[0] >= 0.0 && az[35] < 360.0);
+    for (f, r) in ef.iter().zip(&er) {
+        assert!(*f <= r + 1e-3 && r - f <= 0.5, "fast {f} reference {r}");
+    }
+    // The pixel centre reported is within a pixel of the point asked for.
+    let (lat, lon) = (
+        fast["lat_deg"].as_f64().unwrap(),
+        fast["lon_deg"].as_f64().unwrap(),
+    );
+    assert!(
+        (lat + 12.5).abs() < 1.0
+            && (lon - 200.0 + 360.0)
+                .rem_euclid(360.0)
+                .min((200.0 - lon).rem_euclid(360.0))
+                < 1.0,
+        "{lat} {lon}"
+    );
+
+    // Bake the maps of level 1; the query then reads them and agrees with the computed one
+    // to f16 precision.
+    let r = json(&run(&[
+        "horizon",
+        o,
+        "--levels",
+        "1",
+        "--azimuths",
+        "36",
+        "--json",
+    ]));
+    assert_eq!(r["tiles_written"], 24);
+    let ts = penumbra::manifest::Tileset::load(&out).unwrap();
+    let hp = ts.products.horizon.as_ref().unwrap();
+    assert_eq!(
+        (hp.azimuths, hp.levels.clone(), hp.precision.as_str()),
+        (36, vec![1], "f16")
+    );
+    let stored = q("fast");
+    assert_eq!(stored["source"], "stored");
+    let es: Vec<f64> = serde_json::from_value(stored["elevation_deg"].clone()).unwrap();
+    for (s, f) in es.iter().zip(&ef) {
+        assert!((s - f).abs() <= 0.05, "stored {s} computed {f}");
+    }
+    // Rerun: up to date; same bytes whatever the thread count.
+    let r = json(&run(&[
+        "horizon",
+        o,
+        "--levels",
+        "1",
+        "--azimuths",
+        "36",
+        "--json",
+    ]));
+    assert_eq!(r["up_to_date"], true);
+    let before = crate::util::snapshot(&out.join("horizon"));
+    std::fs::remove_dir_all(out.join("horizon")).unwrap();
+    let r = json(&run(&[
+        "--threads",
+        "1",
+        "horizon",
+        o,
+        "--levels",
+        "1",
+        "--azimuths",
+        "36",
+        "--json",
+    ]));
+    assert_eq!(r["tiles_written"], 24);
+    assert!(before == crate::util::snapshot(&out.join("horizon")));
+
+    // Bad requests: exit 2, a reason, nothing written.
+    for (args, says) in [
+        (vec!["horizon", o, "--azimuths", "2"], "outside 4..=4096"),
+        (vec!["horizon", o, "--levels", "7"], "does not exist"),
+        (
+            vec!["horizon", o, "--levels", "1", "--max-output-gib", "0.001"],
+            "GiB",
+        ),
+        (
+            vec!["query", "horizon", o, "--lat", "95", "--lon", "0"],
+            "latitude",
+        ),
+    ] {
+        let e = run(&args);
+        assert_eq!(e.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&e.stderr);
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
+    let e = run(&["horizon", dir.path().join("nothing").to_str().unwrap()]);
+    assert_eq!(e.status.code(), Some(2));
+}
+
+#[test]
+fn horizon_refuses_equal_angle_tilesets() {
+    use crate::util::{global_dem, penumbra_bin};
+    use penumbra::body::Body;
+    use penumbra::cube::Projection;
+    use penumbra::progress::NoProgress;
+    use penumbra::tiling::{tile_dem, TileOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let opts = TileOptions {
+        tile_size: 16,
+        levels: Some(1),
+        projection: Projection::EqualAngle,
+        ..Default::default()
+    };
+    tile_dem(
+        &global_dem(90),
+        &Body::preset("moon").unwrap(),
+        dir.path(),
+        &opts,
+        None,
+        &NoProgress,
+    )
+    .unwrap();
+    let e = penumbra_bin()
+        .args(["horizon", dir.path().to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(e.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&e.stderr).contains("gnomonic"));
+    assert!(!dir.path().join("horizon").exists());
 }

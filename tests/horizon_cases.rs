@@ -633,7 +633,8 @@ fn mesa_top_edge_and_view_off_the_rim() {
     assert_eq!(ctx.at(c as i64 - 8, c as i64), hm as f32);
     assert_eq!(ctx.at(c as i64 - 9, c as i64), 0.0);
     // (k, observer, top-edge pixel)
-    let mut cases: Vec<(usize, (usize, usize), (usize, usize))> = Vec::new();
+    type Case = (usize, (usize, usize), (usize, usize));
+    let mut cases: Vec<Case> = Vec::new();
     for d in [14, 24, 40] {
         cases.push((0, (c - d, c), (c - 8, c)));
     }
@@ -1173,8 +1174,8 @@ fn small_body_strong_dip_and_relief() {
             reach(&ctx, c, c, plane_azimuth(k, a)) > 1.1 * psi_t,
             "tangent point outside at k {k}"
         );
-        for mi in 0..2 {
-            let e = outs[mi][k] as f64;
+        for (mi, out) in outs.iter().enumerate() {
+            let e = out[k] as f64;
             worst_dip[mi] = worst_dip[mi].max((e - dip).abs());
             assert!(
                 (e - dip).abs() <= 0.01,
@@ -1582,32 +1583,6 @@ fn deterministic_across_thread_counts() {
 // ------------------------------------------------------------------------------------------
 // 13. The hull against a scan of the same samples
 // ------------------------------------------------------------------------------------------
-
-/// Rough terrain (value noise + ±120 m white noise on 40 m pixels) on a strongly curved
-/// off-centre raster of a 30 km body.
-fn rough_case() -> (Context, Rect) {
-    let (w, h) = (64usize, 64usize);
-    let r = 30_000.0;
-    let s = face_pixels(r, 40.0);
-    let ctx = Context {
-        face: Face::Ny,
-        face_pixels: s,
-        origin: ((0.6 * s) as i64, (0.25 * s) as i64),
-        width: w,
-        height: h,
-        heights: rough(w, h, 900.0, 120.0, 2024),
-        radius_m: r,
-    };
-    (
-        ctx,
-        Rect {
-            x0: 20,
-            y0: 20,
-            w: 24,
-            h: 24,
-        },
-    )
-}
 
 // ------------------------------------------------------------------------------------------
 // 14. The horizon on the raster's edge

@@ -920,7 +920,6 @@ fn sweep(
                 });
             }
         }
-        drop(line);
         scratch.hull = hull;
     }
 }

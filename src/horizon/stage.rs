@@ -111,12 +111,15 @@ pub struct HorizonReport {
 // ---------------------------------------------------------------------------------------------
 // Height tiles on demand
 
+type Cached = (Option<Arc<HeightTile>>, u64);
+
 /// Height tiles of one tileset, loaded once and shared by the contexts that need them.
 pub struct TileSource<'a> {
     dir: &'a Path,
     ts: &'a Tileset,
     pattern: String,
-    cache: Mutex<HashMap<TileId, (Option<Arc<HeightTile>>, u64)>>,
+    /// Loaded tiles (None: not in the tileset) and the context epoch that last used each.
+    cache: Mutex<HashMap<TileId, Cached>>,
     epoch: std::sync::atomic::AtomicU64,
 }
 
