@@ -365,6 +365,15 @@ impl Ray {
         (r * a - self.r0 * n) / (r * b)
     }
 
+    /// Slope of terrain of height `h` at distance `s` (as [`Ray::slope_at`]).
+    #[inline]
+    fn slope_of(&self, ctx: &Context, s: f64, h: f64) -> f64 {
+        let (a, b) = (self.a0 + s * self.a1, s * self.b1);
+        let n = (a * a + b * b).sqrt();
+        let r = ctx.radius_m + h;
+        (r * a - self.r0 * n) / (r * b)
+    }
+
     /// The largest slope over the continuous bilinear surface along the ray for s in
     /// (s_from, s_to], and where it is. Cell by cell: along the ray the bilinear height is a
     /// quadratic in s, so with the curvature drop the slope (A + B·s + C·s²)/(g·s) peaks
@@ -381,20 +390,15 @@ impl Ray {
             let dsx = next_crossing(x, self.cx);
             let dsy = next_crossing(y, self.cy);
             let s_next = (s + dsx.min(dsy)).min(s_to);
-            if s_next > s_from || s > s_from {
-                let sl = self.slope_at(ctx, s_next);
-                if sl > best {
-                    best = sl;
-                    at = s_next;
-                }
-            }
-            // The cell the segment lies in.
+            // The cell the segment lies in; a segment leaving the raster from its edge ends
+            // the search.
             let sm = 0.5 * (s + s_next);
+            let (xm, ym) = (self.x0 + sm * self.cx, self.y0 + sm * self.cy);
+            if !(xm >= 0.0 && ym >= 0.0 && xm <= w1 && ym <= h1) {
+                break;
+            }
             // Inside the raster, so ≥ 0: truncation is floor.
-            let (ix, iy) = (
-                ((self.x0 + sm * self.cx) as i64) as f64,
-                ((self.y0 + sm * self.cy) as i64) as f64,
-            );
+            let (ix, iy) = ((xm as i64) as f64, (ym as i64) as f64);
             let (xi, yi) = (ix as i64, iy as i64);
             let (h00, h10, h01, h11) = (
                 ctx.at(xi, yi) as f64,
@@ -403,19 +407,33 @@ impl Ray {
                 ctx.at(xi + 1, yi + 1) as f64,
             );
             if !(h00.is_nan() || h10.is_nan() || h01.is_nan() || h11.is_nan()) {
+                // Along the ray the cell's bilinear surface is h(s) = c0 + c1·s + c2·s².
                 let (a, b, c) = (h10 - h00, h01 - h00, h11 - h10 - h01 + h00);
                 let (ex, ey) = (self.x0 - ix, self.y0 - iy);
-                let ca = h00 + a * ex + b * ey + c * ex * ey - self.h0;
-                let cc = c * self.cx * self.cy - self.kappa;
+                let c0 = h00 + a * ex + b * ey + c * ex * ey;
+                let c1 = a * self.cx + b * self.cy + c * (ex * self.cy + ey * self.cx);
+                let c2 = c * self.cx * self.cy;
+                let mut try_at = |st: f64| {
+                    let sl = self.slope_of(ctx, st, c0 + st * (c1 + st * c2));
+                    if sl > best {
+                        best = sl;
+                        at = st;
+                    }
+                };
+                try_at(s_next);
+                let (ca, cc) = (c0 - self.h0, c2 - self.kappa);
                 if ca != 0.0 && cc != 0.0 && ca / cc > 0.0 {
                     let st = (ca / cc).sqrt();
                     if st > s && st < s_next && st > s_from {
-                        let sl = self.slope_at(ctx, st);
-                        if sl > best {
-                            best = sl;
-                            at = st;
-                        }
+                        try_at(st);
                     }
+                }
+            } else {
+                // No-data corners: the renormalised bilinear of the general path.
+                let sl = self.slope_at(ctx, s_next);
+                if sl > best {
+                    best = sl;
+                    at = s_next;
                 }
             }
             s = s_next;
@@ -1026,6 +1044,45 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod poly_check {
+    use super::*;
+
+    #[test]
+    fn cell_polynomial_equals_bilinear() {
+        let (w, h) = (32usize, 32usize);
+        let mut st = 99u64;
+        let heights: Vec<f32> = (0..w * h)
+            .map(|_| {
+                st ^= st << 13;
+                st ^= st >> 7;
+                st ^= st << 17;
+                ((st >> 11) as f64 / (1u64 << 53) as f64 * 500.0) as f32
+            })
+            .collect();
+        let s = (2.0f64 * 1_737_400.0 / 100.0).round();
+        let ctx = Context {
+            face: Face::Px,
+            face_pixels: s,
+            origin: ((s as i64 - 32) / 2, (s as i64 - 32) / 2),
+            width: w,
+            height: h,
+            heights,
+            radius_m: 1_737_400.0,
+        };
+        for k in 0..16 {
+            let phi = plane_azimuth(k, 16) + 0.1;
+            let ray = Ray::new(&ctx, 15, 16, phi.cos(), phi.sin());
+            let (e, at) = ray.max_over(&ctx, 0.5, 10.0, f64::NEG_INFINITY);
+            let direct = ray.slope_at(&ctx, at);
+            assert!(
+                (e - direct).abs() < 1e-9,
+                "k {k}: max_over {e} at {at}, slope_at there {direct}"
+            );
         }
     }
 }
