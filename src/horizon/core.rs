@@ -380,36 +380,43 @@ impl Ray {
     /// inside a cell only at s* = √(A/C); the crossings and s* are evaluated exactly.
     fn max_over(&self, ctx: &Context, s_from: f64, s_to: f64, floor: f64) -> (f64, f64) {
         let (mut best, mut at) = (floor, f64::NAN);
-        let mut s = s_from;
         let (w1, h1) = ((ctx.width - 1) as f64, (ctx.height - 1) as f64);
-        while s < s_to {
-            let (x, y) = (self.x0 + s * self.cx, self.y0 + s * self.cy);
-            if !(x >= 0.0 && y >= 0.0 && x <= w1 && y <= h1) {
-                break;
+        let (x, y) = (self.x0 + s_from * self.cx, self.y0 + s_from * self.cy);
+        if !(x >= 0.0 && y >= 0.0 && x <= w1 && y <= h1) || s_from >= s_to {
+            return (best, at);
+        }
+        // Cell walk (Amanatides–Woo): the cell the ray is in just after s_from, and the
+        // distances at which it next crosses a column and a row line.
+        let axis = |x: f64, d: f64| -> (i64, i64, f64, f64) {
+            // x ≥ 0: truncation is floor.
+            let fl = (x as i64) as f64;
+            if d > 1e-12 {
+                (fl as i64, 1, (fl + 1.0 - x) / d, 1.0 / d)
+            } else if d < -1e-12 {
+                let c = if fl == x { fl - 1.0 } else { fl };
+                (c as i64, -1, (x - c) / -d, -1.0 / d)
+            } else {
+                (fl as i64, 0, f64::INFINITY, f64::INFINITY)
             }
-            let dsx = next_crossing(x, self.cx);
-            let dsy = next_crossing(y, self.cy);
-            let s_next = (s + dsx.min(dsy)).min(s_to);
-            // The cell the segment lies in; a segment leaving the raster from its edge ends
-            // the search.
-            let sm = 0.5 * (s + s_next);
-            let (xm, ym) = (self.x0 + sm * self.cx, self.y0 + sm * self.cy);
-            if !(xm >= 0.0 && ym >= 0.0 && xm <= w1 && ym <= h1) {
-                break;
-            }
-            // Inside the raster, so ≥ 0: truncation is floor.
-            let (ix, iy) = ((xm as i64) as f64, (ym as i64) as f64);
-            let (xi, yi) = (ix as i64, iy as i64);
+        };
+        let (mut ix, sx, mut tx, dtx) = axis(x, self.cx);
+        let (mut iy, sy, mut ty, dty) = axis(y, self.cy);
+        tx += s_from;
+        ty += s_from;
+        let (nx, ny) = (ctx.width as i64, ctx.height as i64);
+        let mut s = s_from;
+        while s < s_to && ix >= 0 && iy >= 0 && ix < nx && iy < ny {
+            let s_next = tx.min(ty).min(s_to);
             let (h00, h10, h01, h11) = (
-                ctx.at(xi, yi) as f64,
-                ctx.at(xi + 1, yi) as f64,
-                ctx.at(xi, yi + 1) as f64,
-                ctx.at(xi + 1, yi + 1) as f64,
+                ctx.at(ix, iy) as f64,
+                ctx.at(ix + 1, iy) as f64,
+                ctx.at(ix, iy + 1) as f64,
+                ctx.at(ix + 1, iy + 1) as f64,
             );
             if !(h00.is_nan() || h10.is_nan() || h01.is_nan() || h11.is_nan()) {
                 // Along the ray the cell's bilinear surface is h(s) = c0 + c1·s + c2·s².
                 let (a, b, c) = (h10 - h00, h01 - h00, h11 - h10 - h01 + h00);
-                let (ex, ey) = (self.x0 - ix, self.y0 - iy);
+                let (ex, ey) = (self.x0 - ix as f64, self.y0 - iy as f64);
                 let c0 = h00 + a * ex + b * ey + c * ex * ey;
                 let c1 = a * self.cx + b * self.cy + c * (ex * self.cy + ey * self.cx);
                 let c2 = c * self.cx * self.cy;
@@ -424,12 +431,13 @@ impl Ray {
                 let (ca, cc) = (c0 - self.h0, c2 - self.kappa);
                 if ca != 0.0 && cc != 0.0 && ca / cc > 0.0 {
                     let st = (ca / cc).sqrt();
-                    if st > s && st < s_next && st > s_from {
+                    if st > s && st < s_next {
                         try_at(st);
                     }
                 }
             } else {
-                // No-data corners: the renormalised bilinear of the general path.
+                // No-data corners, or the raster's last row/column: the general bilinear
+                // (no-data taps left out, outside the raster none).
                 let sl = self.slope_at(ctx, s_next);
                 if sl > best {
                     best = sl;
@@ -437,6 +445,14 @@ impl Ray {
                 }
             }
             s = s_next;
+            if tx <= s {
+                ix += sx;
+                tx += dtx;
+            }
+            if ty <= s {
+                iy += sy;
+                ty += dty;
+            }
         }
         (best, at)
     }
@@ -450,22 +466,6 @@ fn ceil(x: f64) -> f64 {
         t + 1.0
     } else {
         t
-    }
-}
-
-/// Distance along a coordinate moving at `d` per unit s from `x` to the next integer (a tiny
-/// step past an exact integer).
-#[inline]
-fn next_crossing(x: f64, d: f64) -> f64 {
-    // x ≥ 0 (inside the raster): truncation is floor.
-    let fl = (x as i64) as f64;
-    if d > 1e-12 {
-        ((fl + 1.0 - x) / d).max(1e-9)
-    } else if d < -1e-12 {
-        let n = if fl == x { x - 1.0 } else { fl };
-        ((x - n) / -d).max(1e-9)
-    } else {
-        f64::INFINITY
     }
 }
 
