@@ -461,3 +461,42 @@ fn horizon_refuses_equal_angle_tilesets() {
     assert!(String::from_utf8_lossy(&e.stderr).contains("gnomonic"));
     assert!(!dir.path().join("horizon").exists());
 }
+
+#[test]
+fn bake_runs_the_horizon_stage_when_asked() {
+    use crate::util::penumbra_bin;
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("tiles");
+    let o = out.to_str().unwrap();
+    let r = json(
+        &penumbra_bin()
+            .args([
+                "bake",
+                "--out",
+                o,
+                "--scene-size",
+                "1024",
+                "--tile-size",
+                "64",
+                "--levels",
+                "3",
+                "--horizon-levels",
+                "0",
+                "--json",
+            ])
+            .output()
+            .unwrap(),
+    );
+    assert_eq!(r["stages"], serde_json::json!(["tile", "mip", "horizon"]));
+    assert_eq!(r["horizon"]["levels"], serde_json::json!([0]));
+    let written = r["horizon"]["tiles_written"].as_u64().unwrap();
+    assert!(written >= 1, "{r}");
+    // The distance bound came from the mipmaps' extrema: the manifest says so.
+    let ts = penumbra::manifest::Tileset::load(&out).unwrap();
+    let (m, h) = (ts.products.mip.unwrap(), ts.products.horizon.unwrap());
+    assert_eq!(
+        (h.terrain_min_m, h.terrain_max_m),
+        (m.global_min_m, m.global_max_m)
+    );
+    assert!(h.distances[0].needed_km > 10.0, "{:?}", h.distances);
+}
