@@ -181,6 +181,14 @@ impl Context {
     /// [`Context::slope0`] with cos φ and sin φ given.
     #[inline]
     pub fn slope0_cs(&self, x0: usize, y0: usize, cos: f64, sin: f64) -> f64 {
+        let h0 = self.at(x0 as i64, y0 as i64) as f64;
+        let g = self.metres_per_px(x0 as f64, y0 as f64, cos, sin, self.radius_m + h0);
+        self.slope0_g(x0, y0, cos, sin, g)
+    }
+
+    /// [`Context::slope0`] with the ground metres per plane pixel `g` along φ given.
+    #[inline]
+    fn slope0_g(&self, x0: usize, y0: usize, cos: f64, sin: f64, g: f64) -> f64 {
         let (cx, cy) = (cos, -sin);
         let (x, y) = (x0 as i64, y0 as i64);
         let h0 = self.at(x, y) as f64;
@@ -193,7 +201,7 @@ impl Context {
             let hy = self.at(x, y + cy.signum() as i64) as f64;
             dh += (hy - h0) * cy.abs();
         }
-        dh / self.metres_per_px(x0 as f64, y0 as f64, cos, sin, self.radius_m + h0)
+        dh / g
     }
 }
 
@@ -231,42 +239,56 @@ pub fn horizons(ctx: &Context, rect: Rect, a: usize, method: Method) -> Vec<f32>
         return out;
     }
     match method {
-        Method::Fast => out.par_chunks_mut(plane).enumerate().for_each_init(
-            || (vec![0.0f64; plane], vec![0.0f64; plane], Scratch::default()),
-            |(acc, acc_s, scratch), (k, dst)| {
-                let phi = plane_azimuth(k, a);
-                acc.iter_mut().for_each(|v| *v = f64::NEG_INFINITY);
-                sweep(ctx, rect, phi, acc, acc_s, scratch);
-                finish(ctx, rect, phi, acc, acc_s, dst);
-            },
-        ),
+        Method::Fast => {
+            let geo = pixel_geometry(ctx, rect);
+            out.par_chunks_mut(plane).enumerate().for_each_init(
+                || (vec![0.0f64; plane], vec![0.0f64; plane], Scratch::default()),
+                |(acc, acc_s, scratch), (k, dst)| {
+                    let phi = plane_azimuth(k, a);
+                    acc.iter_mut().for_each(|v| *v = f64::NEG_INFINITY);
+                    sweep(ctx, rect, phi, acc, acc_s, scratch);
+                    finish(ctx, rect, phi, &geo, acc, acc_s, dst);
+                },
+            )
+        }
         Method::Reference => {
             let hmax = ctx.max_height();
-            out.par_chunks_mut(plane)
-                .enumerate()
-                .for_each(|(k, dst)| reference(ctx, rect, plane_azimuth(k, a), hmax, 0.0, dst))
+            let geo = pixel_geometry(ctx, rect);
+            out.par_chunks_mut(plane).enumerate().for_each(|(k, dst)| {
+                reference(ctx, rect, plane_azimuth(k, a), hmax, 0.0, &geo, dst)
+            })
         }
     }
     out
 }
 
 /// The reference sampling every `step` plane pixels instead of the exact cell-by-cell search
-/// (tests: how far a sampled march is
-/// from the continuous answer).
+/// (tests: how far a sampled march is from the continuous answer).
 #[doc(hidden)]
 pub fn horizons_reference_step(ctx: &Context, rect: Rect, a: usize, step: f64) -> Vec<f32> {
     let plane = rect.w * rect.h;
     let mut out = vec![0.0f32; plane * a];
     let hmax = ctx.max_height();
+    let geo = pixel_geometry(ctx, rect);
     out.par_chunks_mut(plane)
         .enumerate()
-        .for_each(|(k, dst)| reference(ctx, rect, plane_azimuth(k, a), hmax, step, dst));
+        .for_each(|(k, dst)| reference(ctx, rect, plane_azimuth(k, a), hmax, step, &geo, dst));
     out
 }
 
-/// Elevations (degrees) from the blended line slopes and the zero-distance slope.
-fn finish(ctx: &Context, rect: Rect, phi: f64, acc: &[f64], acc_s: &[f64], dst: &mut [f32]) {
-    let (cos, sin) = (phi.cos(), phi.sin());
+/// Elevations (degrees) from the sweep's winners, the exact searches of each observer's own
+/// ray and the zero-distance slope.
+fn finish(
+    ctx: &Context,
+    rect: Rect,
+    phi: f64,
+    geo: &[PixelGeo],
+    acc: &[f64],
+    acc_s: &[f64],
+    dst: &mut [f32],
+) {
+    let az = Azimuth::new(ctx, phi);
+    let (cos, sin) = (az.cos, az.sin);
     for j in 0..rect.h {
         for i in 0..rect.w {
             let (x, y) = (rect.x0 + i, rect.y0 + j);
@@ -276,7 +298,7 @@ fn finish(ctx: &Context, rect: Rect, phi: f64, acc: &[f64], acc_s: &[f64], dst: 
                 dst[o] = f32::NAN;
                 continue;
             }
-            let ray = Ray::new(ctx, x, y, cos, sin);
+            let ray = Ray::from_parts(ctx, x, y, &geo[o], &az);
             // The sweep's winner, evaluated exactly: every value reported is then the
             // elevation of a real point of this ray (so fast ≤ reference).
             let mut t = if acc[o] > f64::NEG_INFINITY {
@@ -291,13 +313,62 @@ fn finish(ctx: &Context, rect: Rect, phi: f64, acc: &[f64], acc_s: &[f64], dst: 
                 let sw = acc_s[o];
                 t = t.max(ray.max_over(ctx, (sw - WINDOW).max(NEAR), sw + WINDOW, t).0);
             }
-            let s0 = ctx.slope0_cs(x, y, cos, sin);
+            let s0 = ctx.slope0_g(x, y, cos, sin, ray.r0 * ray.b1 / ray.a0);
             if s0 > t {
                 t = s0;
             }
             dst[o] = t.atan().to_degrees() as f32;
         }
     }
+}
+
+/// Per observer pixel: its unit direction and the length of its plane point.
+#[derive(Clone, Copy)]
+struct PixelGeo {
+    ph: Vec3,
+    n0: f64,
+}
+
+/// Per azimuth: cos φ, sin φ and the plane step per pixel w = (2/S)(cos φ·U + sin φ·V).
+struct Azimuth {
+    cos: f64,
+    sin: f64,
+    w: Vec3,
+    w2: f64,
+}
+
+impl Azimuth {
+    fn new(ctx: &Context, phi: f64) -> Azimuth {
+        let (cos, sin) = (phi.cos(), phi.sin());
+        let (_, u, v) = ctx.face.axes();
+        let k = 2.0 / ctx.face_pixels;
+        let w = [
+            k * (cos * u[0] + sin * v[0]),
+            k * (cos * u[1] + sin * v[1]),
+            k * (cos * u[2] + sin * v[2]),
+        ];
+        Azimuth {
+            cos,
+            sin,
+            w,
+            w2: dot(w, w),
+        }
+    }
+}
+
+fn pixel_geometry(ctx: &Context, rect: Rect) -> Vec<PixelGeo> {
+    let mut v = Vec::with_capacity(rect.w * rect.h);
+    for j in 0..rect.h {
+        for i in 0..rect.w {
+            let p = ctx.plane_point((rect.x0 + i) as f64, (rect.y0 + j) as f64);
+            let n0 = dot(p, p).sqrt();
+            v.push(PixelGeo {
+                ph: [p[0] / n0, p[1] / n0, p[2] / n0],
+                n0,
+            });
+        }
+    }
+    v
 }
 
 /// Distance (plane pixels) from the observer searched exactly by the fast method.
@@ -324,28 +395,28 @@ struct Ray {
 }
 
 impl Ray {
-    fn new(ctx: &Context, x: usize, y: usize, cos: f64, sin: f64) -> Ray {
+    /// The ray from pixel (x, y), whose unit direction `ph` and plane-point length `n0` are
+    /// given (they do not depend on the azimuth), along plane step `w` per pixel (which does
+    /// not depend on the pixel).
+    #[inline]
+    fn from_parts(ctx: &Context, x: usize, y: usize, g: &PixelGeo, az: &Azimuth) -> Ray {
         let h0 = ctx.at(x as i64, y as i64) as f64;
         let r0 = ctx.radius_m + h0;
-        let g = ctx.metres_per_px(x as f64, y as f64, cos, sin, r0);
-        let p0 = ctx.plane_point(x as f64, y as f64);
-        let p1 = ctx.plane_point(x as f64 + cos, y as f64 - sin);
-        let w = [p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]];
-        let n0 = dot(p0, p0).sqrt();
-        let ph = [p0[0] / n0, p0[1] / n0, p0[2] / n0];
-        let a1 = dot(w, ph);
-        let perp = [w[0] - a1 * ph[0], w[1] - a1 * ph[1], w[2] - a1 * ph[2]];
+        let a1 = dot(az.w, g.ph);
+        let b1 = (az.w2 - a1 * a1).max(0.0).sqrt();
+        // Ground metres per plane pixel at the observer: r0·dψ/ds = r0·b1/n0.
+        let gm = r0 * b1 / g.n0;
         Ray {
             x0: x as f64,
             y0: y as f64,
-            cx: cos,
-            cy: -sin,
+            cx: az.cos,
+            cy: -az.sin,
             h0,
             r0,
-            a0: n0,
+            a0: g.n0,
             a1,
-            b1: dot(perp, perp).sqrt(),
-            kappa: g * g / (2.0 * r0),
+            b1,
+            kappa: gm * gm / (2.0 * r0),
         }
     }
 
@@ -473,8 +544,17 @@ fn ceil(x: f64) -> f64 {
 /// straight plane line (a great circle), exact spherical geometry; with `step` = 0 the
 /// continuous bilinear surface cell by cell ([`Ray::max_over`]), else samples every `step`
 /// plane pixels. Stops where no terrain up to `hmax` could rise above the best so far.
-fn reference(ctx: &Context, rect: Rect, phi: f64, hmax: f32, step: f64, dst: &mut [f32]) {
-    let (cos, sin) = (phi.cos(), phi.sin());
+fn reference(
+    ctx: &Context,
+    rect: Rect,
+    phi: f64,
+    hmax: f32,
+    step: f64,
+    geo: &[PixelGeo],
+    dst: &mut [f32],
+) {
+    let az = Azimuth::new(ctx, phi);
+    let (cos, sin) = (az.cos, az.sin);
     let r_max = ctx.radius_m + hmax as f64;
     for j in 0..rect.h {
         for i in 0..rect.w {
@@ -484,7 +564,7 @@ fn reference(ctx: &Context, rect: Rect, phi: f64, hmax: f32, step: f64, dst: &mu
                 dst[o] = f32::NAN;
                 continue;
             }
-            let ray = Ray::new(ctx, x0, y0, cos, sin);
+            let ray = Ray::from_parts(ctx, x0, y0, &geo[o], &az);
             let s0 = ctx.slope0_cs(x0, y0, cos, sin);
             let mut best = if s0.is_nan() { f64::NEG_INFINITY } else { s0 };
             // Chunks of 8 pixels (or `step` samples), each preceded by the stopping test.
@@ -1076,7 +1156,16 @@ mod poly_check {
         };
         for k in 0..16 {
             let phi = plane_azimuth(k, 16) + 0.1;
-            let ray = Ray::new(&ctx, 15, 16, phi.cos(), phi.sin());
+            let geo = pixel_geometry(
+                &ctx,
+                Rect {
+                    x0: 15,
+                    y0: 16,
+                    w: 1,
+                    h: 1,
+                },
+            );
+            let ray = Ray::from_parts(&ctx, 15, 16, &geo[0], &Azimuth::new(&ctx, phi));
             let (e, at) = ray.max_over(&ctx, 0.5, 10.0, f64::NEG_INFINITY);
             let direct = ray.slope_at(&ctx, at);
             assert!(
