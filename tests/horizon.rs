@@ -3,49 +3,7 @@
 use penumbra::cube::Face;
 use penumbra::horizon::{self, Context, Method, Rect};
 
-use crate::util::shared_data;
-
-/// xorshift64*: deterministic and dependency-free.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
-/// Rough random terrain: a few octaves of value noise (bilinear between random lattices).
-fn rough(w: usize, h: usize, amp: f64, seed: u64) -> Vec<f32> {
-    let mut rng = Rng(seed | 1);
-    let mut out = vec![0.0f64; w * h];
-    let mut a = amp;
-    let mut cell = 64usize;
-    while cell >= 1 {
-        let (gw, gh) = (w / cell + 2, h / cell + 2);
-        let g: Vec<f64> = (0..gw * gh).map(|_| rng.unit() * 2.0 - 1.0).collect();
-        for y in 0..h {
-            for x in 0..w {
-                let (fx, fy) = (x as f64 / cell as f64, y as f64 / cell as f64);
-                let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
-                let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
-                let v = g[y0 * gw + x0] * (1.0 - tx) * (1.0 - ty)
-                    + g[y0 * gw + x0 + 1] * tx * (1.0 - ty)
-                    + g[(y0 + 1) * gw + x0] * (1.0 - tx) * ty
-                    + g[(y0 + 1) * gw + x0 + 1] * tx * ty;
-                out[y * w + x] += a * v;
-            }
-        }
-        a *= 0.5;
-        cell /= 2;
-    }
-    out.into_iter().map(|v| v as f32).collect()
-}
+use crate::util::{rough, shared_data};
 
 /// A raster of `w × h` pixels of `pixel_m` metres centred on face `face` of a body of radius
 /// `radius_m`, offset by `(dx, dy)` pixels from the face centre.
@@ -129,7 +87,14 @@ fn reference_is_the_continuous_maximum() {
     // Against a march sampling every 1/64 px the exact cell-by-cell search is never lower (it
     // is the maximum of the same continuous surface) and never much higher.
     let (w, h) = (96, 96);
-    let ctx = context(Face::Px, 1_737_400.0, 100.0, w, h, rough(w, h, 800.0, 3));
+    let ctx = context(
+        Face::Px,
+        1_737_400.0,
+        100.0,
+        w,
+        h,
+        rough(w, h, 800.0, (64, 1), 0.0, 3),
+    );
     let rect = Rect {
         x0: 40,
         y0: 40,
@@ -164,7 +129,14 @@ fn fast_on_rough_synthetic_terrain() {
     // 1-px value noise on top of larger octaves: rougher than any real DEM at its own
     // resolution, so looser bounds than the real-data acceptance.
     let (w, h) = (128, 128);
-    let ctx = context(Face::Px, 1_737_400.0, 100.0, w, h, rough(w, h, 800.0, 7));
+    let ctx = context(
+        Face::Px,
+        1_737_400.0,
+        100.0,
+        w,
+        h,
+        rough(w, h, 800.0, (64, 1), 0.0, 7),
+    );
     let (rms, max) = compare(
         &ctx,
         Rect {

@@ -8,6 +8,8 @@
 use penumbra::cube::{angle_between, dir_to_latlon, dir_to_uv_on, latlon_to_dir, Face, Vec3};
 use penumbra::horizon::{self, compass_azimuth_deg, plane_azimuth, Context, Method, Rect};
 
+use crate::util::rough;
+
 const MOON_R: f64 = 1_737_400.0;
 const MARS_R: f64 = 3_396_190.0;
 const METHODS: [Method; 2] = [Method::Fast, Method::Reference];
@@ -15,22 +17,6 @@ const METHODS: [Method; 2] = [Method::Fast, Method::Reference];
 // ------------------------------------------------------------------------------------------
 // Helpers
 // ------------------------------------------------------------------------------------------
-
-/// xorshift64*: deterministic and dependency-free.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    /// Uniform in [0, 1).
-    fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
 
 /// Pixels across a face whose centre pixel is `pixel_m` metres wide.
 fn face_pixels(radius_m: f64, pixel_m: f64) -> f64 {
@@ -171,36 +157,6 @@ fn max_pixel_m(ctx: &Context) -> f64 {
         }
     }
     m * ctx.radius_m
-}
-
-/// Rough random terrain: value noise octaves (bilinear between random lattices) plus white noise.
-fn rough(w: usize, h: usize, amp: f64, white: f64, seed: u64) -> Vec<f32> {
-    let mut rng = Rng(seed | 1);
-    let mut out = vec![0.0f64; w * h];
-    let mut a = amp;
-    let mut cell = 32usize;
-    while cell >= 2 {
-        let (gw, gh) = (w / cell + 2, h / cell + 2);
-        let g: Vec<f64> = (0..gw * gh).map(|_| rng.unit() * 2.0 - 1.0).collect();
-        for y in 0..h {
-            for x in 0..w {
-                let (fx, fy) = (x as f64 / cell as f64, y as f64 / cell as f64);
-                let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
-                let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
-                let v = g[y0 * gw + x0] * (1.0 - tx) * (1.0 - ty)
-                    + g[y0 * gw + x0 + 1] * tx * (1.0 - ty)
-                    + g[(y0 + 1) * gw + x0] * (1.0 - tx) * ty
-                    + g[(y0 + 1) * gw + x0 + 1] * tx * ty;
-                out[y * w + x] += a * v;
-            }
-        }
-        a *= 0.5;
-        cell /= 2;
-    }
-    for v in out.iter_mut() {
-        *v += white * (rng.unit() * 2.0 - 1.0);
-    }
-    out.into_iter().map(|v| v as f32).collect()
 }
 
 // ------------------------------------------------------------------------------------------
@@ -1211,7 +1167,7 @@ fn small_body_strong_dip_and_relief() {
 fn mars_case() -> (Context, Rect, Vec<f32>, Vec<f32>) {
     let n = 128usize;
     let s = face_pixels(MARS_R, 1000.0);
-    let noise = rough(n, n, 150.0, 20.0, 42);
+    let noise = rough(n, n, 150.0, (32, 2), 20.0, 42);
     let dome = (40.0f64, 64.0f64);
     let basin = (96.0f64, 64.0f64);
     let ctx = build(Face::Py, MARS_R, s, centred(s, n, n), n, n, |c, x, y| {
@@ -1530,7 +1486,7 @@ fn feature_at_359_5_seen_from_both_sides_of_the_seam() {
 #[test]
 fn deterministic_across_thread_counts() {
     let (w, h) = (72usize, 72usize);
-    let mut heights = rough(w, h, 600.0, 30.0, 99);
+    let mut heights = rough(w, h, 600.0, (32, 2), 30.0, 99);
     for y in 30..36 {
         for x in 20..31 {
             heights[y * w + x] = f32::NAN;

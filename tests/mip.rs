@@ -13,22 +13,7 @@ use penumbra::progress::NoProgress;
 use penumbra::tileio::{self, HeightTile};
 use penumbra::tiling::{tile_dem, TileOptions};
 
-use crate::util::{global_dem, penumbra_bin, shared_data, snapshot};
-
-/// xorshift64*: deterministic and dependency-free.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn unit(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-}
+use crate::util::{global_dem, penumbra_bin, shared_data, snapshot, Rng};
 
 fn same(a: f32, b: f32) -> bool {
     a == b || (a.is_nan() && b.is_nan())
@@ -148,21 +133,21 @@ fn terrain(kind: &str, s: usize, rng: &mut Rng) -> Vec<f32> {
             let (x, y) = (i as f32 / s as f32, j as f32 / s as f32);
             h[j * s + i] = match kind {
                 "constant" => 1234.5,
-                "smooth" => 2000.0 * (7.0 * x).sin() * (5.0 * y).cos() + 30.0 * rng.unit(),
-                "noise" => 20000.0 * (rng.unit() - 0.5),
+                "smooth" => 2000.0 * (7.0 * x).sin() * (5.0 * y).cos() + 30.0 * rng.unit_f32(),
+                "noise" => 20000.0 * (rng.unit_f32() - 0.5),
                 "spikes" => {
-                    if rng.unit() < 0.02 {
-                        9000.0 * (rng.unit() - 0.3)
+                    if rng.unit_f32() < 0.02 {
+                        9000.0 * (rng.unit_f32() - 0.3)
                     } else {
-                        -500.0 + 10.0 * rng.unit()
+                        -500.0 + 10.0 * rng.unit_f32()
                     }
                 }
                 "holes" => {
                     let hole = (x - 0.4).powi(2) + (y - 0.6).powi(2) < 0.05;
-                    if hole || rng.unit() < 0.1 {
+                    if hole || rng.unit_f32() < 0.1 {
                         f32::NAN
                     } else {
-                        -8000.0 + 29000.0 * rng.unit()
+                        -8000.0 + 29000.0 * rng.unit_f32()
                     }
                 }
                 "all-nan" => f32::NAN,
@@ -264,7 +249,7 @@ fn bad_buffers_are_refused() {
 fn f16_bounds_still_bound_the_f32_values() {
     let mut rng = Rng(42);
     let mut xs: Vec<f32> = (0..200_000)
-        .map(|_| (rng.unit() - 0.3) * 30000.0 * rng.unit().powi(3))
+        .map(|_| (rng.unit_f32() - 0.3) * 30000.0 * rng.unit_f32().powi(3))
         .collect();
     xs.extend([
         0.0, -0.0, 1e-9, -1e-9, 65504.0, 65505.0, 65520.0, 1e6, -1e6, 21229.0, -8068.0,

@@ -88,3 +88,64 @@ pub fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     }
     out
 }
+
+/// xorshift64*: deterministic and dependency-free.
+pub struct Rng(pub u64);
+
+impl Rng {
+    pub fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    /// Uniform in [0, 1), 53 bits.
+    pub fn unit(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    /// Uniform in [0, 1), 24 bits.
+    pub fn unit_f32(&mut self) -> f32 {
+        (self.next() >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+/// Rough random terrain, `w × h` row-major: octaves of value noise (bilinear between random
+/// lattices) from `cells.0`-px cells down to `cells.1`, amplitude `amp` halving per octave,
+/// plus white noise of ±`white` metres.
+pub fn rough(
+    w: usize,
+    h: usize,
+    amp: f64,
+    cells: (usize, usize),
+    white: f64,
+    seed: u64,
+) -> Vec<f32> {
+    let mut rng = Rng(seed | 1);
+    let mut out = vec![0.0f64; w * h];
+    let mut a = amp;
+    let mut cell = cells.0;
+    while cell >= cells.1.max(1) {
+        let (gw, gh) = (w / cell + 2, h / cell + 2);
+        let g: Vec<f64> = (0..gw * gh).map(|_| rng.unit() * 2.0 - 1.0).collect();
+        for y in 0..h {
+            for x in 0..w {
+                let (fx, fy) = (x as f64 / cell as f64, y as f64 / cell as f64);
+                let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
+                let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
+                let v = g[y0 * gw + x0] * (1.0 - tx) * (1.0 - ty)
+                    + g[y0 * gw + x0 + 1] * tx * (1.0 - ty)
+                    + g[(y0 + 1) * gw + x0] * (1.0 - tx) * ty
+                    + g[(y0 + 1) * gw + x0 + 1] * tx * ty;
+                out[y * w + x] += a * v;
+            }
+        }
+        a *= 0.5;
+        cell /= 2;
+    }
+    if white > 0.0 {
+        for v in out.iter_mut() {
+            *v += white * (rng.unit() * 2.0 - 1.0);
+        }
+    }
+    out.into_iter().map(|v| v as f32).collect()
+}
