@@ -3,7 +3,7 @@
 use penumbra::cube::Face;
 use penumbra::horizon::{self, Context, Method, Rect};
 
-use crate::util::{rough, shared_data};
+use crate::util::{diff_stats, rough, shared_data};
 
 /// A raster of `w × h` pixels of `pixel_m` metres centred on face `face` of a body of radius
 /// `radius_m`, offset by `(dx, dy)` pixels from the face centre.
@@ -25,20 +25,6 @@ fn context(
         heights,
         radius_m,
     }
-}
-
-fn stats(a: &[f32], b: &[f32]) -> (f64, f64, usize) {
-    let (mut ss, mut mx, mut n) = (0.0f64, 0.0f64, 0usize);
-    for (x, y) in a.iter().zip(b) {
-        if x.is_nan() || y.is_nan() {
-            continue;
-        }
-        let d = (*x as f64 - *y as f64).abs();
-        ss += d * d;
-        mx = mx.max(d);
-        n += 1;
-    }
-    ((ss / n.max(1) as f64).sqrt(), mx, n)
 }
 
 /// Heights of a whole DEM in `../shared/data` as a raster (row-major), or None (skip).
@@ -65,7 +51,7 @@ fn compare(ctx: &Context, rect: Rect, a: usize, label: &str) -> (f64, f64) {
         assert_eq!(f.is_nan(), r.is_nan());
         over = over.max(f - r);
     }
-    let (rms, max, n) = stats(&fast, &reference);
+    let (rms, max, n) = diff_stats(&fast, &reference);
     let worse = fast
         .iter()
         .zip(&reference)
@@ -108,8 +94,8 @@ fn reference_is_the_continuous_maximum() {
     for (e, d) in exact.iter().zip(&dense) {
         below = below.max(d - e);
     }
-    let (rms, max, _) = stats(&exact, &dense);
-    let (rms2, max2, _) = stats(&exact, &half);
+    let (rms, max, _) = diff_stats(&exact, &dense);
+    let (rms2, max2, _) = diff_stats(&exact, &half);
     eprintln!(
         "exact vs 1/64-px march: RMS {rms:.4}° max {max:.3}° (dense above exact by {below:.1e}°); \
          vs ½-px march: RMS {rms2:.3}° max {max2:.2}°"

@@ -8,7 +8,7 @@
 use penumbra::cube::{angle_between, dir_to_latlon, dir_to_uv_on, latlon_to_dir, Face, Vec3};
 use penumbra::horizon::{self, compass_azimuth_deg, plane_azimuth, Context, Method, Rect};
 
-use crate::util::rough;
+use crate::util::{diff_stats, rough};
 
 const MOON_R: f64 = 1_737_400.0;
 const MARS_R: f64 = 3_396_190.0;
@@ -128,22 +128,6 @@ fn reach(ctx: &Context, x0: usize, y0: usize, phi: f64) -> f64 {
     }
     let (x, y) = ray(x0, y0, phi, s);
     angle_between(ctx.dir(x0 as f64, y0 as f64), ctx.dir(x, y))
-}
-
-/// (rms, max, count) of |a − b| over the entries where both are numbers.
-fn stats(a: &[f32], b: &[f32]) -> (f64, f64, usize) {
-    assert_eq!(a.len(), b.len());
-    let (mut ss, mut mx, mut n) = (0.0f64, 0.0f64, 0usize);
-    for (x, y) in a.iter().zip(b) {
-        if x.is_nan() || y.is_nan() {
-            continue;
-        }
-        let d = (*x as f64 - *y as f64).abs();
-        ss += d * d;
-        mx = mx.max(d);
-        n += 1;
-    }
-    ((ss / n.max(1) as f64).sqrt(), mx, n)
 }
 
 /// Largest ground size (metres) of one raster pixel step along x or y anywhere in the raster.
@@ -496,7 +480,7 @@ fn check_smooth_vs_brute(label: &str, face: Face, s: f64, origin: (i64, i64)) ->
         }
     }
     let rms = (ss / cnt as f64).sqrt();
-    let (rms_f, max_f, nf) = stats(&fast, &reference);
+    let (rms_f, max_f, nf) = diff_stats(&fast, &reference);
     eprintln!(
         "smooth {label}: Δ {delta:.2} m, horizons {:.2}°..{:.2}°; reference vs 3D brute force: rms {rms:.4}° max {worst:.4}° (tol {tol:.3}°); one azimuth step off: max {wrong:.3}°; fast vs reference: rms {rms_f:.4}° max {max_f:.4}° over {nf}",
         span.0, span.1
@@ -1001,7 +985,7 @@ fn north_pole_smooth_fast_against_reference() {
     let a = 16;
     let fast = horizon::horizons(&ctx, rect, a, Method::Fast);
     let reference = horizon::horizons(&ctx, rect, a, Method::Reference);
-    let (rms, max, cnt) = stats(&fast, &reference);
+    let (rms, max, cnt) = diff_stats(&fast, &reference);
     let plane = rect.w * rect.h;
     let worst = (0..fast.len())
         .max_by(|&i, &j| {
@@ -1215,7 +1199,7 @@ fn mars_relief_finite_and_fast_rms() {
         fast.iter().chain(&reference).all(|v| v.is_finite()),
         "NaN or infinite horizon"
     );
-    let (rms, max, cnt) = stats(&fast, &reference);
+    let (rms, max, cnt) = diff_stats(&fast, &reference);
     eprintln!(
         "mars relief {lo:.0}..{hi:.0} m, reference horizons {emin:.2}°..{emax:.2}°: fast vs reference rms {rms:.4}° max {max:.4}° over {cnt}"
     );

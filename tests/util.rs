@@ -149,3 +149,19 @@ pub fn rough(
     }
     out.into_iter().map(|v| v as f32).collect()
 }
+
+/// (rms, max, count) of |a − b| over the entries where both are numbers.
+pub fn diff_stats(a: &[f32], b: &[f32]) -> (f64, f64, usize) {
+    assert_eq!(a.len(), b.len());
+    let (mut ss, mut mx, mut n) = (0.0f64, 0.0f64, 0usize);
+    for (x, y) in a.iter().zip(b) {
+        if x.is_nan() || y.is_nan() {
+            continue;
+        }
+        let d = (*x as f64 - *y as f64).abs();
+        ss += d * d;
+        mx = mx.max(d);
+        n += 1;
+    }
+    ((ss / n.max(1) as f64).sqrt(), mx, n)
+}

@@ -146,12 +146,6 @@ impl Context {
         }
     }
 
-    /// [`Context::bilinear64`] rounded to f32.
-    #[inline]
-    pub fn bilinear(&self, x: f64, y: f64) -> f32 {
-        self.bilinear64(x, y) as f32
-    }
-
     /// Largest height in the raster (NaN-free), or −∞ when it holds no terrain.
     pub fn max_height(&self) -> f32 {
         self.heights
@@ -159,34 +153,11 @@ impl Context {
             .fold(f32::NEG_INFINITY, |m, &v| if v > m { v } else { m })
     }
 
-    /// Ground metres per plane pixel along plane azimuth `phi` at raster pixel (x, y), at
-    /// radius `r`.
-    #[inline]
-    fn metres_per_px(&self, x: f64, y: f64, cos: f64, sin: f64, r: f64) -> f64 {
-        let (u, v) = self.uv(x, y);
-        let rho2 = 1.0 + u * u + v * v;
-        let wp = u * cos + v * sin;
-        r * (2.0 / self.face_pixels) * (1.0 - wp * wp / rho2).max(0.0).sqrt() / rho2.sqrt()
-    }
-
-    /// Slope (tan of elevation) of the terrain leaving pixel (x0, y0) along plane azimuth
-    /// `phi`, in the limit of zero distance: the one-sided directional derivative of the
-    /// bilinear surface at the pixel centre (the curvature drop vanishes there). NaN when a
-    /// needed neighbour has no data. Both methods include it, so a bare sphere reads 0 at h = 0.
-    #[inline]
-    pub fn slope0(&self, x0: usize, y0: usize, phi: f64) -> f64 {
-        self.slope0_cs(x0, y0, phi.cos(), phi.sin())
-    }
-
-    /// [`Context::slope0`] with cos φ and sin φ given.
-    #[inline]
-    pub fn slope0_cs(&self, x0: usize, y0: usize, cos: f64, sin: f64) -> f64 {
-        let h0 = self.at(x0 as i64, y0 as i64) as f64;
-        let g = self.metres_per_px(x0 as f64, y0 as f64, cos, sin, self.radius_m + h0);
-        self.slope0_g(x0, y0, cos, sin, g)
-    }
-
-    /// [`Context::slope0`] with the ground metres per plane pixel `g` along φ given.
+    /// Slope (tan of elevation) of the terrain leaving pixel (x0, y0) along plane azimuth φ,
+    /// in the limit of zero distance: the one-sided directional derivative of the bilinear
+    /// surface at the pixel centre (the curvature drop vanishes there), with `g` the ground
+    /// metres per plane pixel along φ. NaN when a needed neighbour has no data. Both methods
+    /// include it, so a bare sphere reads 0 at h = 0.
     #[inline]
     fn slope0_g(&self, x0: usize, y0: usize, cos: f64, sin: f64, g: f64) -> f64 {
         let (cx, cy) = (cos, -sin);
@@ -313,7 +284,7 @@ fn finish(
                 let sw = acc_s[o];
                 t = t.max(ray.max_over(ctx, (sw - WINDOW).max(NEAR), sw + WINDOW, t).0);
             }
-            let s0 = ctx.slope0_g(x, y, cos, sin, ray.r0 * ray.b1 / ray.a0);
+            let s0 = ctx.slope0_g(x, y, cos, sin, ray.ground_per_px());
             if s0 > t {
                 t = s0;
             }
@@ -404,7 +375,6 @@ impl Ray {
         let r0 = ctx.radius_m + h0;
         let a1 = dot(az.w, g.ph);
         let b1 = (az.w2 - a1 * a1).max(0.0).sqrt();
-        // Ground metres per plane pixel at the observer: r0·dψ/ds = r0·b1/n0.
         let gm = r0 * b1 / g.n0;
         Ray {
             x0: x as f64,
@@ -418,6 +388,12 @@ impl Ray {
             b1,
             kappa: gm * gm / (2.0 * r0),
         }
+    }
+
+    /// Ground metres per plane pixel along the ray at the observer: r0·dψ/ds = r0·b1/a0.
+    #[inline]
+    fn ground_per_px(&self) -> f64 {
+        self.r0 * self.b1 / self.a0
     }
 
     /// Slope (tan of elevation) of the terrain at distance `s`: bilinear height, exact
@@ -565,7 +541,7 @@ fn reference(
                 continue;
             }
             let ray = Ray::from_parts(ctx, x0, y0, &geo[o], &az);
-            let s0 = ctx.slope0_cs(x0, y0, cos, sin);
+            let s0 = ctx.slope0_g(x0, y0, cos, sin, ray.ground_per_px());
             let mut best = if s0.is_nan() { f64::NEG_INFINITY } else { s0 };
             // Chunks of 8 pixels (or `step` samples), each preceded by the stopping test.
             let chunk = if step > 0.0 { step } else { 8.0 };

@@ -198,9 +198,8 @@ impl<'a> TileSource<'a> {
 /// How far a tile's context reaches.
 #[derive(Clone, Copy, Debug, Serialize)]
 pub struct Reach {
-    /// Angular distance (rad) within which terrain could rise above some pixel's horizon.
-    pub needed_rad: f64,
-    /// Margin around the tile needed for it, and the margin used (capped), in pixels.
+    /// Margin around the tile holding everything within `reach_rad` of it, and the margin
+    /// used (capped by `--max-margin-px`), in pixels.
     pub needed_px: u64,
     pub margin_px: u64,
 }
@@ -295,7 +294,6 @@ fn margin_for(ts: &Tileset, id: TileId, rad: f64, cap: u64) -> Reach {
     }
     let needed = (need * 1.01 + 2.0).ceil() as u64;
     Reach {
-        needed_rad: rad,
         needed_px: needed,
         margin_px: needed.min(cap.max(1)),
     }
