@@ -3,6 +3,7 @@
 
 use rayon::prelude::*;
 
+use super::near;
 use crate::cube::{Face, Vec3};
 
 /// Heights on a rectangle of one face's *extended gnomonic plane* at one level's pixel spacing,
@@ -212,13 +213,26 @@ pub fn horizons(ctx: &Context, rect: Rect, a: usize, method: Method) -> Vec<f32>
     match method {
         Method::Fast => {
             let geo = pixel_geometry(ctx, rect);
+            let nodata = near::NoData::new(ctx);
             out.par_chunks_mut(plane).enumerate().for_each_init(
-                || (vec![0.0f64; plane], vec![0.0f64; plane], Scratch::default()),
-                |(acc, acc_s, scratch), (k, dst)| {
+                || FastBuffers::new(plane),
+                |b, (k, dst)| {
                     let phi = plane_azimuth(k, a);
-                    acc.iter_mut().for_each(|v| *v = f64::NEG_INFINITY);
-                    sweep(ctx, rect, phi, acc, acc_s, scratch);
-                    finish(ctx, rect, phi, &geo, acc, acc_s, dst);
+                    let az = Azimuth::new(ctx, phi);
+                    let walk = near::NearWalk::new(az.cos, -az.sin);
+                    near::near_field(ctx, rect, &az, &walk, &geo, &nodata, &mut b.ns, &mut b.near);
+                    b.acc.fill(f64::NEG_INFINITY);
+                    b.acc_s.fill(f64::NAN);
+                    sweep(
+                        ctx,
+                        rect,
+                        phi,
+                        &b.near,
+                        &mut b.acc,
+                        &mut b.acc_s,
+                        &mut b.sweep,
+                    );
+                    finish(ctx, rect, &az, &geo, &b.near, &b.acc, &b.acc_s, dst);
                 },
             )
         }
@@ -247,18 +261,49 @@ pub fn horizons_reference_step(ctx: &Context, rect: Rect, a: usize, step: f64) -
     out
 }
 
-/// Elevations (degrees) from the sweep's winners, the exact searches of each observer's own
-/// ray and the zero-distance slope.
+/// Per-thread buffers of the fast method, one azimuth at a time.
+struct FastBuffers {
+    /// Exact maximum slope within [`near::NEAR`] of each observer.
+    near: Vec<f64>,
+    /// The sweep's best slope per observer beyond that, and its distance (plane pixels).
+    acc: Vec<f64>,
+    acc_s: Vec<f64>,
+    sweep: Scratch,
+    ns: near::NearScratch,
+}
+
+impl FastBuffers {
+    fn new(plane: usize) -> FastBuffers {
+        FastBuffers {
+            near: vec![0.0; plane],
+            acc: vec![0.0; plane],
+            acc_s: vec![0.0; plane],
+            sweep: Scratch::default(),
+            ns: near::NearScratch::default(),
+        }
+    }
+}
+
+/// How far (in slope, tan of elevation) below an observer's best so far a line's estimate of a
+/// far candidate may lie and still be evaluated on the observer's own ray (≈ 1.7° at the
+/// horizontal). The lines pass up to ½ px beside the ray; beyond [`near::NEAR`] that moves an
+/// elevation by far less (docs/horizons.md).
+const SKIP: f64 = 0.03;
+
+/// Elevations (degrees) from the near field, the sweep's winners evaluated exactly on each
+/// observer's own ray, an exact search of that ray around the winner, and the zero-distance
+/// slope.
+#[allow(clippy::too_many_arguments)]
 fn finish(
     ctx: &Context,
     rect: Rect,
-    phi: f64,
+    az: &Azimuth,
     geo: &[PixelGeo],
+    near: &[f64],
     acc: &[f64],
     acc_s: &[f64],
     dst: &mut [f32],
 ) {
-    let az = Azimuth::new(ctx, phi);
     let (cos, sin) = (az.cos, az.sin);
     for j in 0..rect.h {
         for i in 0..rect.w {
@@ -269,20 +314,23 @@ fn finish(
                 dst[o] = f32::NAN;
                 continue;
             }
-            let ray = Ray::from_parts(ctx, x, y, &geo[o], &az);
-            // The sweep's winner, evaluated exactly: every value reported is then the
-            // elevation of a real point of this ray (so fast ≤ reference).
-            let mut t = if acc[o] > f64::NEG_INFINITY {
-                ray.slope_at(ctx, acc_s[o])
-            } else {
-                f64::NEG_INFINITY
-            };
-            // The lines pass up to a pixel from the observer: next to it, and around the
-            // sweep's winner, the observer's own ray is searched exactly.
-            t = t.max(ray.max_over(ctx, 0.0, NEAR, f64::NEG_INFINITY).0);
-            if acc[o] > f64::NEG_INFINITY {
-                let sw = acc_s[o];
-                t = t.max(ray.max_over(ctx, (sw - WINDOW).max(NEAR), sw + WINDOW, t).0);
+            let ray = Ray::from_parts(ctx, x, y, &geo[o], az);
+            let mut t = near[o];
+            let sw = acc_s[o];
+            if sw.is_finite() {
+                // The sweep's winner, evaluated exactly: every value reported is then the
+                // elevation of a real point of this ray (so fast ≤ reference).
+                t = t.max(ray.slope_at(ctx, sw));
+                // The lines pass up to ½ px beside the ray: around the winner (kept on the
+                // raster: a winner at the raster's edge may lie beyond where this ray leaves
+                // it) the ray is searched exactly, unless the near field is far ahead.
+                if acc[o] == f64::NEG_INFINITY || acc[o] >= t - SKIP {
+                    let c = sw.min(ray.exit(ctx));
+                    t = t.max(
+                        ray.max_over(ctx, (c - WINDOW).max(near::NEAR), c + WINDOW, t)
+                            .0,
+                    );
+                }
             }
             let s0 = ctx.slope0_g(x, y, cos, sin, ray.ground_per_px());
             if s0 > t {
@@ -295,13 +343,13 @@ fn finish(
 
 /// Per observer pixel: its unit direction and the length of its plane point.
 #[derive(Clone, Copy)]
-struct PixelGeo {
+pub(super) struct PixelGeo {
     ph: Vec3,
-    n0: f64,
+    pub(super) n0: f64,
 }
 
 /// Per azimuth: cos φ, sin φ and the plane step per pixel w = (2/S)(cos φ·U + sin φ·V).
-struct Azimuth {
+pub(super) struct Azimuth {
     cos: f64,
     sin: f64,
     w: Vec3,
@@ -309,7 +357,7 @@ struct Azimuth {
 }
 
 impl Azimuth {
-    fn new(ctx: &Context, phi: f64) -> Azimuth {
+    pub(super) fn new(ctx: &Context, phi: f64) -> Azimuth {
         let (cos, sin) = (phi.cos(), phi.sin());
         let (_, u, v) = ctx.face.axes();
         let k = 2.0 / ctx.face_pixels;
@@ -325,9 +373,17 @@ impl Azimuth {
             w2: dot(w, w),
         }
     }
+
+    /// The plane step per pixel split along the observer's direction and across it: the
+    /// plane point at distance s is (n0 + s·a1, s·b1) in the ray's great-circle plane.
+    #[inline]
+    pub(super) fn along(&self, g: &PixelGeo) -> (f64, f64) {
+        let a1 = dot(self.w, g.ph);
+        (a1, (self.w2 - a1 * a1).max(0.0).sqrt())
+    }
 }
 
-fn pixel_geometry(ctx: &Context, rect: Rect) -> Vec<PixelGeo> {
+pub(super) fn pixel_geometry(ctx: &Context, rect: Rect) -> Vec<PixelGeo> {
     let mut v = Vec::with_capacity(rect.w * rect.h);
     for j in 0..rect.h {
         for i in 0..rect.w {
@@ -342,14 +398,12 @@ fn pixel_geometry(ctx: &Context, rect: Rect) -> Vec<PixelGeo> {
     v
 }
 
-/// Distance (plane pixels) from the observer searched exactly by the fast method.
-const NEAR: f64 = 4.0;
 /// Half-width (plane pixels) of the window searched exactly around the sweep's winner.
 const WINDOW: f64 = 0.75;
 
 /// An observer's ray in a context raster: the plane line (x0, y0) + s·(cos φ, −sin φ), s in
 /// plane pixels, which is a great circle.
-struct Ray {
+pub(super) struct Ray {
     x0: f64,
     y0: f64,
     cx: f64,
@@ -370,11 +424,10 @@ impl Ray {
     /// given (they do not depend on the azimuth), along plane step `w` per pixel (which does
     /// not depend on the pixel).
     #[inline]
-    fn from_parts(ctx: &Context, x: usize, y: usize, g: &PixelGeo, az: &Azimuth) -> Ray {
+    pub(super) fn from_parts(ctx: &Context, x: usize, y: usize, g: &PixelGeo, az: &Azimuth) -> Ray {
         let h0 = ctx.at(x as i64, y as i64) as f64;
         let r0 = ctx.radius_m + h0;
-        let a1 = dot(az.w, g.ph);
-        let b1 = (az.w2 - a1 * a1).max(0.0).sqrt();
+        let (a1, b1) = az.along(g);
         let gm = r0 * b1 / g.n0;
         Ray {
             x0: x as f64,
@@ -388,6 +441,25 @@ impl Ray {
             b1,
             kappa: gm * gm / (2.0 * r0),
         }
+    }
+
+    /// Distance (plane pixels) at which the ray leaves the raster.
+    #[inline]
+    fn exit(&self, ctx: &Context) -> f64 {
+        let leave = |p: f64, d: f64, hi: f64| {
+            if d > 1e-12 {
+                (hi - p) / d
+            } else if d < -1e-12 {
+                p / -d
+            } else {
+                f64::INFINITY
+            }
+        };
+        leave(self.x0, self.cx, (ctx.width - 1) as f64).min(leave(
+            self.y0,
+            self.cy,
+            (ctx.height - 1) as f64,
+        ))
     }
 
     /// Ground metres per plane pixel along the ray at the observer: r0·dψ/ds = r0·b1/a0.
@@ -425,7 +497,7 @@ impl Ray {
     /// (s_from, s_to], and where it is. Cell by cell: along the ray the bilinear height is a
     /// quadratic in s, so with the curvature drop the slope (A + B·s + C·s²)/(g·s) peaks
     /// inside a cell only at s* = √(A/C); the crossings and s* are evaluated exactly.
-    fn max_over(&self, ctx: &Context, s_from: f64, s_to: f64, floor: f64) -> (f64, f64) {
+    pub(super) fn max_over(&self, ctx: &Context, s_from: f64, s_to: f64, floor: f64) -> (f64, f64) {
         let (mut best, mut at) = (floor, f64::NAN);
         let (w1, h1) = ((ctx.width - 1) as f64, (ctx.height - 1) as f64);
         let (x, y) = (self.x0 + s_from * self.cx, self.y0 + s_from * self.cy);
@@ -765,6 +837,7 @@ fn sweep(
     ctx: &Context,
     rect: Rect,
     phi: f64,
+    near: &[f64],
     acc: &mut [f64],
     acc_s: &mut [f64],
     scratch: &mut Scratch,
@@ -955,33 +1028,55 @@ fn sweep(
                     let Some(iv) = line.query(o, &mut fingers[side]) else {
                         continue;
                     };
-                    // The line only guides: the vertex and its hull neighbours are evaluated
-                    // on the observer's own ray at the same distance.
+                    let idx = (p - rp0) as usize * si + (q0 - rq0) as usize * sj;
+                    let dist = |v: &Pt| (v.p - p as f64) / dp;
+                    // The line only guides: where its best vertex, seen from the observer
+                    // placed on the line, could beat what the observer has, the vertex and its
+                    // hull neighbours are evaluated on the observer's own ray at the same
+                    // distance.
+                    if slope(o, line.pts[iv]) < acc[idx].max(near[idx]) - SKIP {
+                        continue;
+                    }
                     let hi = (iv + 1).min(line.pts.len() - 1);
                     let mut best: Option<Pt> = None;
                     for c in iv.saturating_sub(1)..=hi {
                         let v = line.pts[c];
-                        let qv = q0 as f64 + t * (v.p - p as f64);
-                        if !g.inside(v.p, qv) {
+                        let mut pv = v.p;
+                        let mut qv = q0 as f64 + t * (pv - p as f64);
+                        if !(qv >= 0.0 && qv <= (nq - 1) as f64) {
+                            // Beyond where the observer's ray leaves the raster (the line
+                            // runs on beside it): take that exit point instead.
+                            qv = if qv < 0.0 { 0.0 } else { (nq - 1) as f64 };
+                            pv = p as f64 + (qv - q0 as f64) / t;
+                        }
+                        if !g.inside(pv, qv) {
                             continue;
                         }
-                        let hv = g.bilinear(v.p, qv);
+                        let hv = g.bilinear(pv, qv);
                         if hv.is_nan() {
                             continue;
                         }
-                        let c = line.at_radius(v, radius + hv as f64);
+                        let c = if pv == v.p {
+                            line.at_radius(v, radius + hv as f64)
+                        } else {
+                            line.pos(pv, radius + hv as f64)
+                        };
                         if best.is_none_or(|b| cross(o, c, b) > 0.0) {
                             best = Some(c);
                         }
                     }
-                    if let Some(b) = best {
-                        let sl = slope(o, b);
-                        let idx = (p - rp0) as usize * si + (q0 - rq0) as usize * sj;
-                        if sl > acc[idx] {
-                            acc[idx] = sl;
-                            // Distance along the ray, plane pixels.
-                            acc_s[idx] = (b.p - p as f64) / dp;
+                    match best {
+                        Some(b) => {
+                            let sl = slope(o, b);
+                            if sl > acc[idx] {
+                                acc[idx] = sl;
+                                acc_s[idx] = dist(&b);
+                            }
                         }
+                        // The vertex lies off this observer's ray's part of the raster (at its
+                        // edge): finish searches around where the ray leaves the raster.
+                        None if acc_s[idx].is_nan() => acc_s[idx] = dist(&line.pts[iv]),
+                        None => {}
                     }
                 }
             }

@@ -8,6 +8,7 @@
 //! maps and answers point queries.
 
 mod core;
+mod near;
 mod stage;
 
 pub use self::core::{
