@@ -219,7 +219,7 @@ pub fn horizons(ctx: &Context, rect: Rect, a: usize, method: Method) -> Vec<f32>
                 |b, (k, dst)| {
                     let phi = plane_azimuth(k, a);
                     let az = Azimuth::new(ctx, phi);
-                    let walk = near::NearWalk::new(az.cos, -az.sin);
+                    let walk = near::NearWalk::new(&az);
                     near::near_field(ctx, rect, &az, &walk, &geo, &nodata, &mut b.ns, &mut b.near);
                     b.acc.fill(f64::NEG_INFINITY);
                     b.acc_s.fill(f64::NAN);
@@ -350,8 +350,8 @@ pub(super) struct PixelGeo {
 
 /// Per azimuth: cos φ, sin φ and the plane step per pixel w = (2/S)(cos φ·U + sin φ·V).
 pub(super) struct Azimuth {
-    cos: f64,
-    sin: f64,
+    pub(super) cos: f64,
+    pub(super) sin: f64,
     w: Vec3,
     w2: f64,
 }
@@ -753,17 +753,28 @@ impl Line<'_> {
 /// frame, looking against the sweep.
 #[inline]
 fn slope(o: Pt, q: Pt) -> f64 {
-    let (vx, vy) = (q.x - o.x, q.y - o.y);
-    let len = (o.x * o.x + o.y * o.y).sqrt();
-    let (ux, uy) = (o.x / len, o.y / len);
-    // Up = (ux, uy); horizontal towards the look direction (against the sweep) = (−uy, ux).
-    let up = vx * ux + vy * uy;
-    let hor = -vx * uy + vy * ux;
+    let (up, hor) = up_hor(o, q);
     if hor > 0.0 {
         up / hor
     } else {
         f64::NEG_INFINITY
     }
+}
+
+/// Whether `q` seen from `o` is at a slope below `thr` (no division).
+#[inline]
+fn below(o: Pt, q: Pt, thr: f64) -> bool {
+    let (up, hor) = up_hor(o, q);
+    !(hor > 0.0 && up >= thr * hor)
+}
+
+/// The offset from `o` to `q` along `o`'s up and along the horizontal towards the look
+/// direction (against the sweep), both scaled by |o| (their ratio is the slope).
+#[inline]
+fn up_hor(o: Pt, q: Pt) -> (f64, f64) {
+    let (vx, vy) = (q.x - o.x, q.y - o.y);
+    // Up ∝ (o.x, o.y); horizontal ∝ (−o.y, o.x).
+    (vx * o.x + vy * o.y, vy * o.x - vx * o.y)
 }
 
 /// Raster access in (major, minor) = (p, q) coordinates of one sweep.
@@ -829,10 +840,11 @@ impl Grid<'_> {
 /// The fast sweep for one plane azimuth: lines parallel to the look direction, one pixel apart
 /// along the minor axis, swept from the far end of the raster towards the observers, each
 /// keeping the upper convex hull of its profile (samples where it crosses pixel columns and
-/// rows — exact bilinear values — and the midpoints between). An observer asks the two lines
-/// that bracket it at its own column for the hull vertex it sees highest; that vertex and its
-/// hull neighbours are then evaluated on the observer's own ray at the same distance, and the
-/// highest wins. Writes the best slope per observer into `acc` (max).
+/// rows: exact bilinear values). An observer asks the two lines that bracket it at its own
+/// column for the hull vertex it sees highest; unless that is hopelessly below what the
+/// observer already has (`near`, earlier lines), the vertex and its hull neighbours are then
+/// evaluated on the observer's own ray at the same distance, and the highest wins. Writes the
+/// best slope per observer into `acc` (max) and its distance into `acc_s`.
 fn sweep(
     ctx: &Context,
     rect: Rect,
@@ -946,9 +958,6 @@ fn sweep(
         sc.h.clear();
         sc.marks.clear();
         let mut prev_y = f64::NAN;
-        // The last crossing: the bilinear surface is quadratic between two crossings, so the
-        // midpoint of each such segment is sampled too.
-        let mut last: Option<(f64, f64)> = None;
         let mut p = start;
         loop {
             let y = mf + t * p as f64;
@@ -960,12 +969,6 @@ fn sweep(
                 let kq = ceil(lo);
                 if kq > lo + 1e-6 && kq < hi - 1e-6 && kq >= 0.0 && kq <= (nq - 1) as f64 {
                     let pc = (kq - mf) / t;
-                    if let Some((lp, lq)) = last {
-                        let (mp, mq) = (0.5 * (lp + pc), 0.5 * (lq + kq));
-                        sc.p.push(mp);
-                        sc.h.push(g.bilinear(mp, mq));
-                    }
-                    last = Some((pc, kq));
                     sc.p.push(pc);
                     sc.h.push(g.bilinear(pc, kq));
                 }
@@ -975,16 +978,8 @@ fn sweep(
                 sc.marks.push((sc.p.len(), p, y));
             }
             if y >= 0.0 && y <= (nq - 1) as f64 {
-                if let Some((lp, lq)) = last {
-                    let (mp, mq) = (0.5 * (lp + p as f64), 0.5 * (lq + y));
-                    sc.p.push(mp);
-                    sc.h.push(g.bilinear(mp, mq));
-                }
-                last = Some((p as f64, y));
                 sc.p.push(p as f64);
                 sc.h.push(g.bilinear(p as f64, y));
-            } else {
-                last = None;
             }
             if p == stop {
                 break;
@@ -1034,7 +1029,7 @@ fn sweep(
                     // placed on the line, could beat what the observer has, the vertex and its
                     // hull neighbours are evaluated on the observer's own ray at the same
                     // distance.
-                    if slope(o, line.pts[iv]) < acc[idx].max(near[idx]) - SKIP {
+                    if below(o, line.pts[iv], acc[idx].max(near[idx]) - SKIP) {
                         continue;
                     }
                     let hi = (iv + 1).min(line.pts.len() - 1);
