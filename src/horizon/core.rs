@@ -160,7 +160,7 @@ impl Context {
     /// metres per plane pixel along φ. NaN when a needed neighbour has no data. Both methods
     /// include it, so a bare sphere reads 0 at h = 0.
     #[inline]
-    fn slope0_g(&self, x0: usize, y0: usize, cos: f64, sin: f64, g: f64) -> f64 {
+    pub(super) fn slope0_g(&self, x0: usize, y0: usize, cos: f64, sin: f64, g: f64) -> f64 {
         let (cx, cy) = (cos, -sin);
         let (x, y) = (x0 as i64, y0 as i64);
         let h0 = self.at(x, y) as f64;
@@ -464,7 +464,7 @@ impl Ray {
 
     /// Ground metres per plane pixel along the ray at the observer: r0·dψ/ds = r0·b1/a0.
     #[inline]
-    fn ground_per_px(&self) -> f64 {
+    pub(super) fn ground_per_px(&self) -> f64 {
         self.r0 * self.b1 / self.a0
     }
 

@@ -25,6 +25,10 @@ pub const PATTERN: &str = "horizon/{level}/{face}/{y}/{x}.exr";
 pub const PARTIAL: &str = ".penumbra-horizon-partial.json";
 /// Version of the horizon products' layout and convention (part of the run key).
 pub const FORMAT: &str = "penumbra-horizon-1";
+/// Revision of the algorithms' results (part of the run key: a rerun after a change that moves
+/// the values recomputes instead of keeping maps made the old way). 2: the fast method's exact
+/// near field reaches 24 px instead of 4, and far candidates at the raster's edge are clamped.
+const ALGORITHM: &str = "2";
 pub const AZIMUTH_CONVENTION: &str = "plane azimuth on the tile's cube face: counter-clockwise \
      from the face's +U axis towards +V, degrees; plane k = 360*k/A; compass azimuth differs per \
      pixel (docs/horizons.md)";
@@ -597,6 +601,7 @@ pub fn build_horizons(
         let mut h = blake3::Hasher::new();
         h.update(env!("CARGO_PKG_VERSION").as_bytes());
         h.update(FORMAT.as_bytes());
+        h.update(ALGORITHM.as_bytes());
         h.update(ts.run_key.as_bytes());
         h.update(height.path.as_bytes());
         h.update(serde_json::to_string(opts).unwrap_or_default().as_bytes());
