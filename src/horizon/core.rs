@@ -1,5 +1,6 @@
-//! The two horizon algorithms over a [`Context`] raster: the brute-force [`reference`] march and
-//! the per-azimuth upper-hull [`fast`] sweep. Conventions and error analysis: docs/horizons.md.
+//! The two horizon algorithms over a [`Context`] raster: the brute-force [`reference`] search
+//! and the fast method (exact near field in [`super::near`], per-azimuth upper-hull [`sweep`]
+//! beyond). Conventions and error analysis: docs/horizons.md.
 
 use rayon::prelude::*;
 
@@ -37,10 +38,12 @@ pub struct Rect {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Method {
-    /// Per-azimuth sweep of parallel great circles with an upper convex hull per line.
+    /// Each pixel's own ray searched exactly out to 24 px, beyond that a per-azimuth sweep of
+    /// parallel great circles with an upper convex hull per line.
     #[default]
     Fast,
-    /// Brute-force march from every pixel, ½-pixel steps, bilinear heights.
+    /// Brute force: each pixel's own ray walked cell by cell to the end of the context, the
+    /// maximum over the continuous bilinear surface.
     Reference,
 }
 

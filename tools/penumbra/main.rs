@@ -155,7 +155,8 @@ struct HorizonFlags {
     /// Azimuth samples per pixel (plane azimuths 360·k/A from the face's +U axis).
     #[arg(long, default_value_t = 360)]
     azimuths: usize,
-    /// fast (upper-hull sweep) or reference (brute-force march, ½-pixel steps).
+    /// fast (exact within 24 px, upper-hull sweep beyond) or reference (exact cell-by-cell
+    /// search of every pixel's ray; ≈ 35× slower).
     #[arg(long, default_value = "fast")]
     method: Method,
     /// Largest context margin around a tile, in pixels of its level.
