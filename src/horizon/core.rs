@@ -321,18 +321,19 @@ fn finish(
             let mut t = near[o];
             let sw = acc_s[o];
             if sw.is_finite() {
-                // The sweep's winner, evaluated exactly: every value reported is then the
-                // elevation of a real point of this ray (so fast ≤ reference).
-                t = t.max(ray.slope_at(ctx, sw));
-                // The lines pass up to ½ px beside the ray: around the winner (kept on the
-                // raster: a winner at the raster's edge may lie beyond where this ray leaves
-                // it) the ray is searched exactly, unless the near field is far ahead.
+                // Every value reported is the elevation of a real point of this ray, evaluated
+                // exactly (so fast ≤ reference). The lines pass up to ½ px beside the ray: around
+                // the sweep's winner (kept on the raster: a winner at the raster's edge may lie
+                // beyond where this ray leaves it) the ray is searched exactly, which includes
+                // the winner itself, unless the near field is far ahead; then the winner alone.
                 if acc[o] == f64::NEG_INFINITY || acc[o] >= t - SKIP {
                     let c = sw.min(ray.exit(ctx));
                     t = t.max(
                         ray.max_over(ctx, (c - WINDOW).max(near::NEAR), c + WINDOW, t)
                             .0,
                     );
+                } else {
+                    t = t.max(ray.slope_at(ctx, sw));
                 }
             }
             let s0 = ctx.slope0_g(x, y, cos, sin, ray.ground_per_px());
@@ -497,9 +498,10 @@ impl Ray {
     }
 
     /// The largest slope over the continuous bilinear surface along the ray for s in
-    /// (s_from, s_to], and where it is. Cell by cell: along the ray the bilinear height is a
-    /// quadratic in s, so with the curvature drop the slope (A + B·s + C·s²)/(g·s) peaks
-    /// inside a cell only at s* = √(A/C); the crossings and s* are evaluated exactly.
+    /// [s_from, s_to] (s = 0 itself left out), and where it is. Cell by cell: along the ray
+    /// the bilinear height is a quadratic in s, so with the curvature drop the slope
+    /// (A + B·s + C·s²)/(g·s) peaks inside a cell only at s* = √(A/C); the interval's start,
+    /// the crossings and s* are evaluated exactly.
     pub(super) fn max_over(&self, ctx: &Context, s_from: f64, s_to: f64, floor: f64) -> (f64, f64) {
         let (mut best, mut at) = (floor, f64::NAN);
         let (w1, h1) = ((ctx.width - 1) as f64, (ctx.height - 1) as f64);
@@ -526,6 +528,15 @@ impl Ray {
         tx += s_from;
         ty += s_from;
         let (nx, ny) = (ctx.width as i64, ctx.height as i64);
+        // The walk evaluates where the ray leaves each cell; inside the first cell the slope may
+        // peak where the interval starts (a window around a sweep winner begins mid-cell).
+        if s_from > 0.0 {
+            let sl = self.slope_at(ctx, s_from);
+            if sl > best {
+                best = sl;
+                at = s_from;
+            }
+        }
         let mut s = s_from;
         while s < s_to && ix >= 0 && iy >= 0 && ix < nx && iy < ny {
             let s_next = tx.min(ty).min(s_to);
