@@ -509,24 +509,8 @@ impl Ray {
         if !(x >= 0.0 && y >= 0.0 && x <= w1 && y <= h1) || s_from >= s_to {
             return (best, at);
         }
-        // Cell walk (Amanatides–Woo): the cell the ray is in just after s_from, and the
-        // distances at which it next crosses a column and a row line.
-        let axis = |x: f64, d: f64| -> (i64, i64, f64, f64) {
-            // x ≥ 0: truncation is floor.
-            let fl = (x as i64) as f64;
-            if d > 1e-12 {
-                (fl as i64, 1, (fl + 1.0 - x) / d, 1.0 / d)
-            } else if d < -1e-12 {
-                let c = if fl == x { fl - 1.0 } else { fl };
-                (c as i64, -1, (x - c) / -d, -1.0 / d)
-            } else {
-                (fl as i64, 0, f64::INFINITY, f64::INFINITY)
-            }
-        };
-        let (mut ix, sx, mut tx, dtx) = axis(x, self.cx);
-        let (mut iy, sy, mut ty, dty) = axis(y, self.cy);
-        tx += s_from;
-        ty += s_from;
+        let mut ax = Axis::new(x, self.cx, s_from);
+        let mut ay = Axis::new(y, self.cy, s_from);
         let (nx, ny) = (ctx.width as i64, ctx.height as i64);
         // The walk evaluates where the ray leaves each cell; inside the first cell the slope may
         // peak where the interval starts (a window around a sweep winner begins mid-cell).
@@ -538,8 +522,9 @@ impl Ray {
             }
         }
         let mut s = s_from;
-        while s < s_to && ix >= 0 && iy >= 0 && ix < nx && iy < ny {
-            let s_next = tx.min(ty).min(s_to);
+        while s < s_to && ax.i >= 0 && ay.i >= 0 && ax.i < nx && ay.i < ny {
+            let (ix, iy) = (ax.i, ay.i);
+            let s_next = ax.next.min(ay.next).min(s_to);
             let (h00, h10, h01, h11) = (
                 ctx.at(ix, iy) as f64,
                 ctx.at(ix + 1, iy) as f64,
@@ -578,16 +563,52 @@ impl Ray {
                 }
             }
             s = s_next;
-            if tx <= s {
-                ix += sx;
-                tx += dtx;
-            }
-            if ty <= s {
-                iy += sy;
-                ty += dty;
-            }
+            ax.advance(s);
+            ay.advance(s);
         }
         (best, at)
+    }
+}
+
+/// One axis of an Amanatides–Woo cell walk along a ray: the cell index, its step (±1, 0) and
+/// the distances (along the ray) of the next grid-line crossing and between crossings.
+pub(super) struct Axis {
+    pub(super) i: i64,
+    step: i64,
+    pub(super) next: f64,
+    delta: f64,
+}
+
+impl Axis {
+    /// At coordinate `x` ≥ 0, reached at distance `s0`, moving `d` per unit distance: the cell
+    /// the ray is in just after (leaving a grid line backwards, the cell below it).
+    #[inline]
+    pub(super) fn new(x: f64, d: f64, s0: f64) -> Axis {
+        // x ≥ 0: truncation is floor.
+        let fl = (x as i64) as f64;
+        let (i, step, next, delta) = if d > 1e-12 {
+            (fl as i64, 1, (fl + 1.0 - x) / d, 1.0 / d)
+        } else if d < -1e-12 {
+            let c = if fl == x { fl - 1.0 } else { fl };
+            (c as i64, -1, (x - c) / -d, -1.0 / d)
+        } else {
+            (fl as i64, 0, f64::INFINITY, f64::INFINITY)
+        };
+        Axis {
+            i,
+            step,
+            next: next + s0,
+            delta,
+        }
+    }
+
+    /// Steps into the next cell when the walk has reached this axis' crossing.
+    #[inline]
+    pub(super) fn advance(&mut self, s: f64) {
+        if self.next <= s {
+            self.i += self.step;
+            self.next += self.delta;
+        }
     }
 }
 

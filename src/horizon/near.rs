@@ -15,7 +15,7 @@
 //! ulp of a 1 km height over one pixel, and far below what an f16 map stores. Observers whose
 //! walk would leave the raster or touch no-data are handed to that f64 search instead.
 
-use super::core::{Azimuth, Context, PixelGeo, Ray, Rect};
+use super::core::{Axis, Azimuth, Context, PixelGeo, Ray, Rect};
 
 /// Distance (plane pixels) from the observer that the fast method searches exactly. Within it
 /// the sweep's lines, up to ½ px beside the observer's own ray, see terrain at a visibly
@@ -45,23 +45,14 @@ impl NearWalk {
     /// The walk along `az`'s raster direction (cos φ, −sin φ).
     pub(super) fn new(az: &Azimuth) -> NearWalk {
         let (cx, cy) = (az.cos, -az.sin);
-        // As Ray::max_over's cell walk, from a grid point: leaving it along −x the ray is in
-        // the cell to the left.
-        let axis = |d: f64| -> (i64, i64, f64, f64) {
-            if d > 1e-12 {
-                (0, 1, 1.0 / d, 1.0 / d)
-            } else if d < -1e-12 {
-                (-1, -1, -1.0 / d, -1.0 / d)
-            } else {
-                (0, 0, f64::INFINITY, f64::INFINITY)
-            }
-        };
-        let (mut ix, sx, mut tx, dtx) = axis(cx);
-        let (mut iy, sy, mut ty, dty) = axis(cy);
+        // Ray::max_over's cell walk, from a grid point.
+        let mut ax = Axis::new(0.0, cx, 0.0);
+        let mut ay = Axis::new(0.0, cy, 0.0);
         let mut segs = Vec::new();
         let mut s = 0.0f64;
         while s < NEAR {
-            let s_next = tx.min(ty).min(NEAR);
+            let s_next = ax.next.min(ay.next).min(NEAR);
+            let (ix, iy) = (ax.i, ay.i);
             // Where the ray enters the cell, in the cell's own coordinates ∈ [0, 1].
             let fx0 = (s * cx - ix as f64).clamp(0.0, 1.0);
             let fy0 = (s * cy - iy as f64).clamp(0.0, 1.0);
@@ -85,14 +76,8 @@ impl NearWalk {
                 w: w.map(|r| r.map(|v| v as f32)),
             });
             s = s_next;
-            if tx <= s {
-                ix += sx;
-                tx += dtx;
-            }
-            if ty <= s {
-                iy += sy;
-                ty += dty;
-            }
+            ax.advance(s);
+            ay.advance(s);
         }
         let bbox = segs
             .iter()
