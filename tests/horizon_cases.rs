@@ -12,6 +12,7 @@ use crate::util::{diff_stats, rough};
 
 const MOON_R: f64 = 1_737_400.0;
 const MARS_R: f64 = 3_396_190.0;
+const EARTH_R: f64 = 6_371_008.8;
 const METHODS: [Method; 2] = [Method::Fast, Method::Reference];
 
 // ------------------------------------------------------------------------------------------
@@ -1631,4 +1632,38 @@ fn raster_edge_horizon_fast() {
     }
     eprintln!("raster edge, fast: max shortfall below the exit point {short:.2e}°, max excess {over:.2e}°; {} azimuths out of bounds: {}", bad.len(), bad.join("; "));
     assert!(bad.is_empty());
+}
+
+#[test]
+fn summit_sees_a_wall_at_the_raster_edge() {
+    // An observer on a sharp summit (flanks falling 1:1) looks down at a 1-px wall along the
+    // raster's border, which is its horizon in every direction. The sweep's lines run up to
+    // ½ px beside the observer's own ray, so where a ray leaves the raster through a side the
+    // line's vertex can lie beyond the ray's exit: the candidate must be taken at the exit.
+    let (w, h, a) = (160usize, 150usize, 360usize);
+    let s = face_pixels(EARTH_R, 30.0);
+    let (cx, cy) = (77.0, 71.0);
+    let ctx = build(Face::Px, EARTH_R, s, centred(s, w, h), w, h, |_, x, y| {
+        if x == 0 || y == 0 || x == w - 1 || y == h - 1 {
+            2000.0
+        } else {
+            let d = 30.0 * ((x as f64 - cx).powi(2) + (y as f64 - cy).powi(2)).sqrt();
+            (3000.0 - d).max(0.0)
+        }
+    });
+    let rect = Rect {
+        x0: 77,
+        y0: 71,
+        w: 1,
+        h: 1,
+    };
+    let fast = horizon::horizons(&ctx, rect, a, Method::Fast);
+    let reference = horizon::horizons(&ctx, rect, a, Method::Reference);
+    let mut worst = 0.0f32;
+    for (f, r) in fast.iter().zip(&reference) {
+        // The wall, 2.1–3.2 km away and 1 km below, is the horizon: −17° to −25°.
+        assert!((-26.0..-16.0).contains(r), "reference {r}");
+        worst = worst.max((f - r).abs());
+    }
+    assert!(worst < 0.01, "fast differs from reference by {worst}°");
 }
