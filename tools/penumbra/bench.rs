@@ -60,6 +60,10 @@ pub enum BenchCommand {
         /// Random observer pixels for the reference (deterministic).
         #[arg(long, default_value_t = 1024)]
         ref_pixels: usize,
+        /// The shared real DEMs: a block at the centre of Gale crater and of Hawaiʻi is
+        /// checked against the exact reference too (skipped when absent).
+        #[arg(long, default_value = "../shared/data")]
+        data: PathBuf,
         #[arg(long)]
         markdown: bool,
         #[arg(long)]
@@ -283,9 +287,12 @@ pub fn run(cmd: BenchCommand, quiet: bool) -> Result<()> {
             azimuths,
             size,
             ref_pixels,
+            data,
             markdown,
             json,
-        } => run_horizon(&peers, azimuths, size, ref_pixels, markdown, json, quiet),
+        } => run_horizon(
+            &peers, &data, azimuths, size, ref_pixels, markdown, json, quiet,
+        ),
     }
 }
 
@@ -917,6 +924,106 @@ struct HzMars {
 }
 
 /// Fast − reference over `pix` (both laid out pixel-major, `a` values per pixel).
+/// Fast against the exact reference on a block at the centre of each shared real DEM the
+/// horizon tests use (rows appended to `accuracy`); returns notes (what was run or skipped).
+fn hz_real_dems(
+    data: &Path,
+    threads: usize,
+    accuracy: &mut Vec<HzAccuracy>,
+    say: &dyn Fn(String),
+) -> Result<Vec<String>> {
+    use penumbra::horizon::{horizons, Context as HzContext, Method, Rect};
+    const BLOCK: usize = 256;
+    const AZ: usize = 36;
+    // Pixel sizes and radii as in tests/horizon.rs.
+    let dems = [
+        (
+            "Gale crater (MOLA 463 m)",
+            "mola_gale_128ppd_crop/gale-mola.bin",
+            MARS_RADIUS_M,
+            463.0,
+        ),
+        (
+            "Hawaiʻi (SRTM3 92 m)",
+            "srtm3/N19W156.hgt",
+            EARTH_RADIUS_M,
+            92.0,
+        ),
+    ];
+    let mut notes = Vec::new();
+    for (label, rel, radius_m, pixel_m) in dems {
+        let path = data.join(rel);
+        if !path.exists() {
+            notes.push(format!("{label}: {} not found, skipped.", path.display()));
+            continue;
+        }
+        let dem = penumbra::dem::open(&path, 64)?;
+        let (w, h) = (dem.width(), dem.height());
+        if w < BLOCK || h < BLOCK {
+            notes.push(format!(
+                "{label}: {w}×{h} is smaller than the {BLOCK}² block, skipped."
+            ));
+            continue;
+        }
+        let mut heights = vec![0.0f32; w * h];
+        for r in 0..h {
+            for c in 0..w {
+                heights[r * w + c] = dem.value(c, r).0;
+            }
+        }
+        let s = (2.0 * radius_m / pixel_m).round();
+        let si = s as i64;
+        let ctx = HzContext {
+            face: penumbra::cube::Face::Px,
+            face_pixels: s,
+            origin: ((si - w as i64) / 2, (si - h as i64) / 2),
+            width: w,
+            height: h,
+            heights,
+            radius_m,
+        };
+        let rect = Rect {
+            x0: (w - BLOCK) / 2,
+            y0: (h - BLOCK) / 2,
+            w: BLOCK,
+            h: BLOCK,
+        };
+        say(format!(
+            "{label}: {BLOCK}² block, {AZ} azimuths, fast and reference"
+        ));
+        let fast = in_pool(threads, || horizons(&ctx, rect, AZ, Method::Fast))?;
+        let reference = in_pool(threads, || horizons(&ctx, rect, AZ, Method::Reference))?;
+        // Plane-major (azimuth, pixel) to pixel-major, as hz_accuracy reads them.
+        let plane = BLOCK * BLOCK;
+        let by_pixel = |v: &[f32]| -> Vec<f32> {
+            (0..plane)
+                .flat_map(|p| (0..AZ).map(move |k| v[k * plane + p]))
+                .collect()
+        };
+        let pix: Vec<(usize, usize)> = (0..plane)
+            .map(|p| (rect.x0 + p % BLOCK, rect.y0 + p / BLOCK))
+            .collect();
+        accuracy.push(hz_accuracy(
+            &format!(
+                "fast − reference, {label}, {BLOCK}² block at the DEM's centre, {AZ} azimuths"
+            ),
+            &by_pixel(&fast),
+            &by_pixel(&reference),
+            &pix,
+            AZ,
+        ));
+        notes.push(format!(
+            "{label}: {} ({w}×{h}) as a patch at the centre of face +X (R = {radius_m} m, \
+             {pixel_m} m pixels); observers the {BLOCK}² block from pixel ({}, {}), the whole DEM \
+             as context.",
+            path.display(),
+            rect.x0,
+            rect.y0
+        ));
+    }
+    Ok(notes)
+}
+
 fn hz_accuracy(
     comparison: &str,
     fast: &[f32],
@@ -1054,8 +1161,10 @@ fn load_average() -> String {
         .unwrap_or_else(|| "?".into())
 }
 
+#[allow(clippy::too_many_arguments)]
 fn run_horizon(
     peers: &Path,
+    data: &Path,
     a: usize,
     size: usize,
     ref_pixels: usize,
@@ -1319,7 +1428,7 @@ fn run_horizon(
             .collect()
     };
     let inner_pix: Vec<(usize, usize)> = inner.iter().map(|&i| pix[i]).collect();
-    let accuracy = vec![
+    let mut accuracy = vec![
         hz_accuracy("fast − reference", &fast_at, &ref_at, &pix, a),
         hz_accuracy(
             &format!("fast − reference, pixels ≥ {EDGE} px from the edges"),
@@ -1331,6 +1440,7 @@ fn run_horizon(
         hz_accuracy("fast − ½-px march", &fast_at[..nf], &fine_at, fine, a),
         hz_accuracy("½-px march − reference", &fine_at, &ref_at[..nf], fine, a),
     ];
+    let dem_notes = hz_real_dems(data, threads, &mut accuracy, &say)?;
 
     // 4. Peers.
     let tsv = peers.join("results.tsv");
@@ -1414,6 +1524,7 @@ fn run_horizon(
             raw_h * factor
         ),
     ];
+    notes.extend(dem_notes);
     // Per-observer cost ≈ α + β·ℓ, ℓ = swept line length per observer relative to the
     // whole-DEM run (1 there; (tile + look-side margin)/tile for a tile inside its context).
     let l_centre = (centre.w as f64 + 3.0 * w as f64 / 8.0) / centre.w as f64;
