@@ -150,6 +150,10 @@ pub struct HorizonProduct {
     pub layout: String,
     /// `fast` or `reference`.
     pub method: String,
+    /// The fast method's exact near field (plane pixels); absent for the reference and in
+    /// tilesets made before it was recorded (4 px then).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub near_px: Option<f64>,
     /// Tile levels that have horizon maps.
     pub levels: Vec<u8>,
     /// Lowest and highest terrain of the body used to bound the distance searched (m).

@@ -135,6 +135,29 @@ fn fast_on_rough_synthetic_terrain() {
         "rough",
     );
     assert!(rms <= 0.2 && max <= 4.0, "rms {rms} max {max}");
+
+    // The near field trades time for accuracy: with none the fast method rests on the sweep's
+    // lines alone, with a wide one it is the reference out to there; both stay ≤ reference.
+    let block = Rect {
+        x0: 50,
+        y0: 50,
+        w: 20,
+        h: 20,
+    };
+    let reference = horizon::horizons(&ctx, block, 36, Method::Reference);
+    let mut rms_by = Vec::new();
+    for near_px in [0.0, 8.0, 64.0] {
+        let fast = horizon::horizons_with(&ctx, block, 36, Method::Fast, near_px);
+        for (f, r) in fast.iter().zip(&reference) {
+            assert!(
+                *f <= r + 1e-3,
+                "near {near_px}: fast {f} above reference {r}"
+            );
+        }
+        rms_by.push(diff_stats(&fast, &reference).0);
+    }
+    eprintln!("rough: RMS with near field 0 / 8 / 64 px: {rms_by:?}");
+    assert!(rms_by[0] > rms_by[1] && rms_by[1] > rms_by[2], "{rms_by:?}");
 }
 
 /// The acceptance on a real DEM read as a raster: fast within RMS 0.05°, max 0.5° of the
@@ -369,6 +392,21 @@ fn cli_horizon_and_query_horizon() {
     // Bad requests: exit 2, a reason, nothing written.
     for (args, says) in [
         (vec!["horizon", o, "--azimuths", "2"], "outside 4..=4096"),
+        (vec!["horizon", o, "--near-px=-1"], "outside 0..=1024"),
+        (
+            vec![
+                "query",
+                "horizon",
+                o,
+                "--lat",
+                "0",
+                "--lon",
+                "0",
+                "--near-px",
+                "2000",
+            ],
+            "outside 0..=1024",
+        ),
         (vec!["horizon", o, "--levels", "7"], "does not exist"),
         (
             vec!["horizon", o, "--levels", "1", "--max-output-gib", "0.001"],

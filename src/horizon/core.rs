@@ -207,7 +207,25 @@ fn dot(a: Vec3, b: Vec3) -> f64 {
 /// elevation angles in degrees (row-major), plane k at plane azimuth 2πk/a. NaN where the
 /// observer has no data; −90 where nothing at all lies in a direction.
 pub fn horizons(ctx: &Context, rect: Rect, a: usize, method: Method) -> Vec<f32> {
+    horizons_with(ctx, rect, a, method, near::DEFAULT_NEAR_PX)
+}
+
+/// [`horizons`] with the fast method's exact near field reaching `near_px` plane pixels
+/// (0..=[`near::MAX_NEAR_PX`]; the reference ignores it): larger is slower and closer to the
+/// reference.
+pub fn horizons_with(
+    ctx: &Context,
+    rect: Rect,
+    a: usize,
+    method: Method,
+    near_px: f64,
+) -> Vec<f32> {
     assert!(rect.x0 + rect.w <= ctx.width && rect.y0 + rect.h <= ctx.height);
+    assert!(
+        (0.0..=near::MAX_NEAR_PX).contains(&near_px),
+        "near field of {near_px} px outside 0..={}",
+        near::MAX_NEAR_PX
+    );
     let plane = rect.w * rect.h;
     let mut out = vec![0.0f32; plane * a];
     if plane == 0 {
@@ -222,7 +240,7 @@ pub fn horizons(ctx: &Context, rect: Rect, a: usize, method: Method) -> Vec<f32>
                 |b, (k, dst)| {
                     let phi = plane_azimuth(k, a);
                     let az = Azimuth::new(ctx, phi);
-                    let walk = near::NearWalk::new(&az);
+                    let walk = near::NearWalk::new(&az, near_px);
                     near::near_field(ctx, rect, &az, &walk, &geo, &nodata, &mut b.ns, &mut b.near);
                     b.acc.fill(f64::NEG_INFINITY);
                     b.acc_s.fill(f64::NAN);
@@ -235,7 +253,9 @@ pub fn horizons(ctx: &Context, rect: Rect, a: usize, method: Method) -> Vec<f32>
                         &mut b.acc_s,
                         &mut b.sweep,
                     );
-                    finish(ctx, rect, &az, &geo, &b.near, &b.acc, &b.acc_s, dst);
+                    finish(
+                        ctx, rect, &az, near_px, &geo, &b.near, &b.acc, &b.acc_s, dst,
+                    );
                 },
             )
         }
@@ -266,7 +286,7 @@ pub fn horizons_reference_step(ctx: &Context, rect: Rect, a: usize, step: f64) -
 
 /// Per-thread buffers of the fast method, one azimuth at a time.
 struct FastBuffers {
-    /// Exact maximum slope within [`near::NEAR`] of each observer.
+    /// Exact maximum slope within the near field of each observer.
     near: Vec<f64>,
     /// The sweep's best slope per observer beyond that, and its distance (plane pixels).
     acc: Vec<f64>,
@@ -289,7 +309,7 @@ impl FastBuffers {
 
 /// How far (in slope, tan of elevation) below an observer's best so far a line's estimate of a
 /// far candidate may lie and still be evaluated on the observer's own ray (≈ 1.7° at the
-/// horizontal). The lines pass up to ½ px beside the ray; beyond [`near::NEAR`] that moves an
+/// horizontal). The lines pass up to ½ px beside the ray; beyond the near field that moves an
 /// elevation by far less (docs/horizons.md).
 const SKIP: f64 = 0.03;
 
@@ -301,6 +321,7 @@ fn finish(
     ctx: &Context,
     rect: Rect,
     az: &Azimuth,
+    near_px: f64,
     geo: &[PixelGeo],
     near: &[f64],
     acc: &[f64],
@@ -329,7 +350,7 @@ fn finish(
                 if acc[o] == f64::NEG_INFINITY || acc[o] >= t - SKIP {
                     let c = sw.min(ray.exit(ctx));
                     t = t.max(
-                        ray.max_over(ctx, (c - WINDOW).max(near::NEAR), c + WINDOW, t)
+                        ray.max_over(ctx, (c - WINDOW).max(near_px), c + WINDOW, t)
                             .0,
                     );
                 } else {

@@ -12,8 +12,10 @@ mod near;
 mod stage;
 
 pub use self::core::{
-    compass_azimuth_deg, horizons, horizons_reference_step, plane_azimuth, Context, Method, Rect,
+    compass_azimuth_deg, horizons, horizons_reference_step, horizons_with, plane_azimuth, Context,
+    Method, Rect,
 };
+pub use self::near::{DEFAULT_NEAR_PX, MAX_NEAR_PX};
 pub use self::stage::{
     build_horizons, context_for, query, reach_rad, read_horizon_exr, terrain_range, tile_path,
     write_horizon_exr, HorizonAnswer, HorizonOptions, HorizonPrecision, HorizonReport, Reach,

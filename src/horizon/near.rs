@@ -1,5 +1,6 @@
 //! The fast method's near field: the exact maximum over the continuous bilinear surface along
-//! each observer's own ray out to [`NEAR`] plane pixels, for a whole row of observers at once.
+//! each observer's own ray out to a few tens of plane pixels ([`DEFAULT_NEAR_PX`]), for a whole
+//! row of observers at once.
 //!
 //! Pixel centres are grid points of the raster and every observer's ray has the same raster
 //! direction (cos φ, −sin φ), so the cells a ray crosses, in offsets from its observer, and the
@@ -17,10 +18,13 @@
 
 use super::core::{Axis, Azimuth, Context, PixelGeo, Ray, Rect};
 
-/// Distance (plane pixels) from the observer that the fast method searches exactly. Within it
-/// the sweep's lines, up to ½ px beside the observer's own ray, see terrain at a visibly
-/// different angle (docs/horizons.md, "Error analysis").
-pub(super) const NEAR: f64 = 24.0;
+/// Default distance (plane pixels) from the observer that the fast method searches exactly.
+/// Within it the sweep's lines, up to ½ px beside the observer's own ray, see terrain at a
+/// visibly different angle (docs/horizons.md, accuracy; `penumbra bench horizon` measures
+/// error against run time for other values).
+pub const DEFAULT_NEAR_PX: f64 = 24.0;
+/// The largest near field accepted.
+pub const MAX_NEAR_PX: f64 = 1024.0;
 
 /// One cell of the walk: its offset from the observer, the distances (plane pixels) at which the
 /// ray enters and leaves it, and the weights that give the height along it from the cell's
@@ -34,24 +38,25 @@ struct Seg {
     w: [[f32; 4]; 3],
 }
 
-/// The walk out to [`NEAR`] from any grid point along one azimuth.
+/// The walk out to `near` plane pixels from any grid point along one azimuth.
 pub(super) struct NearWalk {
+    pub(super) near: f64,
     segs: Vec<Seg>,
     /// The pixels the walk's cells touch, as offsets from the observer: [x0, x1) × [y0, y1).
     bbox: [i64; 4],
 }
 
 impl NearWalk {
-    /// The walk along `az`'s raster direction (cos φ, −sin φ).
-    pub(super) fn new(az: &Azimuth) -> NearWalk {
+    /// The walk along `az`'s raster direction (cos φ, −sin φ), out to `near` plane pixels.
+    pub(super) fn new(az: &Azimuth, near: f64) -> NearWalk {
         let (cx, cy) = (az.cos, -az.sin);
         // Ray::max_over's cell walk, from a grid point.
         let mut ax = Axis::new(0.0, cx, 0.0);
         let mut ay = Axis::new(0.0, cy, 0.0);
         let mut segs = Vec::new();
         let mut s = 0.0f64;
-        while s < NEAR {
-            let s_next = ax.next.min(ay.next).min(NEAR);
+        while s < near {
+            let s_next = ax.next.min(ay.next).min(near);
             let (ix, iy) = (ax.i, ay.i);
             // Where the ray enters the cell, in the cell's own coordinates ∈ [0, 1].
             let fx0 = (s * cx - ix as f64).clamp(0.0, 1.0);
@@ -79,17 +84,16 @@ impl NearWalk {
             ax.advance(s);
             ay.advance(s);
         }
-        let bbox = segs
-            .iter()
-            .fold([i64::MAX, i64::MIN, i64::MAX, i64::MIN], |b, sg| {
-                [
-                    b[0].min(sg.dx),
-                    b[1].max(sg.dx + 2),
-                    b[2].min(sg.dy),
-                    b[3].max(sg.dy + 2),
-                ]
-            });
-        NearWalk { segs, bbox }
+        // The observer's own pixel at least (a walk of length 0 has no cells).
+        let bbox = segs.iter().fold([0, 1, 0, 1], |b, sg| {
+            [
+                b[0].min(sg.dx),
+                b[1].max(sg.dx + 2),
+                b[2].min(sg.dy),
+                b[3].max(sg.dy + 2),
+            ]
+        });
+        NearWalk { near, segs, bbox }
     }
 }
 
@@ -141,7 +145,7 @@ pub(super) struct NearScratch {
     best: Vec<f32>,
 }
 
-/// The largest slope (tan of elevation) over (0, NEAR] of every observer of `rect` along
+/// The largest slope (tan of elevation) over (0, walk.near] of every observer of `rect` along
 /// azimuth `az`, written to `out` (row-major over `rect`); −∞ for no-data observers.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn near_field(
@@ -165,7 +169,7 @@ pub(super) fn near_field(
                     f64::NEG_INFINITY
                 } else {
                     Ray::from_parts(ctx, x, y, &geo[o], az)
-                        .max_over(ctx, 0.0, NEAR, f64::NEG_INFINITY)
+                        .max_over(ctx, 0.0, walk.near, f64::NEG_INFINITY)
                         .0
                 };
                 i += 1;
@@ -346,7 +350,7 @@ mod tests {
     #[test]
     fn row_kernel_equals_the_f64_cell_walk() {
         // Earth-like at 30 m near the face centre; the Moon at 7.6 km pixels near a face
-        // corner (strong gnomonic distortion, ψ up to 0.1 rad within NEAR); a 10 km body.
+        // corner (strong gnomonic distortion, ψ up to 0.1 rad within the near field); a 10 km body.
         let cases = [
             (424_734.0, (212_000, 212_000), 6_371_008.8),
             (256.0, (180, 190), 1_737_400.0),
@@ -369,7 +373,7 @@ mod tests {
             let mut kernel = 0usize;
             for k in 0..a {
                 let az = Azimuth::new(&ctx, plane_azimuth(k, a));
-                let walk = NearWalk::new(&az);
+                let walk = NearWalk::new(&az, DEFAULT_NEAR_PX);
                 near_field(&ctx, rect, &az, &walk, &geo, &nodata, &mut sc, &mut got);
                 for y in 0..rect.h {
                     for x in 0..rect.w {
@@ -383,7 +387,10 @@ mod tests {
                         // Both with the zero-distance limit, as the fast method reports them
                         // (the f64 walk may also catch that limit a hair past the observer).
                         let s0 = ctx.slope0_g(x, y, az.cos, az.sin, ray.ground_per_px());
-                        let want = ray.max_over(&ctx, 0.0, NEAR, f64::NEG_INFINITY).0.max(s0);
+                        let want = ray
+                            .max_over(&ctx, 0.0, DEFAULT_NEAR_PX, f64::NEG_INFINITY)
+                            .0
+                            .max(s0);
                         let d = (got[o].max(s0).atan() - want.atan()).to_degrees().abs();
                         // f32 heights: an ulp of a 1 km height over a 30 m pixel is 1e-4°.
                         assert!(
@@ -413,7 +420,7 @@ mod tests {
         };
         let geo = pixel_geometry(&ctx, rect);
         let az = Azimuth::new(&ctx, 0.7);
-        let walk = NearWalk::new(&az);
+        let walk = NearWalk::new(&az, DEFAULT_NEAR_PX);
         let mut sc = NearScratch::default();
         // Row 40, from x = 20: clean of holes and edges for this walk.
         let (y, x0, n) = (40usize, 20usize, 24usize);

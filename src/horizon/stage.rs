@@ -11,7 +11,8 @@ use exr::prelude::*;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::core::{compass_azimuth_deg, horizons, plane_azimuth, Context, Method, Rect};
+use super::core::{compass_azimuth_deg, horizons_with, plane_azimuth, Context, Method, Rect};
+use super::near::{DEFAULT_NEAR_PX, MAX_NEAR_PX};
 use crate::cube::{Face, Projection};
 use crate::error::{Error, IoContext, Result};
 use crate::layout::TileId;
@@ -81,6 +82,8 @@ pub struct HorizonOptions {
     pub max_margin_px: u64,
     /// Refuse a run whose raw maps would exceed this many GiB (uncompressed).
     pub max_output_gib: f64,
+    /// The fast method's exact near field, plane pixels (0..=MAX_NEAR_PX).
+    pub near_px: f64,
 }
 
 impl Default for HorizonOptions {
@@ -93,6 +96,7 @@ impl Default for HorizonOptions {
             compression: TileCompression::Zip,
             max_margin_px: 4096,
             max_output_gib: 8.0,
+            near_px: DEFAULT_NEAR_PX,
         }
     }
 }
@@ -536,9 +540,16 @@ fn check_layout(dir: &Path, ts: &Tileset) -> Result<()> {
     Ok(())
 }
 
-fn check_azimuths(a: usize) -> Result<()> {
+fn check_options(opts: &HorizonOptions) -> Result<()> {
+    let a = opts.azimuths;
     if !(4..=4096).contains(&a) {
         return Err(Error::usage(format!("--azimuths {a} is outside 4..=4096")));
+    }
+    if !(0.0..=MAX_NEAR_PX).contains(&opts.near_px) {
+        return Err(Error::usage(format!(
+            "--near-px {} is outside 0..={MAX_NEAR_PX}",
+            opts.near_px
+        )));
     }
     Ok(())
 }
@@ -552,7 +563,7 @@ pub fn build_horizons(
     let mut ts = Tileset::load(dir)?;
     let manifest_path = dir.join(manifest::MANIFEST);
     check_layout(dir, &ts)?;
-    check_azimuths(opts.azimuths)?;
+    check_options(opts)?;
     let height = ts.products.height.clone().ok_or_else(|| {
         Error::invalid(
             &manifest_path,
@@ -681,7 +692,7 @@ pub fn build_horizons(
             let (ctx, rect) = context_for(&src, id, reach.margin_px, cover)?;
             src.next_context(1 << 30);
             pixaz += (n * n * opts.azimuths) as u64;
-            horizons(&ctx, rect, opts.azimuths, opts.method)
+            horizons_with(&ctx, rect, opts.azimuths, opts.method, opts.near_px)
         } else {
             vec![f32::NAN; n * n * opts.azimuths]
         };
@@ -715,6 +726,7 @@ pub fn build_horizons(
         azimuth: AZIMUTH_CONVENTION.into(),
         layout: LAYOUT.into(),
         method: opts.method.name().into(),
+        near_px: (opts.method == Method::Fast).then_some(opts.near_px),
         levels: done_levels,
         terrain_min_m: tmin,
         terrain_max_m: tmax,
@@ -789,12 +801,11 @@ pub fn query(
     lat: f64,
     lon: f64,
     level: Option<u8>,
-    method: Method,
-    azimuths: usize,
-    max_margin_px: u64,
+    opts: &HorizonOptions,
 ) -> Result<HorizonAnswer> {
+    let (method, azimuths) = (opts.method, opts.azimuths);
     query::check_latlon(lat, lon)?;
-    check_azimuths(azimuths)?;
+    check_options(opts)?;
     let ts = Tileset::load(dir)?;
     check_layout(dir, &ts)?;
     let level = query::pick_level(&ts, level)?;
@@ -822,9 +833,13 @@ pub fn query(
              it has no horizon"
         )));
     }
-    // Stored maps of the same method and azimuth count.
+    // Stored maps of the same method, azimuth count and (fast) near field.
+    let near = (method == Method::Fast).then_some(opts.near_px);
     let stored = ts.products.horizon.as_ref().filter(|p| {
-        p.azimuths == azimuths && p.method == method.name() && p.levels.contains(&level)
+        p.azimuths == azimuths
+            && p.method == method.name()
+            && p.near_px == near
+            && p.levels.contains(&level)
     });
     let (elev, source, margin, needed) = match stored {
         Some(_) => {
@@ -847,7 +862,7 @@ pub fn query(
             })?;
             let top = interior_max(&t, h, n).unwrap_or(height);
             let rad = reach_rad(ts.body.radius_m, tmin, tmax, top as f64);
-            let reach = margin_for(&ts, tile, rad, max_margin_px);
+            let reach = margin_for(&ts, tile, rad, opts.max_margin_px);
             let cover = coverage_box(&ts, level, tile.face);
             let (ctx, rect) = context_for(&src, tile, reach.margin_px, cover)?;
             let one = Rect {
@@ -857,7 +872,7 @@ pub fn query(
                 h: 1,
             };
             (
-                horizons(&ctx, one, azimuths, method),
+                horizons_with(&ctx, one, azimuths, method, opts.near_px),
                 "computed",
                 reach.margin_px,
                 reach.needed_px,

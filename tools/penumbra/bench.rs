@@ -924,17 +924,34 @@ struct HzMars {
 }
 
 /// Fast − reference over `pix` (both laid out pixel-major, `a` values per pixel).
+/// One near-field size of the fast method on one real-DEM block: time and error.
+#[derive(Serialize)]
+struct HzNear {
+    dem: String,
+    near_px: f64,
+    wall_s: f64,
+    core_ns_per_px_az: f64,
+    rms_deg: f64,
+    max_abs_deg: f64,
+    share_over_0_5_deg: f64,
+}
+
 /// Fast against the exact reference on a block at the centre of each shared real DEM the
-/// horizon tests use (rows appended to `accuracy`); returns notes (what was run or skipped).
+/// horizon tests use (the default near field's row appended to `accuracy`, every near-field
+/// size's time and error to `near`); returns notes (what was run or skipped).
 fn hz_real_dems(
     data: &Path,
     threads: usize,
     accuracy: &mut Vec<HzAccuracy>,
+    near: &mut Vec<HzNear>,
     say: &dyn Fn(String),
 ) -> Result<Vec<String>> {
-    use penumbra::horizon::{horizons, Context as HzContext, Method, Rect};
+    use penumbra::horizon::DEFAULT_NEAR_PX;
+    use penumbra::horizon::{horizons, horizons_with, Context as HzContext, Method, Rect};
+    use std::time::Instant;
     const BLOCK: usize = 256;
     const AZ: usize = 36;
+    const NEAR_PX: [f64; 7] = [0.0, 4.0, 8.0, 16.0, 24.0, 32.0, 48.0];
     // Pixel sizes and radii as in tests/horizon.rs.
     let dems = [
         (
@@ -989,9 +1006,9 @@ fn hz_real_dems(
             h: BLOCK,
         };
         say(format!(
-            "{label}: {BLOCK}² block, {AZ} azimuths, fast and reference"
+            "{label}: {BLOCK}² block, {AZ} azimuths, reference and fast at {} near-field sizes",
+            NEAR_PX.len()
         ));
-        let fast = in_pool(threads, || horizons(&ctx, rect, AZ, Method::Fast))?;
         let reference = in_pool(threads, || horizons(&ctx, rect, AZ, Method::Reference))?;
         // Plane-major (azimuth, pixel) to pixel-major, as hz_accuracy reads them.
         let plane = BLOCK * BLOCK;
@@ -1003,15 +1020,35 @@ fn hz_real_dems(
         let pix: Vec<(usize, usize)> = (0..plane)
             .map(|p| (rect.x0 + p % BLOCK, rect.y0 + p / BLOCK))
             .collect();
-        accuracy.push(hz_accuracy(
-            &format!(
-                "fast − reference, {label}, {BLOCK}² block at the DEM's centre, {AZ} azimuths"
-            ),
-            &by_pixel(&fast),
-            &by_pixel(&reference),
-            &pix,
-            AZ,
-        ));
+        let reference = by_pixel(&reference);
+        for near_px in NEAR_PX {
+            let (t, fast) = in_pool(threads, || {
+                let t0 = Instant::now();
+                let out = horizons_with(&ctx, rect, AZ, Method::Fast, near_px);
+                (t0.elapsed().as_secs_f64(), out)
+            })?;
+            let acc = hz_accuracy(
+                &format!(
+                    "fast − reference, {label}, {BLOCK}² block at the DEM's centre, {AZ} azimuths"
+                ),
+                &by_pixel(&fast),
+                &reference,
+                &pix,
+                AZ,
+            );
+            near.push(HzNear {
+                dem: label.to_string(),
+                near_px,
+                wall_s: t,
+                core_ns_per_px_az: t * threads as f64 / (plane * AZ) as f64 * 1e9,
+                rms_deg: acc.rms_deg,
+                max_abs_deg: acc.max_abs_deg,
+                share_over_0_5_deg: acc.share_over_0_5_deg,
+            });
+            if near_px == DEFAULT_NEAR_PX {
+                accuracy.push(acc);
+            }
+        }
         notes.push(format!(
             "{label}: {} ({w}×{h}) as a patch at the centre of face +X (R = {radius_m} m, \
              {pixel_m} m pixels); observers the {BLOCK}² block from pixel ({}, {}), the whole DEM \
@@ -1440,7 +1477,8 @@ fn run_horizon(
         hz_accuracy("fast − ½-px march", &fast_at[..nf], &fine_at, fine, a),
         hz_accuracy("½-px march − reference", &fine_at, &ref_at[..nf], fine, a),
     ];
-    let dem_notes = hz_real_dems(data, threads, &mut accuracy, &say)?;
+    let mut near = Vec::new();
+    let dem_notes = hz_real_dems(data, threads, &mut accuracy, &mut near, &say)?;
 
     // 4. Peers.
     let tsv = peers.join("results.tsv");
@@ -1556,18 +1594,23 @@ fn run_horizon(
             "fast_identical_across_threads": identical,
             "rows": rows,
             "accuracy": accuracy,
+            "near_field": near,
             "peers": peer_rows,
             "mars": mars,
             "notes": notes,
         }));
     }
-    print_horizon(&rows, &accuracy, &peer_rows, &mars, &notes, a, markdown);
+    print_horizon(
+        &rows, &accuracy, &near, &peer_rows, &mars, &notes, a, markdown,
+    );
     Ok(())
 }
 
+#[allow(clippy::too_many_arguments)]
 fn print_horizon(
     rows: &[HzRow],
     accuracy: &[HzAccuracy],
+    near: &[HzNear],
     peers: &[HzPeer],
     mars: &HzMars,
     notes: &[String],
@@ -1651,6 +1694,38 @@ fn print_horizon(
         }
     }
     println!();
+    if !near.is_empty() {
+        if markdown {
+            println!("| fast method on | near field px | wall s | core-ns per px·az | RMS Δ ° | max abs Δ ° | share abs Δ > 0.5° |");
+            println!("|---|---:|---:|---:|---:|---:|---:|");
+        }
+        for r in near {
+            if markdown {
+                println!(
+                    "| {} | {} | {:.2} | {:.1} | {:.4} | {:.3} | {:.3}% |",
+                    r.dem,
+                    r.near_px,
+                    r.wall_s,
+                    r.core_ns_per_px_az,
+                    r.rms_deg,
+                    r.max_abs_deg,
+                    100.0 * r.share_over_0_5_deg
+                );
+            } else {
+                println!(
+                    "{:<28} near {:>4} px {:>7.2} s {:>8.1} core-ns/px·az  RMS {:.4}°  max {:.3}°  >0.5°: {:.3}%",
+                    r.dem,
+                    r.near_px,
+                    r.wall_s,
+                    r.core_ns_per_px_az,
+                    r.rms_deg,
+                    r.max_abs_deg,
+                    100.0 * r.share_over_0_5_deg
+                );
+            }
+        }
+        println!();
+    }
     if markdown {
         println!("| peer | row | directions | wall s | cpu % | load1 before | wall s scaled to {a} az | peer ÷ penumbra (all cores) | peer ÷ penumbra (1 thread) | notes |");
         println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---|");

@@ -155,13 +155,18 @@ struct HorizonFlags {
     /// Azimuth samples per pixel (plane azimuths 360·k/A from the face's +U axis).
     #[arg(long, default_value_t = 360)]
     azimuths: usize,
-    /// fast (exact within 24 px, upper-hull sweep beyond) or reference (exact cell-by-cell
-    /// search of every pixel's ray; ≈ 35× slower).
+    /// fast (exact within --near-px, upper-hull sweep beyond) or reference (exact
+    /// cell-by-cell search of every pixel's ray; ≈ 35× slower).
     #[arg(long, default_value = "fast")]
     method: Method,
     /// Largest context margin around a tile, in pixels of its level.
     #[arg(long, default_value_t = 4096)]
     max_margin_px: u64,
+    /// How far (pixels) the fast method searches each pixel's own ray exactly before its sweep
+    /// takes over: larger is slower and more accurate (0..=1024; `penumbra bench horizon`
+    /// measures the trade).
+    #[arg(long, default_value_t = penumbra::horizon::DEFAULT_NEAR_PX)]
+    near_px: f64,
 }
 
 #[derive(Args, Clone)]
@@ -366,6 +371,7 @@ fn run(cli: Cli) -> Result<()> {
                 compression,
                 max_margin_px: flags.max_margin_px,
                 max_output_gib,
+                near_px: flags.near_px,
             };
             let t0 = std::time::Instant::now();
             let report = penumbra::horizon::build_horizons(&dir, &opts, &progress)?;
@@ -401,15 +407,14 @@ fn run(cli: Cli) -> Result<()> {
             flags,
             json,
         }) => {
-            let ans = penumbra::horizon::query(
-                &dir,
-                lat,
-                lon,
-                level,
-                flags.method,
-                flags.azimuths,
-                flags.max_margin_px,
-            )?;
+            let opts = HorizonOptions {
+                azimuths: flags.azimuths,
+                method: flags.method,
+                max_margin_px: flags.max_margin_px,
+                near_px: flags.near_px,
+                ..Default::default()
+            };
+            let ans = penumbra::horizon::query(&dir, lat, lon, level, &opts)?;
             output::print_horizon_answer(&ans, json)?;
         }
         Command::Bench(b) => bench::run(b, cli.quiet)?,
