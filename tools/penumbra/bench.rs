@@ -1022,10 +1022,18 @@ fn hz_real_dems(
             .collect();
         let reference = by_pixel(&reference);
         for near_px in NEAR_PX {
+            // Best of 3: a run is under a second, within this machine's timing noise.
             let (t, fast) = in_pool(threads, || {
-                let t0 = Instant::now();
-                let out = horizons_with(&ctx, rect, AZ, Method::Fast, near_px);
-                (t0.elapsed().as_secs_f64(), out)
+                let mut best = (f64::INFINITY, Vec::new());
+                for _ in 0..3 {
+                    let t0 = Instant::now();
+                    let out = horizons_with(&ctx, rect, AZ, Method::Fast, near_px);
+                    let t = t0.elapsed().as_secs_f64();
+                    if t < best.0 {
+                        best = (t, out);
+                    }
+                }
+                best
             })?;
             let acc = hz_accuracy(
                 &format!(
@@ -1052,7 +1060,8 @@ fn hz_real_dems(
         notes.push(format!(
             "{label}: {} ({w}×{h}) as a patch at the centre of face +X (R = {radius_m} m, \
              {pixel_m} m pixels); observers the {BLOCK}² block from pixel ({}, {}), the whole DEM \
-             as context.",
+             as context; the near-field rows time the fast method best of 3 on all cores \
+             (near field {DEFAULT_NEAR_PX} px is the default).",
             path.display(),
             rect.x0,
             rect.y0
