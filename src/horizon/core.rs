@@ -38,8 +38,9 @@ pub struct Rect {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Method {
-    /// Each pixel's own ray searched exactly out to 24 px, beyond that a per-azimuth sweep of
-    /// parallel great circles with an upper convex hull per line.
+    /// Each pixel's own ray searched exactly out to a near field (`near_px`, default 24 px),
+    /// beyond that a per-azimuth sweep of parallel great circles with an upper convex hull
+    /// per line.
     #[default]
     Fast,
     /// Brute force: each pixel's own ray walked cell by cell to the end of the context, the
@@ -343,14 +344,12 @@ fn finish(
             let sw = acc_s[o];
             if sw.is_finite() {
                 // Every value reported is the elevation of a real point of this ray, evaluated
-                // exactly (so fast ≤ reference). The lines pass up to ½ px beside the ray: around
-                // the sweep's winner (kept on the raster: a winner at the raster's edge may lie
-                // beyond where this ray leaves it) the ray is searched exactly, which includes
-                // the winner itself, unless the near field is far ahead; then the winner alone.
-                if acc[o] == f64::NEG_INFINITY || acc[o] >= t - SKIP {
-                    let c = sw.min(ray.exit(ctx));
+                // exactly (so fast ≤ reference). The lines pass up to ½ px beside the ray:
+                // around the sweep's winner the ray is searched exactly, which includes the
+                // winner itself, unless the near field is far ahead; then the winner alone.
+                if acc[o] >= t - SKIP {
                     t = t.max(
-                        ray.max_over(ctx, (c - WINDOW).max(near_px), c + WINDOW, t)
+                        ray.max_over(ctx, (sw - WINDOW).max(near_px), sw + WINDOW, t)
                             .0,
                     );
                 } else {
@@ -466,25 +465,6 @@ impl Ray {
             b1,
             kappa: gm * gm / (2.0 * r0),
         }
-    }
-
-    /// Distance (plane pixels) at which the ray leaves the raster.
-    #[inline]
-    fn exit(&self, ctx: &Context) -> f64 {
-        let leave = |p: f64, d: f64, hi: f64| {
-            if d > 1e-12 {
-                (hi - p) / d
-            } else if d < -1e-12 {
-                p / -d
-            } else {
-                f64::INFINITY
-            }
-        };
-        leave(self.x0, self.cx, (ctx.width - 1) as f64).min(leave(
-            self.y0,
-            self.cy,
-            (ctx.height - 1) as f64,
-        ))
     }
 
     /// Ground metres per plane pixel along the ray at the observer: r0·dψ/ds = r0·b1/a0.
@@ -1080,7 +1060,6 @@ fn sweep(
                         continue;
                     };
                     let idx = (p - rp0) as usize * si + (q0 - rq0) as usize * sj;
-                    let dist = |v: &Pt| (v.p - p as f64) / dp;
                     // The line only guides: where its best vertex, seen from the observer
                     // placed on the line, could beat what the observer has, the vertex and its
                     // hull neighbours are evaluated on the observer's own ray at the same
@@ -1116,18 +1095,13 @@ fn sweep(
                             best = Some(c);
                         }
                     }
-                    match best {
-                        Some(b) => {
-                            let sl = slope(o, b);
-                            if sl > acc[idx] {
-                                acc[idx] = sl;
-                                acc_s[idx] = dist(&b);
-                            }
+                    if let Some(b) = best {
+                        let sl = slope(o, b);
+                        if sl > acc[idx] {
+                            acc[idx] = sl;
+                            // Distance along the ray, plane pixels.
+                            acc_s[idx] = (b.p - p as f64) / dp;
                         }
-                        // The vertex lies off this observer's ray's part of the raster (at its
-                        // edge): finish searches around where the ray leaves the raster.
-                        None if acc_s[idx].is_nan() => acc_s[idx] = dist(&line.pts[iv]),
-                        None => {}
                     }
                 }
             }

@@ -145,6 +145,33 @@ pub(super) struct NearScratch {
     best: Vec<f32>,
 }
 
+impl NearScratch {
+    /// The per-observer inputs of the row kernel for the run of observers at raster index
+    /// `base..` whose geometry is `geo`, along `az`; `best` reset.
+    fn load(&mut self, ctx: &Context, az: &Azimuth, base: usize, geo: &[PixelGeo]) {
+        self.h0.clear();
+        self.r0.clear();
+        self.alpha.clear();
+        self.beta.clear();
+        self.kappa.clear();
+        for (k, g) in geo.iter().enumerate() {
+            let h0 = ctx.heights[base + k] as f64;
+            let r0 = ctx.radius_m + h0;
+            let (a1, b1) = az.along(g);
+            // Along the ray tan ψ = s·β / (1 + s·α) (ψ: angle at the body's centre).
+            let (alpha, beta) = (a1 / g.n0, b1 / g.n0);
+            let gm = r0 * beta;
+            self.h0.push(h0 as f32);
+            self.r0.push(r0 as f32);
+            self.alpha.push(alpha as f32);
+            self.beta.push(beta as f32);
+            self.kappa.push((gm * gm / (2.0 * r0)) as f32);
+        }
+        self.best.clear();
+        self.best.resize(geo.len(), f32::NEG_INFINITY);
+    }
+}
+
 /// The largest slope (tan of elevation) over (0, walk.near] of every observer of `rect` along
 /// azimuth `az`, written to `out` (row-major over `rect`); −∞ for no-data observers.
 #[allow(clippy::too_many_arguments)]
@@ -181,27 +208,8 @@ pub(super) fn near_field(
                 e += 1;
             }
             let n = e - i;
-            sc.h0.clear();
-            sc.r0.clear();
-            sc.alpha.clear();
-            sc.beta.clear();
-            sc.kappa.clear();
             let base = y * ctx.width + rect.x0 + i;
-            for (k, g) in geo[o..o + n].iter().enumerate() {
-                let h0 = ctx.heights[base + k] as f64;
-                let r0 = ctx.radius_m + h0;
-                let (a1, b1) = az.along(g);
-                // Along the ray tan ψ = s·β / (1 + s·α) (ψ: angle at the body's centre).
-                let (alpha, beta) = (a1 / g.n0, b1 / g.n0);
-                let gm = r0 * beta;
-                sc.h0.push(h0 as f32);
-                sc.r0.push(r0 as f32);
-                sc.alpha.push(alpha as f32);
-                sc.beta.push(beta as f32);
-                sc.kappa.push((gm * gm / (2.0 * r0)) as f32);
-            }
-            sc.best.clear();
-            sc.best.resize(n, f32::NEG_INFINITY);
+            sc.load(ctx, az, base, &geo[o..o + n]);
             row(&ctx.heights, ctx.width, base, walk, sc);
             for (d, &b) in out[o..o + n].iter_mut().zip(&sc.best) {
                 *d = b as f64;
@@ -422,18 +430,11 @@ mod tests {
         let az = Azimuth::new(&ctx, 0.7);
         let walk = NearWalk::new(&az, DEFAULT_NEAR_PX);
         let mut sc = NearScratch::default();
-        // Row 40, from x = 20: clean of holes and edges for this walk.
-        let (y, x0, n) = (40usize, 20usize, 24usize);
-        for (k, g) in geo[y * rect.w + x0..][..n].iter().enumerate() {
-            let h0 = ctx.heights[y * ctx.width + x0 + k] as f64;
-            let (a1, b1) = az.along(g);
-            sc.h0.push(h0 as f32);
-            sc.r0.push((ctx.radius_m + h0) as f32);
-            sc.alpha.push((a1 / g.n0) as f32);
-            sc.beta.push((b1 / g.n0) as f32);
-            sc.kappa.push(1e-3);
-        }
-        sc.best = vec![f32::NEG_INFINITY; n];
+        // Row 50, from x = 8: clear of holes and edges for this walk.
+        let (y, x0, n) = (50usize, 8usize, 24usize);
+        let nodata = NoData::new(&ctx);
+        assert!((x0..x0 + n).all(|x| nodata.clean(&walk, x, y)));
+        sc.load(&ctx, &az, y * ctx.width + x0, &geo[y * rect.w + x0..][..n]);
         row(&ctx.heights, ctx.width, y * ctx.width + x0, &walk, &mut sc);
         let dispatched = sc.best.clone();
         sc.best = vec![f32::NEG_INFINITY; n];
