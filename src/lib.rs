@@ -11,14 +11,17 @@ pub mod body;
 pub mod cube;
 pub mod dem;
 pub mod error;
+pub mod fsio;
 pub mod horizon;
 pub mod layout;
 pub mod manifest;
 pub mod mip;
 pub mod progress;
 pub mod query;
+pub mod runner;
 pub mod scene;
 pub mod tileio;
+pub mod tileset;
 pub mod tiling;
 
 pub use error::{Error, Result};

@@ -204,6 +204,7 @@ pub struct Tileset {
 }
 
 impl Tileset {
+    /// Read and validate the manifest of the tileset in `dir` (see [`crate::tileset::validate`]).
     pub fn load(dir: &Path) -> Result<Tileset> {
         let path = dir.join(MANIFEST);
         if !path.exists() {
@@ -212,9 +213,23 @@ impl Tileset {
                 "no tileset manifest here: point at a folder made by `penumbra tile` or `penumbra bake`",
             ));
         }
-        let text = std::fs::read_to_string(&path).at(&path)?;
-        let t: Tileset = serde_json::from_str(&text)
-            .map_err(|e| Error::invalid(&path, format!("manifest is not valid: {e}")))?;
+        let bytes = crate::tileset::fsio::read_capped(
+            &path,
+            crate::tileset::validate::MAX_MANIFEST_BYTES,
+            "a tileset manifest",
+        )?;
+        let de = &mut serde_json::Deserializer::from_slice(&bytes);
+        let t: Tileset = serde_path_to_error::deserialize(de).map_err(|e| {
+            let field = e.path().to_string();
+            Error::invalid(
+                &path,
+                format!(
+                    "manifest is not valid at field `{field}`: {}; restore it, or rerun \
+                     `penumbra tile`/`bake` into a fresh folder",
+                    e.inner()
+                ),
+            )
+        })?;
         if t.format != FORMAT || t.format_version > FORMAT_VERSION {
             return Err(Error::unsupported(
                 &path,
@@ -224,6 +239,7 @@ impl Tileset {
                 ),
             ));
         }
+        crate::tileset::validate::check(&t, &path)?;
         Ok(t)
     }
 

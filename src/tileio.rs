@@ -1,6 +1,6 @@
 //! Reading and writing tiles: EXR height tiles (f32 `height` + f16 `mask`), PNG albedo tiles,
-//! and the atomic-write helper every output goes through (temp file + rename, so a reader or a
-//! crashed run never sees half a file).
+//! written through [`crate::fsio::write_atomic`] (temp file, fsync, rename), so a reader or a
+//! crashed run never sees half a file.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -9,35 +9,7 @@ use exr::prelude::*;
 
 use crate::error::{Error, IoContext, Result};
 
-/// Write `bytes` to `path` atomically: a temp file in the same folder, fsync, rename.
-pub fn write_atomic(
-    path: &Path,
-    write: impl FnOnce(&mut std::fs::File) -> Result<()>,
-) -> Result<()> {
-    let dir = path.parent().unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).at(dir)?;
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.tmp.{}", std::process::id()));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp).at(&tmp)?;
-        write(&mut f)?;
-        f.flush().at(&tmp)?;
-        Ok(())
-    })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(e);
-    }
-    std::fs::rename(&tmp, path).at(path)
-}
-
-/// Write a small text/JSON file atomically.
-pub fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_atomic(path, |f| f.write_all(bytes).at(path))
-}
+pub use crate::fsio::{write_atomic, write_atomic_bytes};
 
 /// A square height tile including its halo.
 #[derive(Clone, Debug, PartialEq)]

@@ -1,0 +1,137 @@
+//! Durable file operations: every file a tileset holds is written through [`write_atomic`]
+//! (temp file in the same folder, fsync, rename, fsync of the folder), so neither a reader nor a
+//! run killed at any moment sees half a file under its final name.
+
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+
+use crate::error::{Error, IoContext, Result};
+
+/// Marker in the names of temp files: `.{name}.tmp.{pid}`.
+pub const TEMP_MARK: &str = ".tmp.";
+
+/// Write `path` atomically and durably: the bytes go to a temp file in the same folder, which
+/// is synced to disk and renamed over `path`; the folder is synced after the rename so that the
+/// new name survives a crash too.
+pub fn write_atomic(
+    path: &Path,
+    write: impl FnOnce(&mut std::fs::File) -> Result<()>,
+) -> Result<()> {
+    let dir = path.parent().unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).at(dir)?;
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = dir.join(format!(".{name}{TEMP_MARK}{}", std::process::id()));
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp).at(&tmp)?;
+        write(&mut f)?;
+        f.flush().at(&tmp)?;
+        f.sync_all().at(&tmp)?;
+        Ok(())
+    })();
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e);
+    }
+    std::fs::rename(&tmp, path).at(path)?;
+    sync_dir(dir)
+}
+
+/// Write a small file atomically.
+pub fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
+    write_atomic(path, |f| f.write_all(bytes).at(path))
+}
+
+/// Flush a folder's entries (new names, renames, removals) to disk.
+pub fn sync_dir(dir: &Path) -> Result<()> {
+    #[cfg(unix)]
+    {
+        std::fs::File::open(dir)
+            .and_then(|f| f.sync_all())
+            .at(dir)?;
+    }
+    #[cfg(not(unix))]
+    let _ = dir;
+    Ok(())
+}
+
+/// Read a small file, refusing one larger than `cap` bytes (a manifest linked to /dev/zero or a
+/// multi-gigabyte file is not a manifest). Reads at most `cap + 1` bytes whatever the file is.
+pub fn read_capped(path: &Path, cap: u64, what: &str) -> Result<Vec<u8>> {
+    let f = std::fs::File::open(path).at(path)?;
+    let mut buf = Vec::new();
+    f.take(cap + 1).read_to_end(&mut buf).at(path)?;
+    if buf.len() as u64 > cap {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "larger than {} MiB: too large to be {what}; point at the folder made by penumbra",
+                cap >> 20
+            ),
+        ));
+    }
+    Ok(buf)
+}
+
+/// Remove the temp files ([`TEMP_MARK`]) of writers that are gone from `dir` and everything
+/// below it; returns how many were removed. Only call with the tileset's writer lock held.
+pub fn sweep_temps(dir: &Path) -> Result<u64> {
+    let mut removed = 0;
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        let Ok(rd) = std::fs::read_dir(&d) else {
+            continue;
+        };
+        for e in rd.flatten() {
+            let Ok(ty) = e.file_type() else { continue };
+            let name = e.file_name();
+            let name = name.to_string_lossy();
+            if ty.is_dir() {
+                stack.push(e.path());
+            } else if name.starts_with('.') && name.contains(TEMP_MARK) {
+                let p = e.path();
+                std::fs::remove_file(&p).at(&p)?;
+                removed += 1;
+            }
+        }
+    }
+    Ok(removed)
+}
+
+/// Every regular file below `root` (relative paths with `/`, sorted) and its size.
+pub fn list_files(root: &Path) -> Result<Vec<(String, u64)>> {
+    let mut out = Vec::new();
+    let mut stack = vec![PathBuf::new()];
+    while let Some(rel) = stack.pop() {
+        let d = root.join(&rel);
+        let rd = match std::fs::read_dir(&d) {
+            Ok(rd) => rd,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => continue,
+            Err(e) => return Err(Error::io(&d, e)),
+        };
+        for e in rd {
+            let e = e.at(&d)?;
+            let ty = e.file_type().at(e.path())?;
+            let r = rel.join(e.file_name());
+            if ty.is_dir() {
+                stack.push(r);
+            } else if ty.is_file() {
+                let len = e.metadata().at(e.path())?.len();
+                out.push((r.to_string_lossy().replace('\\', "/"), len));
+            }
+        }
+    }
+    out.sort();
+    Ok(out)
+}
+
+/// Remove a folder tree if it exists.
+pub fn remove_tree(p: &Path) -> Result<()> {
+    match std::fs::remove_dir_all(p) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(Error::io(p, e)),
+    }
+}

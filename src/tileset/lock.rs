@@ -1,0 +1,105 @@
+//! One writer per tileset: an advisory lock on `.penumbra/lock`, held for the whole run and
+//! released by the operating system when the process exits or is killed. The lock file names
+//! the holder's pid so that a refused writer can say who holds it. The file itself is never
+//! removed (removing a lock file lets two writers lock two different files).
+//!
+//! Readers take a shared lock on `.penumbra/commit.lock` for as long as they read; a writer
+//! takes it exclusively only while it swaps finished products into place, so a reader sees the
+//! tileset before or after a commit, never halfway.
+
+use std::fs::{File, OpenOptions, TryLockError};
+use std::io::{Read, Seek, Write};
+use std::path::Path;
+
+use crate::error::{Error, IoContext, Result};
+
+/// Folder inside a tileset for its bookkeeping: locks, staging, indexes.
+pub const STATE_DIR: &str = ".penumbra";
+const LOCK: &str = "lock";
+const COMMIT_LOCK: &str = "commit.lock";
+
+/// The exclusive right to write one tileset; dropped = released.
+#[derive(Debug)]
+pub struct WriteLock {
+    _file: File,
+}
+
+impl WriteLock {
+    /// Take the writer lock of the tileset in `dir` (creating `dir` and its state folder), or
+    /// fail at once, naming the pid that holds it.
+    pub fn acquire(dir: &Path) -> Result<WriteLock> {
+        let state = dir.join(STATE_DIR);
+        std::fs::create_dir_all(&state).at(&state)?;
+        let path = state.join(LOCK);
+        let mut f = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .at(&path)?;
+        match f.try_lock() {
+            Ok(()) => {}
+            Err(TryLockError::WouldBlock) => {
+                let mut holder = String::new();
+                let _ = f.read_to_string(&mut holder);
+                let holder = holder.trim();
+                let who = if holder.is_empty() {
+                    "another penumbra process".to_string()
+                } else {
+                    format!("penumbra process {holder}")
+                };
+                return Err(Error::invalid(
+                    dir,
+                    format!(
+                        "{who} is writing this tileset: wait for it to finish, or choose another \
+                         output folder"
+                    ),
+                ));
+            }
+            Err(TryLockError::Error(e)) => return Err(Error::io(&path, e)),
+        }
+        // Best effort: the pid is only for the message above.
+        let _ = f.set_len(0);
+        let _ = f.rewind();
+        let _ = write!(f, "{}", std::process::id());
+        let _ = f.flush();
+        Ok(WriteLock { _file: f })
+    }
+}
+
+/// Shared (reader) or exclusive (committing writer) hold on the commit lock.
+#[derive(Debug)]
+pub struct CommitLock {
+    _file: Option<File>,
+}
+
+impl CommitLock {
+    /// A reader's hold: waits while a writer commits. A tileset without a state folder (made
+    /// by an older penumbra, or on read-only media) has no writer to wait for.
+    pub fn shared(dir: &Path) -> Result<CommitLock> {
+        let path = dir.join(STATE_DIR).join(COMMIT_LOCK);
+        let f = match File::open(&path) {
+            Ok(f) => f,
+            Err(_) => return Ok(CommitLock { _file: None }),
+        };
+        f.lock_shared().at(&path)?;
+        Ok(CommitLock { _file: Some(f) })
+    }
+
+    /// A committing writer's hold: waits for readers to finish.
+    pub fn exclusive(dir: &Path) -> Result<CommitLock> {
+        let state = dir.join(STATE_DIR);
+        std::fs::create_dir_all(&state).at(&state)?;
+        let path = state.join(COMMIT_LOCK);
+        let f = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .at(&path)?;
+        f.lock().at(&path)?;
+        Ok(CommitLock { _file: Some(f) })
+    }
+}

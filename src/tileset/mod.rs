@@ -1,0 +1,238 @@
+//! The tileset store: the one place that opens and validates `tileset.json`, knows where every
+//! product's files live, reads them back checked (with a bounded cache shared by the stages
+//! that read many tiles), and writes through one writer per tileset.
+//!
+//! - [`Product`]: the registry of products, the folders each owns and the products each is
+//!   derived from; invalidation downstream of a changed product is derived from it.
+//! - [`Store`]: the read API (`open` validates the manifest; typed, size-checked tile reads).
+//! - [`writer::Writer`]: the writer lock, staging of a run's files beside the tileset, and the
+//!   commit that swaps them in (crash-safe, rolled forward by the next writer).
+//! - [`crate::fsio`]: atomic, durable file writes; [`lock`]: the advisory locks; [`validate`]: the
+//!   manifest's limits.
+
+pub mod cache;
+pub use crate::fsio;
+
+pub mod lock;
+pub mod validate;
+pub mod writer;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use crate::cube::Face;
+use crate::error::{Error, Result};
+use crate::layout::TileId;
+use crate::manifest::{Tileset, MANIFEST};
+use crate::tileio::{self, HeightTile};
+
+pub use cache::TileCache;
+pub use lock::STATE_DIR;
+
+/// The products a tileset can hold.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Product {
+    /// Height tiles (`height/`), written by the tiling stage.
+    Height,
+    /// Albedo tiles (`albedo/`), written by the tiling stage beside the heights.
+    Albedo,
+    /// Maximum and (min, max) mipmaps of the height tiles.
+    Mip,
+    /// Raw horizon maps.
+    Horizon,
+}
+
+impl Product {
+    pub const ALL: [Product; 4] = [
+        Product::Height,
+        Product::Albedo,
+        Product::Mip,
+        Product::Horizon,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Product::Height => "height",
+            Product::Albedo => "albedo",
+            Product::Mip => "mip",
+            Product::Horizon => "horizon",
+        }
+    }
+
+    /// Top-level folders of the tileset that hold this product's files (and nothing else).
+    pub fn dirs(self) -> &'static [&'static str] {
+        match self {
+            Product::Height => &["height"],
+            Product::Albedo => &["albedo"],
+            Product::Mip => &["maxmip", "minmax"],
+            Product::Horizon => &["horizon"],
+        }
+    }
+
+    /// Products this one is computed from: when one of them changes, this one is stale.
+    pub fn reads(self) -> &'static [Product] {
+        match self {
+            Product::Height | Product::Albedo => &[],
+            Product::Mip => &[Product::Height],
+            // The horizon's search distance uses the mipmaps' global extrema when present.
+            Product::Horizon => &[Product::Height, Product::Mip],
+        }
+    }
+
+    /// Every product derived, directly or not, from one of `changed` (not including them).
+    pub fn downstream(changed: &[Product]) -> Vec<Product> {
+        let mut out: Vec<Product> = Vec::new();
+        loop {
+            let before = out.len();
+            for p in Product::ALL {
+                if changed.contains(&p) || out.contains(&p) {
+                    continue;
+                }
+                if p.reads()
+                    .iter()
+                    .any(|r| changed.contains(r) || out.contains(r))
+                {
+                    out.push(p);
+                }
+            }
+            if out.len() == before {
+                out.sort();
+                return out;
+            }
+        }
+    }
+
+    /// The run key the manifest records for this product, if it holds it.
+    pub fn recorded_key(self, ts: &Tileset) -> Option<&str> {
+        match self {
+            Product::Height => ts.products.height.as_ref().map(|_| ts.run_key.as_str()),
+            Product::Albedo => ts.products.albedo.as_ref().map(|_| ts.run_key.as_str()),
+            Product::Mip => ts.products.mip.as_ref().map(|m| m.run_key.as_str()),
+            Product::Horizon => ts.products.horizon.as_ref().map(|h| h.run_key.as_str()),
+        }
+    }
+
+    /// Drop this product's entry from a manifest.
+    pub fn clear(self, ts: &mut Tileset) {
+        match self {
+            Product::Height => ts.products.height = None,
+            Product::Albedo => ts.products.albedo = None,
+            Product::Mip => ts.products.mip = None,
+            Product::Horizon => ts.products.horizon = None,
+        }
+    }
+}
+
+/// Path of a tile's file below `root` from a product's path pattern (`{level}`, `{face}`,
+/// `{x}`, `{y}`), e.g. `height/{level}/{face}/{y}/{x}.exr`.
+pub fn tile_path(root: &Path, pattern: &str, id: TileId) -> PathBuf {
+    root.join(
+        pattern
+            .replace("{level}", &id.level.to_string())
+            .replace("{face}", id.face.name())
+            .replace("{x}", &id.x.to_string())
+            .replace("{y}", &id.y.to_string()),
+    )
+}
+
+/// Path of a per-(level, face) file below `root` from a pattern with `{level}` and `{face}`.
+pub fn face_file_path(root: &Path, pattern: &str, level: u8, face: Face) -> PathBuf {
+    root.join(
+        pattern
+            .replace("{level}", &level.to_string())
+            .replace("{face}", face.name()),
+    )
+}
+
+/// Default byte budget of a store's height-tile cache.
+pub const DEFAULT_CACHE_BYTES: u64 = 1 << 30;
+
+/// An open, validated tileset.
+pub struct Store {
+    dir: PathBuf,
+    ts: Tileset,
+    cache: TileCache,
+    _reader: Option<lock::CommitLock>,
+}
+
+impl Store {
+    /// Open the tileset in `dir` for reading: waits while a writer commits, validates the
+    /// manifest (exit-2 errors name the file and the field).
+    pub fn open(dir: &Path) -> Result<Store> {
+        let reader = lock::CommitLock::shared(dir)?;
+        let mut s = Store::open_unlocked(dir)?;
+        s._reader = Some(reader);
+        Ok(s)
+    }
+
+    /// Open without the reader's lock: for a writer that holds the tileset's writer lock
+    /// (nobody else can commit) and reads what earlier stages committed.
+    pub fn open_unlocked(dir: &Path) -> Result<Store> {
+        let ts = Tileset::load(dir)?;
+        let cache = TileCache::new(DEFAULT_CACHE_BYTES, ts.layout.stored_size());
+        Ok(Store {
+            dir: dir.to_path_buf(),
+            ts,
+            cache,
+            _reader: None,
+        })
+    }
+
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    pub fn manifest(&self) -> &Tileset {
+        &self.ts
+    }
+
+    pub fn manifest_path(&self) -> PathBuf {
+        self.dir.join(MANIFEST)
+    }
+
+    /// An error about the manifest that says what is missing and what to run.
+    pub fn missing(&self, what: &str) -> Error {
+        Error::invalid(self.manifest_path(), what.to_string())
+    }
+
+    /// Path of a height tile.
+    pub fn height_path(&self, id: TileId) -> Result<PathBuf> {
+        let h = self
+            .ts
+            .products
+            .height
+            .as_ref()
+            .ok_or_else(|| self.missing("tileset has no height product"))?;
+        Ok(tile_path(&self.dir, &h.path, id))
+    }
+
+    /// Read a height tile (uncached), checking its size against the manifest.
+    pub fn read_height(&self, id: TileId) -> Result<HeightTile> {
+        let p = self.height_path(id)?;
+        let t = tileio::read_height_tile(&p)?;
+        let s = self.ts.layout.stored_size();
+        if t.size != s {
+            return Err(Error::invalid(
+                &p,
+                format!("tile is {}² but the manifest says {s}²", t.size),
+            ));
+        }
+        Ok(t)
+    }
+
+    /// The height tile `id` through the shared cache, or None where the tileset has none.
+    pub fn height(&self, id: TileId) -> Result<Option<Arc<HeightTile>>> {
+        self.cache.get_or_load(id, || {
+            if self.ts.has_tile(id) {
+                self.read_height(id).map(Some)
+            } else {
+                Ok(None)
+            }
+        })
+    }
+
+    /// The shared height-tile cache (for stages that manage its budget).
+    pub fn cache(&self) -> &TileCache {
+        &self.cache
+    }
+}

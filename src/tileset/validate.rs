@@ -1,0 +1,319 @@
+//! Limits of `tileset.json`: every number in range and every path relative and inside the
+//! tileset, checked when a tileset is opened so that no reader trusts a damaged manifest.
+//! Each error names the manifest and the field.
+
+use std::path::Path;
+
+use crate::error::{Error, Result};
+use crate::layout::MAX_LEVELS;
+use crate::manifest::Tileset;
+
+/// Largest manifest read (a 24-level global tileset's coverage is a few MiB).
+pub const MAX_MANIFEST_BYTES: u64 = 64 << 20;
+
+const FIX: &str = "the manifest is damaged: restore it, or rerun `penumbra tile`/`bake` into a \
+                   fresh folder";
+
+fn bad(path: &Path, field: &str, msg: String) -> Error {
+    Error::invalid(path, format!("field `{field}`: {msg}; {FIX}"))
+}
+
+fn finite(path: &Path, field: &str, v: f64) -> Result<()> {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err(bad(path, field, format!("{v} is not a finite number")))
+    }
+}
+
+fn within(path: &Path, field: &str, v: f64, lo: f64, hi: f64) -> Result<()> {
+    if v.is_finite() && (lo..=hi).contains(&v) {
+        Ok(())
+    } else {
+        Err(bad(path, field, format!("{v} is outside {lo}..={hi}")))
+    }
+}
+
+/// A product path pattern: relative, inside one of the product's folders, no `..`, only the
+/// placeholders `placeholders` (each required), ending in `ext`.
+fn pattern(
+    path: &Path,
+    field: &str,
+    p: &str,
+    dirs: &[&str],
+    placeholders: &[&str],
+    ext: &str,
+) -> Result<()> {
+    let fail = |m: &str| Err(bad(path, field, format!("path pattern '{p}' {m}")));
+    if p.is_empty() || p.len() > 256 {
+        return fail("is empty or longer than 256 characters");
+    }
+    if p.starts_with('/') || p.contains('\\') || p.contains(':') || p.contains('\0') {
+        return fail("is not a relative path inside the tileset");
+    }
+    let parts: Vec<&str> = p.split('/').collect();
+    if parts
+        .iter()
+        .any(|c| c.is_empty() || *c == "." || *c == "..")
+    {
+        return fail("has an empty, '.' or '..' component");
+    }
+    if !dirs.contains(&parts[0]) {
+        return fail(&format!(
+            "must lie in the product's folder ({})",
+            dirs.join(" or ")
+        ));
+    }
+    let mut rest = p.to_string();
+    for ph in placeholders {
+        if !rest.contains(ph) {
+            return fail(&format!("lacks {ph}"));
+        }
+        rest = rest.replace(ph, "");
+    }
+    if rest.contains('{') || rest.contains('}') {
+        return fail("has an unknown placeholder");
+    }
+    if !p.ends_with(ext) {
+        return fail(&format!("does not end in {ext}"));
+    }
+    Ok(())
+}
+
+const TILE: &[&str] = &["{level}", "{face}", "{y}", "{x}"];
+
+/// Check a parsed manifest; `path` is the manifest's file (for messages).
+pub fn check(ts: &Tileset, path: &Path) -> Result<()> {
+    let b = &ts.body;
+    within(path, "body.radius_m", b.radius_m, 1.0, 1e9)?;
+    within(
+        path,
+        "body.relief_m[0]",
+        b.relief_m.0,
+        -b.radius_m,
+        b.radius_m,
+    )?;
+    within(
+        path,
+        "body.relief_m[1]",
+        b.relief_m.1,
+        -b.radius_m,
+        b.radius_m,
+    )?;
+
+    let lay = &ts.layout;
+    if !(8..=8192).contains(&lay.tile_size) || lay.tile_size % 2 != 0 {
+        return Err(bad(
+            path,
+            "layout.tile_size",
+            format!("{} is not an even size from 8 to 8192", lay.tile_size),
+        ));
+    }
+    if lay.halo >= lay.tile_size / 2 {
+        return Err(bad(
+            path,
+            "layout.halo",
+            format!("{} is not below half the tile size", lay.halo),
+        ));
+    }
+    if lay.levels == 0 || lay.levels > MAX_LEVELS {
+        return Err(bad(
+            path,
+            "layout.levels",
+            format!("{} is outside 1..={MAX_LEVELS}", lay.levels),
+        ));
+    }
+
+    if ts.coverage.len() != lay.levels as usize {
+        return Err(bad(
+            path,
+            "coverage",
+            format!(
+                "has {} levels but layout.levels is {}",
+                ts.coverage.len(),
+                lay.levels
+            ),
+        ));
+    }
+    for (i, lc) in ts.coverage.iter().enumerate() {
+        let f = format!("coverage[{i}]");
+        if lc.level as usize != i {
+            return Err(bad(
+                path,
+                &format!("{f}.level"),
+                format!("is {}, expected {i}", lc.level),
+            ));
+        }
+        let per = lay.tiles_per_side(lc.level) as u64;
+        if lc.tiles_per_face != per * per {
+            return Err(bad(
+                path,
+                &format!("{f}.tiles_per_face"),
+                format!("is {}, expected {}", lc.tiles_per_face, per * per),
+            ));
+        }
+        let mut count = 0u64;
+        for (face, runs) in &lc.faces {
+            for (k, r) in runs.iter().enumerate() {
+                let [y, x0, x1] = *r;
+                if (y as u64) >= per || (x1 as u64) >= per || x0 > x1 {
+                    return Err(bad(
+                        path,
+                        &format!("{f}.faces.{face}[{k}]"),
+                        format!("run {r:?} is not [y, x_first, x_last] within 0..{per}"),
+                    ));
+                }
+                count += (x1 - x0 + 1) as u64;
+            }
+        }
+        if count != lc.tiles {
+            return Err(bad(
+                path,
+                &format!("{f}.tiles"),
+                format!("is {} but its runs hold {count} tiles", lc.tiles),
+            ));
+        }
+    }
+
+    let src = &ts.source;
+    finite(path, "source.pixel_size_m", src.pixel_size_m)?;
+    finite(path, "source.height_shift_m", src.height_shift_m)?;
+
+    let p = &ts.products;
+    if let Some(h) = &p.height {
+        pattern(
+            path,
+            "products.height.path",
+            &h.path,
+            &["height"],
+            TILE,
+            ".exr",
+        )?;
+        within(
+            path,
+            "products.height.min_m",
+            h.min_m,
+            -b.radius_m,
+            b.radius_m,
+        )?;
+        within(
+            path,
+            "products.height.max_m",
+            h.max_m,
+            -b.radius_m,
+            b.radius_m,
+        )?;
+    }
+    if let Some(a) = &p.albedo {
+        pattern(
+            path,
+            "products.albedo.path",
+            &a.path,
+            &["albedo"],
+            TILE,
+            ".png",
+        )?;
+        if !matches!(a.bit_depth, 8 | 16) || !(1..=4).contains(&a.channels) {
+            return Err(bad(
+                path,
+                "products.albedo",
+                format!(
+                    "bit depth {} with {} channels is not 8/16-bit with 1..=4 channels",
+                    a.bit_depth, a.channels
+                ),
+            ));
+        }
+    }
+    if let Some(m) = &p.mip {
+        let dirs = &["maxmip", "minmax"];
+        pattern(
+            path,
+            "products.mip.max_path",
+            &m.max_path,
+            dirs,
+            TILE,
+            ".exr",
+        )?;
+        pattern(
+            path,
+            "products.mip.minmax_path",
+            &m.minmax_path,
+            dirs,
+            TILE,
+            ".exr",
+        )?;
+        pattern(
+            path,
+            "products.mip.face_path",
+            &m.face_path,
+            dirs,
+            &["{level}", "{face}"],
+            ".exr",
+        )?;
+        for (k, l) in m.levels.iter().enumerate() {
+            if l.level >= lay.levels {
+                return Err(bad(
+                    path,
+                    &format!("products.mip.levels[{k}].level"),
+                    format!("{} is not a level of this tileset", l.level),
+                ));
+            }
+        }
+    }
+    if let Some(h) = &p.horizon {
+        pattern(
+            path,
+            "products.horizon.path",
+            &h.path,
+            &["horizon"],
+            TILE,
+            ".exr",
+        )?;
+        if !(4..=4096).contains(&h.azimuths) {
+            return Err(bad(
+                path,
+                "products.horizon.azimuths",
+                format!("{} is outside 4..=4096", h.azimuths),
+            ));
+        }
+        if !matches!(h.precision.as_str(), "f16" | "f32") {
+            return Err(bad(
+                path,
+                "products.horizon.precision",
+                format!("'{}' is not f16 or f32", h.precision),
+            ));
+        }
+        if !matches!(h.method.as_str(), "fast" | "reference") {
+            return Err(bad(
+                path,
+                "products.horizon.method",
+                format!("'{}' is not fast or reference", h.method),
+            ));
+        }
+        if let Some(n) = h.near_px {
+            within(path, "products.horizon.near_px", n, 0.0, 1024.0)?;
+        }
+        if let Some(&l) = h.levels.iter().find(|&&l| l >= lay.levels) {
+            return Err(bad(
+                path,
+                "products.horizon.levels",
+                format!("{l} is not a level of this tileset"),
+            ));
+        }
+        within(
+            path,
+            "products.horizon.terrain_min_m",
+            h.terrain_min_m,
+            -b.radius_m,
+            b.radius_m,
+        )?;
+        within(
+            path,
+            "products.horizon.terrain_max_m",
+            h.terrain_max_m,
+            -b.radius_m,
+            b.radius_m,
+        )?;
+    }
+    Ok(())
+}

@@ -1,0 +1,314 @@
+//! Writing a tileset: one writer at a time, a run's files staged beside the tileset, and a
+//! commit that swaps them in. Until the commit the tileset is exactly as it was, so a run that
+//! fails or is killed loses nothing; the commit itself is a short, written-down sequence of
+//! renames that the next writer finishes if a kill interrupts it.
+//!
+//! Layout of the state folder `.penumbra/`:
+//! - `lock`, `commit.lock`: see [`super::lock`];
+//! - `staging/<stage>/`: a run in progress: `run.json` (its run key, so that a rerun with the
+//!   same key resumes), the product folders as they will appear in the tileset, then
+//!   `tileset.json` and `index/<product>.json` once the run is complete;
+//! - `commit.json`: the plan of a commit under way (present only during one);
+//! - `index/<product>.json`: every file of a committed product with its size, so that an
+//!   up-to-date check can verify that the files it vouches for are there;
+//! - `trash/`: folders replaced by a commit, removed right after it.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use super::fsio::{self, list_files, remove_tree, sync_dir, write_atomic_bytes};
+use super::lock::{CommitLock, WriteLock, STATE_DIR};
+use super::Product;
+use crate::error::{Error, IoContext, Result};
+use crate::manifest::{Tileset, MANIFEST};
+
+const RUN: &str = "run.json";
+const PLAN: &str = "commit.json";
+
+#[derive(Serialize, Deserialize)]
+struct RunMarker {
+    run_key: String,
+}
+
+#[derive(Serialize, Deserialize)]
+struct Plan {
+    /// Staging folder (below `.penumbra/staging/`) whose contents move in.
+    staging: String,
+    /// Top-level folders that move from the staging folder into the tileset.
+    moves: Vec<String>,
+    /// Top-level folders of the tileset removed (stale products not rewritten).
+    removes: Vec<String>,
+    /// Products whose indexes are replaced (from the staging folder) or dropped.
+    indexes: Vec<String>,
+}
+
+/// The exclusive writer of one tileset folder.
+pub struct Writer {
+    dir: PathBuf,
+    /// Set when this writer made the folder (or its state folder): a run that fails before
+    /// its first commit removes what it made.
+    created_dir: bool,
+    created_state: bool,
+    committed: bool,
+    staging: Option<PathBuf>,
+    _lock: WriteLock,
+}
+
+/// Where a run writes its files.
+#[derive(Debug)]
+pub struct Staging {
+    /// Root under which the run writes product folders as they will appear in the tileset.
+    pub root: PathBuf,
+    /// True when an interrupted run with the same run key left files here to keep.
+    pub resume: bool,
+}
+
+impl Writer {
+    /// Become the writer of `dir` (made if missing): refuses at once if another process is;
+    /// finishes a commit a killed writer left, and sweeps temp files of dead writers.
+    pub fn begin(dir: &Path) -> Result<Writer> {
+        let created_dir = !dir.exists();
+        let created_state = !dir.join(STATE_DIR).exists();
+        let lock = WriteLock::acquire(dir);
+        let lock = match lock {
+            Ok(l) => l,
+            Err(e) => {
+                if created_dir {
+                    let _ = std::fs::remove_dir_all(dir);
+                }
+                return Err(e);
+            }
+        };
+        let w = Writer {
+            dir: dir.to_path_buf(),
+            created_dir,
+            created_state,
+            committed: false,
+            staging: None,
+            _lock: lock,
+        };
+        let plan = w.state().join(PLAN);
+        if plan.exists() {
+            w.apply(&plan)?;
+        }
+        // Temp files of killed writers: beside the manifest and in staged runs.
+        for e in std::fs::read_dir(&w.dir).at(&w.dir)?.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if name.starts_with('.') && name.contains(fsio::TEMP_MARK) {
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
+        fsio::sweep_temps(&w.state())?;
+        remove_tree(&w.state().join("trash"))?;
+        Ok(w)
+    }
+
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    fn state(&self) -> PathBuf {
+        self.dir.join(STATE_DIR)
+    }
+
+    /// True when every file the index of `product` lists is present with its size.
+    pub fn verify(&self, product: Product) -> bool {
+        let path = self
+            .state()
+            .join("index")
+            .join(format!("{}.json", product.name()));
+        let Ok(bytes) = fsio::read_capped(&path, 1 << 30, "an index") else {
+            return false;
+        };
+        let Ok(files) = serde_json::from_slice::<Vec<(String, u64)>>(&bytes) else {
+            return false;
+        };
+        files.iter().all(|(rel, len)| {
+            std::fs::metadata(self.dir.join(rel)).is_ok_and(|m| m.is_file() && m.len() == *len)
+        })
+    }
+
+    /// The staging folder of stage `name` for a run with `run_key`: kept (resume) when an
+    /// interrupted run of the same key left it, else made afresh.
+    pub fn stage(&mut self, name: &str, run_key: &str) -> Result<Staging> {
+        let root = self.state().join("staging").join(name);
+        let marker = root.join(RUN);
+        let resume = fsio::read_capped(&marker, 1 << 16, "a run marker")
+            .ok()
+            .and_then(|b| serde_json::from_slice::<RunMarker>(&b).ok())
+            .is_some_and(|m| m.run_key == run_key);
+        if !resume {
+            remove_tree(&root)?;
+            std::fs::create_dir_all(&root).at(&root)?;
+            let m = RunMarker {
+                run_key: run_key.to_string(),
+            };
+            write_atomic_bytes(&marker, &serde_json::to_vec(&m).expect("marker serialises"))?;
+        }
+        // Leftovers of a completed-but-uncommitted run are rewritten by this one.
+        let _ = std::fs::remove_file(root.join(MANIFEST));
+        remove_tree(&root.join("index"))?;
+        self.staging = Some(root.clone());
+        Ok(Staging { root, resume })
+    }
+
+    /// Swap a completed run into the tileset: the product folders of `writes` found in the
+    /// staging folder replace the tileset's; folders of `writes` the run did not make and of
+    /// every product downstream of `writes` are removed, and so are their manifest entries;
+    /// `manifest` becomes the tileset's manifest.
+    pub fn commit(
+        &mut self,
+        staging: Staging,
+        writes: &[Product],
+        mut manifest: Tileset,
+    ) -> Result<()> {
+        let downstream = Product::downstream(writes);
+        for p in &downstream {
+            p.clear(&mut manifest);
+        }
+        let mut moves = Vec::new();
+        let mut removes = Vec::new();
+        let mut indexes = Vec::new();
+        let index_dir = staging.root.join("index");
+        std::fs::create_dir_all(&index_dir).at(&index_dir)?;
+        for &p in writes {
+            let mut files = Vec::new();
+            for d in p.dirs() {
+                if staging.root.join(d).is_dir() {
+                    moves.push(d.to_string());
+                    for (rel, len) in list_files(&staging.root.join(d))? {
+                        files.push((format!("{d}/{rel}"), len));
+                    }
+                } else {
+                    removes.push(d.to_string());
+                }
+            }
+            let json = serde_json::to_vec(&files).expect("index serialises");
+            write_atomic_bytes(&index_dir.join(format!("{}.json", p.name())), &json)?;
+            indexes.push(p.name().to_string());
+        }
+        for p in &downstream {
+            removes.extend(p.dirs().iter().map(|d| d.to_string()));
+            indexes.push(p.name().to_string());
+        }
+        let json = serde_json::to_string_pretty(&manifest).expect("manifest serialises");
+        write_atomic_bytes(&staging.root.join(MANIFEST), json.as_bytes())?;
+        for d in &moves {
+            sync_tree(&staging.root.join(d))?;
+        }
+        let plan = Plan {
+            staging: staging
+                .root
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            moves,
+            removes,
+            indexes,
+        };
+        let plan_path = self.state().join(PLAN);
+        write_atomic_bytes(
+            &plan_path,
+            &serde_json::to_vec(&plan).expect("plan serialises"),
+        )?;
+        // From here on the commit is decided: a killed writer's successor finishes it.
+        self.apply(&plan_path)?;
+        self.committed = true;
+        self.staging = None;
+        Ok(())
+    }
+
+    /// Carry out a written commit plan; every step can be repeated after a kill.
+    fn apply(&self, plan_path: &Path) -> Result<()> {
+        let bytes = fsio::read_capped(plan_path, 1 << 20, "a commit plan")?;
+        let plan: Plan = serde_json::from_slice(&bytes)
+            .map_err(|e| Error::invalid(plan_path, format!("damaged commit plan ({e})")))?;
+        let state = self.state();
+        let staged = state.join("staging").join(&plan.staging);
+        let trash = state.join("trash");
+        let index = state.join("index");
+        std::fs::create_dir_all(&trash).at(&trash)?;
+        std::fs::create_dir_all(&index).at(&index)?;
+        let _readers_out = CommitLock::exclusive(&self.dir)?;
+        for p in &plan.indexes {
+            let f = index.join(format!("{p}.json"));
+            if f.exists() && !staged.join("index").join(format!("{p}.json")).exists() {
+                std::fs::remove_file(&f).at(&f)?;
+            }
+        }
+        let to_trash = |d: &str| -> Result<()> {
+            let cur = self.dir.join(d);
+            if cur.exists() {
+                let t = trash.join(d);
+                remove_tree(&t)?;
+                std::fs::rename(&cur, &t).at(&cur)?;
+            }
+            Ok(())
+        };
+        for d in &plan.moves {
+            let src = staged.join(d);
+            if src.exists() {
+                to_trash(d)?;
+                let dst = self.dir.join(d);
+                std::fs::rename(&src, &dst).at(&dst)?;
+            }
+        }
+        for d in &plan.removes {
+            to_trash(d)?;
+        }
+        for p in &plan.indexes {
+            let src = staged.join("index").join(format!("{p}.json"));
+            if src.exists() {
+                let dst = index.join(format!("{p}.json"));
+                std::fs::rename(&src, &dst).at(&dst)?;
+            }
+        }
+        let m = staged.join(MANIFEST);
+        if m.exists() {
+            let dst = self.dir.join(MANIFEST);
+            std::fs::rename(&m, &dst).at(&dst)?;
+        }
+        sync_dir(&self.dir)?;
+        sync_dir(&index)?;
+        std::fs::remove_file(plan_path).at(plan_path)?;
+        sync_dir(&state)?;
+        drop(_readers_out);
+        remove_tree(&trash)?;
+        remove_tree(&staged)?;
+        Ok(())
+    }
+}
+
+impl Drop for Writer {
+    /// A run that ends without committing (an error) leaves the tileset as it was: its staging
+    /// folder goes, and so does the folder itself if this writer made it and never committed.
+    fn drop(&mut self) {
+        if self.committed {
+            return;
+        }
+        if let Some(s) = self.staging.take() {
+            let _ = std::fs::remove_dir_all(s);
+        }
+        if self.created_dir && !self.dir.join(MANIFEST).exists() {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        } else if self.created_state {
+            let _ = std::fs::remove_dir_all(self.state());
+        }
+    }
+}
+
+/// fsync every folder of a tree (files were synced when written; their names are made durable
+/// here, once per folder rather than once per file).
+fn sync_tree(root: &Path) -> Result<()> {
+    let mut stack = vec![root.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).at(&d)?.flatten() {
+            if e.file_type().is_ok_and(|t| t.is_dir()) {
+                stack.push(e.path());
+            }
+        }
+        sync_dir(&d)?;
+    }
+    Ok(())
+}
