@@ -35,8 +35,16 @@ pub enum Stage {
 pub enum Input {
     /// The embedded synthetic south-pole scene on the Moon.
     Embedded(SceneSpec),
-    /// A DEM file and the body it belongs to (`None`: the body the file names).
-    Dem { path: PathBuf, body: Option<Body> },
+    /// A DEM file and the body it belongs to as the caller chose it.
+    Dem { path: PathBuf, body: BodyChoice },
+}
+
+/// The body to tile a DEM for, as the caller gave it: a preset name, a radius (which forces
+/// that radius whatever the file says), both, or neither (the body the file names).
+#[derive(Clone, Debug, Default)]
+pub struct BodyChoice {
+    pub name: Option<String>,
+    pub radius_m: Option<f64>,
 }
 
 /// What to run.
@@ -93,7 +101,7 @@ pub fn bake(input: &Input, out: &Path, plan: &Plan, progress: &dyn Progress) -> 
                     }
                     Input::Dem { path, body } => {
                         let dem = dem::open(path, plan.tile.max_fill_px)?;
-                        let body = body_for(&dem, body.clone())?;
+                        let body = body_for(&dem, body)?;
                         tiling::tile_dem(&dem, &body, out, &plan.tile, None, progress)?
                     }
                 };
@@ -108,31 +116,38 @@ pub fn bake(input: &Input, out: &Path, plan: &Plan, progress: &dyn Progress) -> 
     Ok(report)
 }
 
-/// The body to tile `dem` for: the one given, checked against the body the file names (PDS3
-/// TARGET_NAME), or the named one when none is given.
-pub fn body_for(dem: &Dem, given: Option<Body>) -> Result<Body> {
+/// The body to tile `dem` for. A radius given by the caller is taken as it is (with the preset's
+/// name when one is named too). A preset name alone is checked against the body the file names
+/// (PDS3 TARGET_NAME): tiling Mars heights on the Moon is refused. Neither: the named body.
+pub fn body_for(dem: &Dem, given: &BodyChoice) -> Result<Body> {
     let path = dem.sources().first().cloned().unwrap_or_default();
-    match (given, dem.target()) {
-        (Some(b), Some(t)) if b.reference.starts_with("radius given") || b.name == "custom" => {
-            let _ = t;
-            Ok(b)
+    if given.radius_m.is_some() {
+        return Body::resolve(given.name.as_deref(), given.radius_m);
+    }
+    match (&given.name, dem.target()) {
+        (Some(n), t) => {
+            let b = Body::preset(n)?;
+            match t {
+                Some(t) if Body::preset(t).is_ok_and(|tb| tb.name != b.name) => {
+                    Err(Error::usage(format!(
+                        "{} is a DEM of {t} but the body {} was given: leave the body out, or give \
+                         a radius to force one",
+                        path.display(),
+                        b.name
+                    )))
+                }
+                _ => Ok(b),
+            }
         }
-        (Some(b), Some(t)) if Body::preset(t).is_ok() && t != b.name => Err(Error::usage(format!(
-            "{} is a DEM of {t} but --body {} was given: drop --body, or give --radius-m to force a \
-             radius",
-            path.display(),
-            b.name
-        ))),
-        (Some(b), _) => Ok(b),
         (None, Some(t)) => Body::preset(t).map_err(|_| {
             Error::usage(format!(
-                "{} names the body '{t}', which has no preset: give --body or --radius-m",
+                "{} names the body '{t}', which has no preset: name a body or give a radius",
                 path.display()
             ))
         }),
         (None, None) => Err(Error::usage(format!(
-            "{} does not say which body it belongs to: give --body (moon, mars, earth, …) or \
-             --radius-m",
+            "{} does not say which body it belongs to: name one (moon, mars, earth, …) or give a \
+             radius",
             path.display()
         ))),
     }

@@ -100,7 +100,7 @@ impl Body {
             })
             .ok_or_else(|| {
                 Error::usage(format!(
-                    "unknown body '{name}': use one of {} or give --radius-m",
+                    "unknown body '{name}': use one of {} or give a radius",
                     Self::preset_names().join(", ")
                 ))
             })
@@ -137,7 +137,7 @@ impl Body {
             },
             (None, Some(r)) => Body::custom("custom", r),
             (None, None) => Err(Error::usage(
-                "no body given: use --body (moon, mars, earth, …) or --radius-m",
+                "no body given: name one (moon, mars, earth, …) or give a radius",
             )),
         }
     }

@@ -24,6 +24,10 @@ pub enum Error {
     /// A parameter given by the caller is out of range or inconsistent.
     #[error("{0}")]
     Usage(String),
+    /// One named option of the caller's is out of range: `param` is the option's field name in
+    /// the library (`near_px`, `tile_size`); a front end shows it as its own flag.
+    #[error("{param} {msg}")]
+    Param { param: &'static str, msg: String },
 }
 
 impl Error {
@@ -47,6 +51,14 @@ impl Error {
     }
     pub fn usage(msg: impl Into<String>) -> Self {
         Error::Usage(msg.into())
+    }
+    /// `param` (an options field name) with what is wrong with its value, e.g.
+    /// `Error::param("near_px", "2000 is outside 0..=1024")`.
+    pub fn param(param: &'static str, msg: impl Into<String>) -> Self {
+        Error::Param {
+            param,
+            msg: msg.into(),
+        }
     }
 }
 

@@ -19,7 +19,50 @@ use crate::error::{Error, Result};
 use crate::layout::{Layout, TileId, MAX_LEVELS};
 use crate::manifest::{self, Tileset};
 use crate::progress::Progress;
+use crate::runner::{self, StageSpec, Start};
 use crate::tileio::{self, AlbedoTile, HeightTile};
+use crate::tileset::writer::Writer;
+use crate::tileset::{Product, STATE_DIR};
+
+/// The tiling stage writes the height (and albedo) tiles every later product derives from.
+pub const STAGE: StageSpec = StageSpec {
+    name: "tile",
+    writes: &[Product::Height, Product::Albedo],
+    format: &[],
+};
+
+/// Refuse to tile into a folder that holds something other than a tileset: a commit replaces
+/// the product folders (`height/`, …) of its output, which must never be a user's own.
+fn refuse_foreign_folder(out: &Path) -> Result<()> {
+    if out.exists() && !out.is_dir() {
+        return Err(Error::usage(format!(
+            "{} exists and is not a folder: give a new or tileset folder as the output",
+            out.display()
+        )));
+    }
+    let Ok(rd) = std::fs::read_dir(out) else {
+        return Ok(());
+    };
+    let mut names: Vec<String> = rd
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    if names.is_empty()
+        || names
+            .iter()
+            .any(|n| n == manifest::MANIFEST || n == STATE_DIR)
+    {
+        return Ok(());
+    }
+    names.sort();
+    names.truncate(3);
+    Err(Error::usage(format!(
+        "{} is not empty and holds no tileset ({}…): penumbra writes only into a new folder, an \
+         empty one or a tileset it made; choose another output folder",
+        out.display(),
+        names.join(", ")
+    )))
+}
 
 /// What the user chose.
 #[derive(Clone, Debug, Serialize)]
@@ -57,23 +100,30 @@ impl Default for TileOptions {
 impl TileOptions {
     pub fn validate(&self) -> Result<()> {
         if !(8..=8192).contains(&self.tile_size) || self.tile_size % 2 != 0 {
-            return Err(Error::usage(format!(
-                "tile size {} is not usable: give an even size from 8 to 8192 (default 512)",
-                self.tile_size
-            )));
+            return Err(Error::param(
+                "tile_size",
+                format!(
+                    "{} is not usable: give an even size from 8 to 8192 (default 512)",
+                    self.tile_size
+                ),
+            ));
         }
         if self.halo < 1 || self.halo >= self.tile_size / 2 {
-            return Err(Error::usage(format!(
-                "halo {} is not usable: give 1 .. {} pixels (default 2)",
-                self.halo,
-                self.tile_size / 2 - 1
-            )));
+            return Err(Error::param(
+                "halo",
+                format!(
+                    "{} is not usable: give 1 .. {} pixels (default 2)",
+                    self.halo,
+                    self.tile_size / 2 - 1
+                ),
+            ));
         }
         if let Some(l) = self.levels {
             if l == 0 || l > MAX_LEVELS {
-                return Err(Error::usage(format!(
-                    "{l} levels is not usable: give 1 .. {MAX_LEVELS}"
-                )));
+                return Err(Error::param(
+                    "levels",
+                    format!("{l} is not usable: give 1 .. {MAX_LEVELS}"),
+                ));
             }
         }
         Ok(())
@@ -177,50 +227,18 @@ pub fn tile_dem(
         "options": opts,
         "levels": levels,
     });
-    let run_key = {
-        let mut h = blake3::Hasher::new();
-        h.update(env!("CARGO_PKG_VERSION").as_bytes());
-        h.update(serde_json::to_string(&files).unwrap_or_default().as_bytes());
-        h.update(
+    let run_key = runner::run_key(
+        &STAGE,
+        &[],
+        &[
+            serde_json::to_string(&files).unwrap_or_default().as_bytes(),
             serde_json::to_string(&albedo_file)
                 .unwrap_or_default()
                 .as_bytes(),
-        );
-        h.update(parameters.to_string().as_bytes());
-        h.finalize().to_hex().to_string()
-    };
-
-    // Resume or start afresh.
-    let manifest_path = out.join(manifest::MANIFEST);
-    let partial_path = out.join(manifest::PARTIAL);
-    if let Ok(existing) = Tileset::load(out) {
-        if existing.run_key == run_key && !partial_path.exists() {
-            let n = existing.coverage.iter().map(|c| c.tiles).sum();
-            return Ok(TileReport {
-                out: out.to_path_buf(),
-                levels,
-                tiles_written: 0,
-                tiles_kept: n,
-                candidates: n,
-                source_pixels: (dem.width() * dem.height()) as u64,
-                output_pixels: 0,
-                up_to_date: true,
-            });
-        }
-    }
-    let previous_key = manifest::partial_run_key(&partial_path);
-    let resume = previous_key.as_deref() == Some(run_key.as_str());
-    if !resume && (manifest_path.exists() || partial_path.exists()) {
-        // A tileset made with other inputs or parameters: its tiles are stale.
-        for sub in ["height", "albedo", "maxmip", "minmax"] {
-            let p = out.join(sub);
-            if p.exists() {
-                std::fs::remove_dir_all(&p).map_err(|e| Error::io(&p, e))?;
-            }
-        }
-        let _ = std::fs::remove_file(&manifest_path);
-    }
-    manifest::write_partial(&partial_path, &run_key)?;
+            parameters.to_string().as_bytes(),
+        ],
+    );
+    refuse_foreign_folder(out)?;
 
     // Candidate tiles: every finest-level tile a footprint point falls in, and their ancestors.
     let finest = levels - 1;
@@ -242,6 +260,27 @@ pub fn tile_dem(
     }
     let candidates: Vec<TileId> = candidates.into_iter().collect();
 
+    // Only now, with the input read and the plan known, touch the output folder.
+    let writer = Writer::begin(out)?;
+    let existing = Tileset::load(out).ok();
+    let run = match runner::start(writer, STAGE, &run_key, existing.as_ref())? {
+        Start::UpToDate => {
+            let n = existing.map_or(0, |e| e.coverage.iter().map(|c| c.tiles).sum());
+            return Ok(TileReport {
+                out: out.to_path_buf(),
+                levels,
+                tiles_written: 0,
+                tiles_kept: n,
+                candidates: n,
+                source_pixels: (dem.width() * dem.height()) as u64,
+                output_pixels: 0,
+                up_to_date: true,
+            });
+        }
+        Start::Run(run) => run,
+    };
+    let (stage_out, resume) = (run.out().to_path_buf(), run.resume());
+
     progress.start("tiling", candidates.len() as u64);
     let results: Vec<Result<Option<TileStats>>> = candidates
         .par_iter()
@@ -253,7 +292,7 @@ pub fn tile_dem(
                 opts,
                 height_shift,
                 albedo.as_ref(),
-                out,
+                &stage_out,
                 resume,
             );
             progress.inc(1);
@@ -330,9 +369,7 @@ pub fn tile_dem(
         parameters,
         run_key,
     };
-    let json = serde_json::to_string_pretty(&tileset).expect("manifest serialises");
-    tileio::write_atomic_bytes(&manifest_path, json.as_bytes())?;
-    std::fs::remove_file(&partial_path).map_err(|e| Error::io(&partial_path, e))?;
+    run.commit(tileset)?;
     let side = layout.stored_size() as u64;
     Ok(TileReport {
         out: out.to_path_buf(),

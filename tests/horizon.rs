@@ -229,7 +229,7 @@ fn fast_matches_reference_on_ldem4_polar_tiles() {
     )
     .unwrap();
     let ts = Tileset::load(dir.path()).unwrap();
-    let src = horizon::TileSource::new(dir.path(), &ts).unwrap();
+    let src = penumbra::tileset::Store::open(dir.path()).unwrap();
     let (lo, hi) = horizon::terrain_range(&ts).unwrap();
     // The south pole is the corner of four tiles of face nz at level 1; each polar tile's
     // context reaches across the pole into the others and into the equatorial faces.

@@ -20,5 +20,9 @@ mod mip;
 // Horizon maps: fast sweep against brute force, analytic terrains, stiff cases, the CLI.
 mod horizon;
 
+// The tileset store and stage runner: one writer, kill -9 and resume, stale products, damaged
+// manifests.
+mod store;
+
 // Horizon stiff and extreme cases: spikes, cones, cliffs, corner, pole, voids, seam, threads.
 mod horizon_cases;

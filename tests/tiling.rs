@@ -9,7 +9,7 @@ use penumbra::progress::NoProgress;
 use penumbra::tileio;
 use penumbra::tiling::{tile_dem, TileOptions};
 
-use crate::util::{analytic, dem_from, global_dem, snapshot};
+use crate::util::{analytic, copy_tree, dem_from, global_dem, snapshot};
 
 fn small_opts() -> TileOptions {
     TileOptions {
@@ -60,22 +60,27 @@ fn reruns_resume_and_stale_tiles_go() {
     let r2 = tile_dem(&dem, &moon(), dir.path(), &opts, None, &NoProgress).unwrap();
     assert!(r2.up_to_date);
 
-    // An interrupted run (marker present, manifest and one tile missing) resumes.
+    // An interrupted run (its staging folder holds all tiles but one, no manifest yet)
+    // resumes: it keeps what the run wrote and gives the same bytes.
+    let again = tempfile::tempdir().unwrap();
     let ts = Tileset::load(dir.path()).unwrap();
+    let staged = again.path().join(".penumbra/staging/tile");
+    std::fs::create_dir_all(&staged).unwrap();
+    copy_tree(&dir.path().join("height"), &staged.join("height"));
     std::fs::write(
-        dir.path().join(manifest::PARTIAL),
+        staged.join("run.json"),
         serde_json::json!({ "run_key": ts.run_key }).to_string(),
     )
     .unwrap();
-    std::fs::remove_file(dir.path().join(manifest::MANIFEST)).unwrap();
-    std::fs::remove_file(dir.path().join("height/2/px/1/3.exr")).unwrap();
-    let r3 = tile_dem(&dem, &moon(), dir.path(), &opts, None, &NoProgress).unwrap();
+    std::fs::remove_file(staged.join("height/2/px/1/3.exr")).unwrap();
+    let r3 = tile_dem(&dem, &moon(), again.path(), &opts, None, &NoProgress).unwrap();
     assert_eq!((r3.tiles_written, r3.tiles_kept), (1, 125));
     assert_eq!(
-        snapshot(dir.path()),
+        snapshot(again.path()),
         before,
         "a resumed run gives the same bytes"
     );
+    assert!(!staged.exists(), "the staging folder goes with the commit");
 
     // Other parameters: the old tiles are stale and removed.
     let opts2 = TileOptions {

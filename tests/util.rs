@@ -78,6 +78,12 @@ pub fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     while let Some(d) = stack.pop() {
         for e in std::fs::read_dir(&d).unwrap() {
             let p = e.unwrap().path();
+            if p.file_name()
+                .is_some_and(|n| n == penumbra::tileset::STATE_DIR)
+            {
+                // The writer's bookkeeping (lock with its pid, indexes), not output.
+                continue;
+            }
             if p.is_dir() {
                 stack.push(p);
             } else {
@@ -87,6 +93,20 @@ pub fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
         }
     }
     out
+}
+
+/// Copy a folder tree.
+pub fn copy_tree(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let t = to.join(e.file_name());
+        if e.file_type().unwrap().is_dir() {
+            copy_tree(&e.path(), &t);
+        } else {
+            std::fs::copy(e.path(), t).unwrap();
+        }
+    }
 }
 
 /// xorshift64*: deterministic and dependency-free.

@@ -19,5 +19,5 @@ pub use self::near::{DEFAULT_NEAR_PX, MAX_NEAR_PX};
 pub use self::stage::{
     build_horizons, context_for, query, reach_rad, read_horizon_exr, terrain_range, tile_path,
     write_horizon_exr, HorizonAnswer, HorizonOptions, HorizonPrecision, HorizonReport, Reach,
-    TileSource, AZIMUTH_CONVENTION, PARTIAL, PATTERN,
+    AZIMUTH_CONVENTION, PATTERN, STAGE,
 };

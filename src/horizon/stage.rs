@@ -5,7 +5,7 @@
 use std::collections::HashMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 use exr::prelude::*;
 use rayon::prelude::*;
@@ -19,11 +19,12 @@ use crate::layout::TileId;
 use crate::manifest::{self, HorizonLevelDistance, HorizonProduct, Tileset};
 use crate::progress::Progress;
 use crate::query;
+use crate::runner::{self, StageSpec, Start};
 use crate::tileio::{self, HeightTile, TileCompression};
+use crate::tileset::writer::Writer;
+use crate::tileset::{self, Product, Store};
 
 pub const PATTERN: &str = "horizon/{level}/{face}/{y}/{x}.exr";
-/// Written at the start of a horizon run and removed at its end.
-pub const PARTIAL: &str = ".penumbra-horizon-partial.json";
 /// Version of the horizon products' layout and convention (part of the run key).
 pub const FORMAT: &str = "penumbra-horizon-1";
 /// Revision of the algorithms' results (part of the run key: a rerun after a change that moves
@@ -114,90 +115,6 @@ pub struct HorizonReport {
     pub pixel_azimuths: u64,
     pub distances: Vec<HorizonLevelDistance>,
     pub up_to_date: bool,
-}
-
-// ---------------------------------------------------------------------------------------------
-// Height tiles on demand
-
-type Cached = (Option<Arc<HeightTile>>, u64);
-
-/// Height tiles of one tileset, loaded once and shared by the contexts that need them.
-pub struct TileSource<'a> {
-    dir: &'a Path,
-    ts: &'a Tileset,
-    pattern: String,
-    /// Loaded tiles (None: not in the tileset) and the context epoch that last used each.
-    cache: Mutex<HashMap<TileId, Cached>>,
-    epoch: std::sync::atomic::AtomicU64,
-}
-
-impl<'a> TileSource<'a> {
-    pub fn new(dir: &'a Path, ts: &'a Tileset) -> Result<TileSource<'a>> {
-        let pattern = ts
-            .products
-            .height
-            .as_ref()
-            .ok_or_else(|| {
-                Error::invalid(
-                    dir.join(manifest::MANIFEST),
-                    "tileset has no height product to compute horizons from",
-                )
-            })?
-            .path
-            .clone();
-        Ok(TileSource {
-            dir,
-            ts,
-            pattern,
-            cache: Mutex::new(HashMap::new()),
-            epoch: 0.into(),
-        })
-    }
-
-    /// The height tile `id`, or None where the tileset has none (coverage gap).
-    pub fn get(&self, id: TileId) -> Result<Option<Arc<HeightTile>>> {
-        let epoch = self.epoch.load(std::sync::atomic::Ordering::Relaxed);
-        if let Some(e) = self.cache.lock().unwrap().get_mut(&id) {
-            e.1 = epoch;
-            return Ok(e.0.clone());
-        }
-        let t = if self.ts.has_tile(id) {
-            let p = tileio::tile_path(
-                self.dir,
-                &self.pattern,
-                id.level,
-                id.face.name(),
-                id.x,
-                id.y,
-            );
-            let t = tileio::read_height_tile(&p)?;
-            let s = self.ts.layout.stored_size();
-            if t.size != s {
-                return Err(Error::invalid(
-                    &p,
-                    format!("tile is {}² but the manifest says {s}²", t.size),
-                ));
-            }
-            Some(Arc::new(t))
-        } else {
-            None
-        };
-        self.cache.lock().unwrap().insert(id, (t.clone(), epoch));
-        Ok(t)
-    }
-
-    /// Forget tiles not used since the previous context when the cache holds more than
-    /// `budget` bytes.
-    fn next_context(&self, budget: u64) {
-        let e = self
-            .epoch
-            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let s = self.ts.layout.stored_size() as u64;
-        let mut c = self.cache.lock().unwrap();
-        if c.len() as u64 * s * s * 5 > budget {
-            c.retain(|_, v| v.1 >= e);
-        }
-    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -348,12 +265,12 @@ fn coverage_box(ts: &Tileset, level: u8, face: Face) -> Option<(i64, i64, i64, i
 /// The context raster of tile `id` with `margin` pixels around it (clipped to the level's
 /// coverage and to the face plane's usable part), and the tile's interior within it.
 pub fn context_for(
-    src: &TileSource,
+    src: &Store,
     id: TileId,
     margin: u64,
     cover: Option<(i64, i64, i64, i64)>,
 ) -> Result<(Context, Rect)> {
-    let ts = src.ts;
+    let ts = src.manifest();
     let lay = ts.layout;
     let s = lay.face_pixels(id.level) as i64;
     let n = lay.tile_size as i64;
@@ -405,7 +322,7 @@ pub fn context_for(
                             return Ok(a.clone());
                         }
                     }
-                    let a = src.get(t)?;
+                    let a = src.height(t)?;
                     last = Some((t, a.clone()));
                     Ok(a)
                 };
@@ -520,7 +437,7 @@ pub fn read_horizon_exr(path: &Path, n: usize) -> Result<(usize, Vec<f32>)> {
 }
 
 pub fn tile_path(dir: &Path, id: TileId) -> PathBuf {
-    tileio::tile_path(dir, PATTERN, id.level, id.face.name(), id.x, id.y)
+    tileset::tile_path(dir, PATTERN, id)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -532,7 +449,7 @@ fn check_layout(dir: &Path, ts: &Tileset) -> Result<()> {
             dir.join(manifest::MANIFEST),
             format!(
                 "horizons need a gnomonic tileset (straight lines on a face are then great \
-                 circles); this one is {}: retile with --projection gnomonic",
+                 circles); this one is {}: retile with the gnomonic projection",
                 ts.layout.projection.name()
             ),
         ));
@@ -543,37 +460,28 @@ fn check_layout(dir: &Path, ts: &Tileset) -> Result<()> {
 fn check_options(opts: &HorizonOptions) -> Result<()> {
     let a = opts.azimuths;
     if !(4..=4096).contains(&a) {
-        return Err(Error::usage(format!("--azimuths {a} is outside 4..=4096")));
+        return Err(Error::param("azimuths", format!("{a} is outside 4..=4096")));
     }
     if !(0.0..=MAX_NEAR_PX).contains(&opts.near_px) {
-        return Err(Error::usage(format!(
-            "--near-px {} is outside 0..={MAX_NEAR_PX}",
-            opts.near_px
-        )));
+        return Err(Error::param(
+            "near_px",
+            format!("{} is outside 0..={MAX_NEAR_PX}", opts.near_px),
+        ));
     }
     Ok(())
 }
 
-/// Compute and store the raw horizon maps of the levels asked.
-pub fn build_horizons(
-    dir: &Path,
-    opts: &HorizonOptions,
-    progress: &dyn Progress,
-) -> Result<HorizonReport> {
-    let mut ts = Tileset::load(dir)?;
-    let manifest_path = dir.join(manifest::MANIFEST);
-    check_layout(dir, &ts)?;
-    check_options(opts)?;
-    let height = ts.products.height.clone().ok_or_else(|| {
-        Error::invalid(
-            &manifest_path,
-            "tileset has no height product to compute horizons from",
-        )
-    })?;
-    let (tmin, tmax) = terrain_range(&ts)
-        .ok_or_else(|| Error::invalid(&manifest_path, "tileset records no height range"))?;
+/// The horizon stage writes the raw maps from the height tiles (and the mipmaps' extrema).
+pub const STAGE: StageSpec = StageSpec {
+    name: "horizon",
+    writes: &[Product::Horizon],
+    format: &[FORMAT, ALGORITHM],
+};
+
+/// The levels a run computes, checked against the tileset.
+fn pick_levels(ts: &Tileset, asked: &Option<Vec<u8>>) -> Result<Vec<u8>> {
     let lay = ts.layout;
-    let levels: Vec<u8> = match &opts.levels {
+    Ok(match asked {
         None => (0..lay.levels).collect(),
         Some(l) => {
             let mut l = l.clone();
@@ -587,44 +495,75 @@ pub fn build_horizons(
             }
             l
         }
-    };
-    let tiles: Vec<TileId> = ts
-        .tile_set()
-        .into_iter()
-        .filter(|t| levels.contains(&t.level))
-        .collect();
-    let n = lay.tile_size as usize;
+    })
+}
+
+/// Refuse a run whose raw maps would exceed `opts.max_output_gib` before compression.
+fn check_output_size(opts: &HorizonOptions, levels: &[u8], tiles: usize, n: usize) -> Result<()> {
     let bytes_per = match opts.precision {
         HorizonPrecision::F16 => 2.0,
         HorizonPrecision::F32 => 4.0,
     };
-    let gib = tiles.len() as f64 * (n * n * opts.azimuths) as f64 * bytes_per / (1u64 << 30) as f64;
+    let gib = tiles as f64 * (n * n * opts.azimuths) as f64 * bytes_per / (1u64 << 30) as f64;
     if gib > opts.max_output_gib {
         return Err(Error::usage(format!(
-            "horizons for levels {levels:?} would write {gib:.1} GiB before compression ({} tiles \
-             × {n}² pixels × {} azimuths × {bytes_per} bytes): choose fewer levels with --levels, \
-             fewer --azimuths, or raise --max-output-gib",
-            tiles.len(),
+            "horizons for levels {levels:?} would write {gib:.1} GiB before compression ({tiles} \
+             tiles × {n}² pixels × {} azimuths × {bytes_per} bytes): choose fewer levels, fewer \
+             azimuths, or raise the output cap",
             opts.azimuths
         )));
     }
-    let run_key = {
-        let mut h = blake3::Hasher::new();
-        h.update(env!("CARGO_PKG_VERSION").as_bytes());
-        h.update(FORMAT.as_bytes());
-        h.update(ALGORITHM.as_bytes());
-        h.update(ts.run_key.as_bytes());
-        h.update(height.path.as_bytes());
-        h.update(serde_json::to_string(opts).unwrap_or_default().as_bytes());
-        h.update(format!("{tmin} {tmax}").as_bytes());
-        h.finalize().to_hex().to_string()
+    Ok(())
+}
+
+/// Compute and store the raw horizon maps of the levels asked.
+pub fn build_horizons(
+    dir: &Path,
+    opts: &HorizonOptions,
+    progress: &dyn Progress,
+) -> Result<HorizonReport> {
+    check_options(opts)?;
+    // Everything that can refuse the run is checked before the tileset's folder is touched.
+    let check = |ts: &Tileset| -> Result<(Vec<u8>, Vec<TileId>, (f64, f64))> {
+        let manifest_path = dir.join(manifest::MANIFEST);
+        check_layout(dir, ts)?;
+        if ts.products.height.is_none() {
+            return Err(Error::invalid(
+                &manifest_path,
+                "tileset has no height product to compute horizons from",
+            ));
+        }
+        let range = terrain_range(ts)
+            .ok_or_else(|| Error::invalid(&manifest_path, "tileset records no height range"))?;
+        let levels = pick_levels(ts, &opts.levels)?;
+        let tiles: Vec<TileId> = ts
+            .tile_set()
+            .into_iter()
+            .filter(|t| levels.contains(&t.level))
+            .collect();
+        check_output_size(opts, &levels, tiles.len(), ts.layout.tile_size as usize)?;
+        Ok((levels, tiles, range))
     };
-    let partial_path = dir.join(PARTIAL);
-    if let Some(p) = &ts.products.horizon {
-        if p.run_key == run_key
-            && !partial_path.exists()
-            && tiles.iter().all(|&id| tile_path(dir, id).exists())
-        {
+    check(&Tileset::load(dir)?)?;
+    let writer = Writer::begin(dir)?;
+    let store = Store::open_unlocked(dir)?;
+    let (levels, tiles, (tmin, tmax)) = check(store.manifest())?;
+    let ts = store.manifest();
+    let lay = ts.layout;
+    let n = lay.tile_size as usize;
+    let height_path = &ts.products.height.as_ref().expect("checked").path;
+    let run_key = runner::run_key(
+        &STAGE,
+        &[&ts.run_key],
+        &[
+            height_path.as_bytes(),
+            serde_json::to_string(opts).unwrap_or_default().as_bytes(),
+            format!("{tmin} {tmax}").as_bytes(),
+        ],
+    );
+    let run = match runner::start(writer, STAGE, &run_key, Some(ts))? {
+        Start::UpToDate => {
+            let p = ts.products.horizon.as_ref().expect("up to date");
             return Ok(HorizonReport {
                 out: dir.to_path_buf(),
                 levels,
@@ -638,21 +577,9 @@ pub fn build_horizons(
                 up_to_date: true,
             });
         }
-    }
-    let resume = manifest::partial_run_key(&partial_path).as_deref() == Some(run_key.as_str());
-    if !resume {
-        let p = dir.join("horizon");
-        if p.exists() {
-            std::fs::remove_dir_all(&p).map_err(|e| Error::io(&p, e))?;
-        }
-        if ts.products.horizon.take().is_some() {
-            let json = serde_json::to_string_pretty(&ts).expect("manifest serialises");
-            tileio::write_atomic_bytes(&manifest_path, json.as_bytes())?;
-        }
-    }
-    manifest::write_partial(&partial_path, &run_key)?;
+        Start::Run(run) => run,
+    };
 
-    let src = TileSource::new(dir, &ts)?;
     let mut covers = HashMap::new();
     let mut dist: Vec<HorizonLevelDistance> = levels
         .iter()
@@ -666,8 +593,23 @@ pub fn build_horizons(
     let (mut written, mut kept, mut pixaz) = (0u64, 0u64, 0u64);
     progress.start("horizons", tiles.len() as u64);
     for &id in &tiles {
-        let out = tile_path(dir, id);
-        if resume
+        let out = tile_path(run.out(), id);
+        let tile = store.height(id)?.expect("listed tiles exist");
+        let top = interior_max(&tile, lay.halo as usize, n);
+        // The distances are recorded for every tile, kept ones too, so that a resumed run's
+        // manifest is the uninterrupted run's.
+        let reach = top.map(|top| {
+            let rad = reach_rad(ts.body.radius_m, tmin, tmax, top as f64);
+            let reach = margin_for(ts, id, rad, opts.max_margin_px);
+            let d = dist.iter_mut().find(|d| d.level == id.level).unwrap();
+            d.needed_km = d.needed_km.max(rad * ts.body.radius_m / 1000.0);
+            d.max_margin_px = d.max_margin_px.max(reach.margin_px);
+            if reach.margin_px < reach.needed_px {
+                d.tiles_capped += 1;
+            }
+            reach
+        });
+        if run.resume()
             && out.exists()
             && read_horizon_exr(&out, n).is_ok_and(|(a, _)| a == opts.azimuths)
         {
@@ -675,22 +617,11 @@ pub fn build_horizons(
             progress.inc(1);
             continue;
         }
-        let tile = src.get(id)?.expect("listed tiles exist");
-        let top = interior_max(&tile, lay.halo as usize, n);
-        let elev = if let Some(top) = top {
-            let rad = reach_rad(ts.body.radius_m, tmin, tmax, top as f64);
-            let reach = margin_for(&ts, id, rad, opts.max_margin_px);
-            let d = dist.iter_mut().find(|d| d.level == id.level).unwrap();
-            d.needed_km = d.needed_km.max(rad * ts.body.radius_m / 1000.0);
-            d.max_margin_px = d.max_margin_px.max(reach.margin_px);
-            if reach.margin_px < reach.needed_px {
-                d.tiles_capped += 1;
-            }
+        let elev = if let Some(reach) = reach {
             let cover = *covers
                 .entry((id.level, id.face))
-                .or_insert_with(|| coverage_box(&ts, id.level, id.face));
-            let (ctx, rect) = context_for(&src, id, reach.margin_px, cover)?;
-            src.next_context(1 << 30);
+                .or_insert_with(|| coverage_box(ts, id.level, id.face));
+            let (ctx, rect) = context_for(&store, id, reach.margin_px, cover)?;
             pixaz += (n * n * opts.azimuths) as u64;
             horizons_with(&ctx, rect, opts.azimuths, opts.method, opts.near_px)
         } else {
@@ -708,17 +639,8 @@ pub fn build_horizons(
         progress.inc(1);
     }
     progress.finish();
-    let mut done_levels = ts
-        .products
-        .horizon
-        .as_ref()
-        .filter(|_| resume)
-        .map(|p| p.levels.clone())
-        .unwrap_or_default();
-    done_levels.extend(&levels);
-    done_levels.sort_unstable();
-    done_levels.dedup();
-    ts.products.horizon = Some(HorizonProduct {
+    let mut manifest = ts.clone();
+    manifest.products.horizon = Some(HorizonProduct {
         path: PATTERN.into(),
         channel: "elevation".into(),
         precision: opts.precision.name().into(),
@@ -727,15 +649,13 @@ pub fn build_horizons(
         layout: LAYOUT.into(),
         method: opts.method.name().into(),
         near_px: (opts.method == Method::Fast).then_some(opts.near_px),
-        levels: done_levels,
+        levels: levels.clone(),
         terrain_min_m: tmin,
         terrain_max_m: tmax,
         distances: dist.clone(),
         run_key,
     });
-    let json = serde_json::to_string_pretty(&ts).expect("manifest serialises");
-    tileio::write_atomic_bytes(&manifest_path, json.as_bytes())?;
-    std::fs::remove_file(&partial_path).map_err(|e| Error::io(&partial_path, e))?;
+    run.commit(manifest)?;
     Ok(HorizonReport {
         out: dir.to_path_buf(),
         levels,
@@ -806,10 +726,11 @@ pub fn query(
     let (method, azimuths) = (opts.method, opts.azimuths);
     query::check_latlon(lat, lon)?;
     check_options(opts)?;
-    let ts = Tileset::load(dir)?;
-    check_layout(dir, &ts)?;
-    let level = query::pick_level(&ts, level)?;
-    let (tile, px, py) = query::locate(&ts, lat, lon, level);
+    let store = Store::open(dir)?;
+    let ts = store.manifest();
+    check_layout(dir, ts)?;
+    let level = query::pick_level(ts, level)?;
+    let (tile, px, py) = query::locate(ts, lat, lon, level);
     if !ts.has_tile(tile) {
         return Err(Error::usage(format!(
             "no height tile covers {lat}°, {lon}° at level {level} (tile {tile}): the source DEM \
@@ -823,8 +744,7 @@ pub fn query(
         (px.round().max(0.0) as usize).min(n - 1),
         (py.round().max(0.0) as usize).min(n - 1),
     );
-    let src = TileSource::new(dir, &ts)?;
-    let t = src.get(tile)?.expect("covered");
+    let t = store.height(tile)?.expect("covered");
     let h = lay.halo as usize;
     let height = t.height[(j + h) * t.size + i + h];
     if height.is_nan() {
@@ -854,7 +774,7 @@ pub fn query(
             (e, "stored", 0, 0)
         }
         None => {
-            let (tmin, tmax) = terrain_range(&ts).ok_or_else(|| {
+            let (tmin, tmax) = terrain_range(ts).ok_or_else(|| {
                 Error::invalid(
                     dir.join(manifest::MANIFEST),
                     "tileset records no height range",
@@ -862,9 +782,9 @@ pub fn query(
             })?;
             let top = interior_max(&t, h, n).unwrap_or(height);
             let rad = reach_rad(ts.body.radius_m, tmin, tmax, top as f64);
-            let reach = margin_for(&ts, tile, rad, opts.max_margin_px);
-            let cover = coverage_box(&ts, level, tile.face);
-            let (ctx, rect) = context_for(&src, tile, reach.margin_px, cover)?;
+            let reach = margin_for(ts, tile, rad, opts.max_margin_px);
+            let cover = coverage_box(ts, level, tile.face);
+            let (ctx, rect) = context_for(&store, tile, reach.margin_px, cover)?;
             let one = Rect {
                 x0: rect.x0 + i,
                 y0: rect.y0 + j,

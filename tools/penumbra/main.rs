@@ -10,8 +10,7 @@ use std::process::ExitCode;
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
 
-use penumbra::bake::{self, Input, Plan, Stage};
-use penumbra::body::Body;
+use penumbra::bake::{self, BodyChoice, Input, Plan, Stage};
 use penumbra::cube::Projection;
 use penumbra::dem::Resampling;
 use penumbra::horizon::{HorizonOptions, HorizonPrecision, Method};
@@ -283,11 +282,11 @@ struct BakeArgs {
     horizon_levels: Option<Vec<u8>>,
 }
 
-fn body_arg(b: &BodyArgs) -> Result<Option<Body>> {
-    if b.body.is_none() && b.radius_m.is_none() {
-        return Ok(None);
-    }
-    Ok(Some(Body::resolve(b.body.as_deref(), b.radius_m)?))
+fn body_arg(b: &BodyArgs) -> Result<BodyChoice> {
+    Ok(BodyChoice {
+        name: b.body.clone(),
+        radius_m: b.radius_m,
+    })
 }
 
 fn run(cli: Cli) -> Result<()> {
@@ -432,7 +431,12 @@ fn main() -> ExitCode {
                     return ExitCode::SUCCESS;
                 }
             }
-            eprintln!("penumbra: error: {e:#}");
+            // The library names an out-of-range option by its field; show the flag instead.
+            if let Some(penumbra::Error::Param { param, msg }) = e.downcast_ref() {
+                eprintln!("penumbra: error: --{} {msg}", param.replace('_', "-"));
+            } else {
+                eprintln!("penumbra: error: {e:#}");
+            }
             ExitCode::from(2)
         }
     }

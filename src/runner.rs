@@ -1,0 +1,124 @@
+//! The stage runner: what every stage that writes a tileset product has in common. A stage
+//! declares a [`StageSpec`] (its name, the products it writes, the version strings of its
+//! format and algorithm); the runner derives its run key, takes the tileset's writer lock,
+//! answers "up to date" only when the manifest's key matches *and* every file the product's
+//! index lists is on disk, resumes an interrupted run of the same key, and commits the result,
+//! which invalidates every product downstream of the ones written (from
+//! [`Product::reads`], without the stage naming them).
+//!
+//! A stage's own work: validate its inputs before calling [`start`] (a refused run touches
+//! nothing), write its files below [`Run::out`] (keeping those a resumed run already made), and
+//! hand its updated manifest to [`Run::commit`].
+
+use std::path::Path;
+
+use crate::error::Result;
+use crate::manifest::Tileset;
+use crate::tileset::writer::{Staging, Writer};
+use crate::tileset::Product;
+
+/// What a stage declares.
+#[derive(Clone, Copy, Debug)]
+pub struct StageSpec {
+    /// Name of the stage (its staging folder, progress label).
+    pub name: &'static str,
+    /// Products it writes; the first is the one whose run key decides "up to date".
+    pub writes: &'static [Product],
+    /// Version strings of its output format and algorithms: a change recomputes.
+    pub format: &'static [&'static str],
+}
+
+/// The run key of a stage: the tool version, the stage's format, the run keys of the products
+/// it reads and its parameters. Equal keys mean identical output.
+pub fn run_key(spec: &StageSpec, inputs: &[&str], params: &[&[u8]]) -> String {
+    let mut h = blake3::Hasher::new();
+    h.update(env!("CARGO_PKG_VERSION").as_bytes());
+    for f in spec.format {
+        h.update(f.as_bytes());
+    }
+    for k in inputs {
+        h.update(k.as_bytes());
+    }
+    for p in params {
+        h.update(p);
+    }
+    h.finalize().to_hex().to_string()
+}
+
+/// A run under way.
+pub struct Run {
+    spec: StageSpec,
+    writer: Writer,
+    staging: Staging,
+}
+
+/// What [`start`] found.
+pub enum Start {
+    /// The tileset already holds this stage's output for this run key, every file present.
+    UpToDate,
+    Run(Run),
+}
+
+/// Begin a stage on the tileset in `dir` (made if missing). `current` gives the manifest as
+/// the stage read it *under the writer lock* (None: no tileset yet); see [`lock_and_load`].
+pub fn start(
+    writer: Writer,
+    spec: StageSpec,
+    key: &str,
+    current: Option<&Tileset>,
+) -> Result<Start> {
+    if let Some(ts) = current {
+        let primary = spec.writes[0];
+        if primary.recorded_key(ts) == Some(key)
+            && spec
+                .writes
+                .iter()
+                .filter(|p| p.recorded_key(ts).is_some())
+                .all(|&p| writer.verify(p))
+        {
+            return Ok(Start::UpToDate);
+        }
+    }
+    let mut writer = writer;
+    let staging = writer.stage(spec.name, key)?;
+    Ok(Start::Run(Run {
+        spec,
+        writer,
+        staging,
+    }))
+}
+
+/// Take the writer lock of an existing tileset and read its manifest under it. Check the
+/// tileset (and the stage's options) before: a refused run must not write into the folder.
+pub fn lock_and_load(dir: &Path) -> Result<(Writer, Tileset)> {
+    let w = Writer::begin(dir)?;
+    let ts = Tileset::load(dir)?;
+    Ok((w, ts))
+}
+
+impl Run {
+    /// Root under which the run writes its product folders (`height/…`, `maxmip/…`).
+    pub fn out(&self) -> &Path {
+        &self.staging.root
+    }
+
+    /// True when an interrupted run of the same key left files to keep.
+    pub fn resume(&self) -> bool {
+        self.staging.resume
+    }
+
+    /// The tileset's folder.
+    pub fn dir(&self) -> &Path {
+        self.writer.dir()
+    }
+
+    /// Swap the finished run in with `manifest` as the tileset's manifest.
+    pub fn commit(self, manifest: Tileset) -> Result<()> {
+        let Run {
+            spec,
+            mut writer,
+            staging,
+        } = self;
+        writer.commit(staging, spec.writes, manifest)
+    }
+}

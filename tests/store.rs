@@ -1,0 +1,460 @@
+//! The tileset store and the stage runner through the CLI: one writer at a time, killed runs
+//! that resume to the same bytes, retiles that leave no stale product behind, up-to-date
+//! checks that look at the files, and a corpus of damaged manifests that must be refused
+//! (exit 2, the file and field named) without touching the tileset.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use crate::util::{copy_tree, penumbra_bin, snapshot, Rng};
+
+fn run(args: &[&str]) -> Output {
+    penumbra_bin().args(args).output().unwrap()
+}
+
+fn ok(args: &[&str]) {
+    let o = run(args);
+    assert!(
+        o.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+/// A small tileset of the embedded scene with every product: tiles, mipmaps, horizons.
+const BAKE: &[&str] = &[
+    "bake",
+    "--scene-size",
+    "1024",
+    "--levels",
+    "4",
+    "--tile-size",
+    "32",
+    "--horizon-levels",
+    "3",
+];
+
+fn bake(out: &Path, extra: &[&str]) -> Command {
+    let mut c = penumbra_bin();
+    c.args(BAKE)
+        .args(["--out", out.to_str().unwrap()])
+        .args(extra);
+    c
+}
+
+/// Paths of temp files and staging folders left anywhere below `dir`.
+fn leftovers(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            let name = e.file_name().to_string_lossy().into_owned();
+            if name.contains(".tmp.") || name == "staging" && has_entries(&p) || name == "trash" {
+                out.push(p.clone());
+            }
+            if p.is_dir() {
+                stack.push(p);
+            }
+        }
+    }
+    out
+}
+
+fn has_entries(p: &Path) -> bool {
+    std::fs::read_dir(p).is_ok_and(|mut r| r.next().is_some())
+}
+
+fn wait_with_timeout(mut child: Child, limit: Duration) -> Output {
+    let t0 = Instant::now();
+    loop {
+        if child.try_wait().unwrap().is_some() {
+            return child.wait_with_output().unwrap();
+        }
+        if t0.elapsed() > limit {
+            child.kill().unwrap();
+            panic!("a run took longer than {limit:?}");
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+#[test]
+fn killed_runs_resume_to_the_uninterrupted_bytes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let reference = tmp.path().join("reference");
+    let t0 = Instant::now();
+    let o = bake(&reference, &[]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let full = t0.elapsed();
+    let want = snapshot(&reference);
+    // Ten kill -9 moments spread over the whole bake (scene, tiling, mipmaps, horizons), each
+    // followed by a rerun to completion.
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let out = tmp.path().join("killed");
+    let mut interrupted = 0;
+    for k in 0..10 {
+        let frac = (k as f64 + rng.unit()) / 10.0;
+        let at = full.mul_f64(frac);
+        let mut child = bake(&out, &[])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(at);
+        if child.try_wait().unwrap().is_none() {
+            interrupted += 1;
+        }
+        child.kill().unwrap(); // SIGKILL
+        child.wait().unwrap();
+        let o = wait_with_timeout(
+            bake(&out, &["--json"]).spawn().unwrap(),
+            Duration::from_secs(600),
+        );
+        assert!(
+            o.status.success(),
+            "rerun after kill {k}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert_eq!(snapshot(&out), want, "rerun after a kill at {at:?} differs");
+        assert!(leftovers(&out).is_empty(), "{:?}", leftovers(&out));
+        // Start the next trial from nothing.
+        std::fs::remove_dir_all(&out).unwrap();
+    }
+    assert!(
+        interrupted >= 5,
+        "only {interrupted} of 10 kills hit a running bake"
+    );
+}
+
+#[test]
+fn a_second_writer_is_refused_at_once_and_the_first_wins() {
+    let tmp = tempfile::tempdir().unwrap();
+    let reference = tmp.path().join("reference");
+    ok(&[BAKE, &["--out", reference.to_str().unwrap()]].concat());
+    let out = tmp.path().join("shared");
+    let first = bake(&out, &[])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // Wait until the first run holds the lock (it reads its input first).
+    let lock = out.join(".penumbra/lock");
+    let t0 = Instant::now();
+    while !std::fs::read_to_string(&lock).is_ok_and(|s| s.trim() == first.id().to_string()) {
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "the first writer never locked"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    // Another writer with other parameters, into the same folder.
+    let t1 = Instant::now();
+    let second = bake(&out, &["--prefilter", "point"]).output().unwrap();
+    let refused_in = t1.elapsed();
+    let first = wait_with_timeout(first, Duration::from_secs(600));
+    assert!(first.status.success());
+    assert_eq!(second.status.code(), Some(2));
+    let e = String::from_utf8_lossy(&second.stderr);
+    assert!(e.contains(&format!("process {}", first_pid(&lock))), "{e}");
+    assert!(
+        refused_in < Duration::from_secs(30),
+        "refused after {refused_in:?}"
+    );
+    assert_eq!(
+        snapshot(&out),
+        snapshot(&reference),
+        "the tileset is the first run's"
+    );
+}
+
+fn first_pid(lock: &Path) -> String {
+    std::fs::read_to_string(lock).unwrap().trim().to_string()
+}
+
+#[test]
+fn retile_with_other_parameters_leaves_no_stale_product() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("t");
+    ok(&[BAKE, &["--out", out.to_str().unwrap()]].concat());
+    let before = snapshot(&out);
+    assert!(before.keys().any(|k| k.starts_with("horizon/")));
+    // Retile alone, with another prefilter: mipmaps and horizons of the old heights must go.
+    let o = run(&[
+        "bake",
+        "--scene-size",
+        "1024",
+        "--levels",
+        "4",
+        "--tile-size",
+        "32",
+        "--prefilter",
+        "point",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let after = snapshot(&out);
+    assert!(
+        !after.keys().any(|k| k.starts_with("horizon/")),
+        "old horizon maps remain"
+    );
+    for (k, v) in &after {
+        if k.starts_with("maxmip/") || k.starts_with("minmax/") {
+            assert_ne!(before.get(k), Some(v), "{k} is the old run's");
+        }
+    }
+    let m: serde_json::Value = serde_json::from_slice(&after["tileset.json"]).unwrap();
+    assert!(m["products"].get("horizon").is_none());
+}
+
+#[test]
+fn up_to_date_only_when_the_files_are_there() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("t");
+    let o = out.to_str().unwrap();
+    ok(&[BAKE, &["--out", o]].concat());
+    let want = snapshot(&out);
+    let r = run(&["mip", o, "--json"]);
+    let j: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    assert_eq!(j["up_to_date"], true);
+    // Products deleted or damaged behind the manifest's back are rebuilt, not vouched for.
+    std::fs::remove_dir_all(out.join("maxmip")).unwrap();
+    std::fs::remove_dir_all(out.join("minmax")).unwrap();
+    let r = run(&["mip", o, "--json"]);
+    let j: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    assert_eq!(
+        j["up_to_date"],
+        false,
+        "{}",
+        String::from_utf8_lossy(&r.stderr)
+    );
+    let h = snapshot(&out)
+        .into_keys()
+        .find(|k| k.starts_with("horizon/"))
+        .unwrap();
+    std::fs::write(out.join(&h), b"truncated").unwrap();
+    let r = run(&[
+        "horizon",
+        o,
+        "--levels",
+        "3",
+        "--azimuths",
+        "360",
+        "--compression",
+        "zip",
+        "--json",
+    ]);
+    let j: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    assert_eq!(
+        j["up_to_date"],
+        false,
+        "{}",
+        String::from_utf8_lossy(&r.stderr)
+    );
+    assert_eq!(snapshot(&out), want);
+}
+
+/// One damage to a manifest: the field path and a new value (None: remove the key).
+fn damages() -> Vec<(String, Option<serde_json::Value>)> {
+    use serde_json::json;
+    let mut d: Vec<(String, Option<serde_json::Value>)> = Vec::new();
+    let numbers = [
+        "layout.tile_size",
+        "layout.halo",
+        "layout.levels",
+        "body.radius_m",
+        "coverage.0.tiles",
+        "coverage.0.tiles_per_face",
+        "coverage.0.level",
+        "coverage.3.level",
+        "products.height.min_m",
+        "products.height.max_m",
+        "products.horizon.azimuths",
+        "products.horizon.near_px",
+        "products.horizon.terrain_min_m",
+        "products.mip.global_max_m",
+        "source.pixel_size_m",
+        "format_version",
+    ];
+    let values = [
+        json!(0),
+        json!(-1),
+        json!(1e300),
+        json!(18446744073709551615u64),
+        json!(4294967296u64),
+        json!("12"),
+        json!(null),
+        json!([1]),
+    ];
+    for f in numbers {
+        for v in &values {
+            d.push((f.to_string(), Some(v.clone())));
+        }
+    }
+    for f in [
+        "products.height.path",
+        "products.mip.max_path",
+        "products.mip.minmax_path",
+        "products.mip.face_path",
+        "products.horizon.path",
+    ] {
+        for v in [
+            "../outside/{level}/{face}/{y}/{x}.exr",
+            "/etc/{level}/{face}/{y}/{x}.exr",
+            "height/{level}/{face}/{y}.exr",
+            "",
+            "height/{level}/{face}/{y}/{x}/{z}.exr",
+            "horizon/../../{level}/{face}/{y}/{x}.exr",
+        ] {
+            d.push((f.to_string(), Some(json!(v))));
+        }
+        d.push((f.to_string(), None));
+        d.push((f.to_string(), Some(json!(7))));
+    }
+    for f in [
+        "products",
+        "products.height",
+        "layout",
+        "coverage",
+        "body",
+        "run_key",
+        "coverage.1.faces",
+    ] {
+        d.push((f.to_string(), None));
+    }
+    d.push(("coverage.2.faces.nz".into(), Some(json!([[0, 0, 99]]))));
+    d.push(("coverage.2.faces.nz".into(), Some(json!([[99, 0, 0]]))));
+    d.push(("coverage.2.faces.nz".into(), Some(json!([[0, 3, 1]]))));
+    d.push(("coverage.2.faces.nz".into(), Some(json!("all"))));
+    d.push(("layout.projection".into(), Some(json!("mercator"))));
+    d.push(("products.horizon.precision".into(), Some(json!("f8"))));
+    d.push(("products.horizon.method".into(), Some(json!("magic"))));
+    d.push(("products.horizon.levels".into(), Some(json!([200]))));
+    d.push(("products.mip.precision".into(), Some(json!("f64"))));
+    d.push(("format".into(), Some(json!("something-else"))));
+    d
+}
+
+fn set_path(v: &mut serde_json::Value, path: &str, new: Option<serde_json::Value>) {
+    let parts: Vec<&str> = path.split('.').collect();
+    let mut cur = v;
+    for p in &parts[..parts.len() - 1] {
+        cur = match p.parse::<usize>() {
+            Ok(i) => &mut cur[i],
+            Err(_) => &mut cur[*p],
+        };
+    }
+    let last = parts[parts.len() - 1];
+    match (new, last.parse::<usize>()) {
+        (Some(n), Ok(i)) => cur[i] = n,
+        (Some(n), Err(_)) => cur[last] = n,
+        (None, _) => {
+            if let Some(o) = cur.as_object_mut() {
+                o.remove(last);
+            }
+        }
+    }
+}
+
+#[test]
+fn damaged_manifests_are_refused_and_left_alone() {
+    let tmp = tempfile::tempdir().unwrap();
+    let good = tmp.path().join("good");
+    ok(&[BAKE, &["--out", good.to_str().unwrap()]].concat());
+    let text = std::fs::read_to_string(good.join("tileset.json")).unwrap();
+    let original: serde_json::Value = serde_json::from_str(&text).unwrap();
+
+    let mut cases: Vec<(String, Vec<u8>)> = Vec::new();
+    for (path, value) in damages() {
+        let mut v = original.clone();
+        set_path(&mut v, &path, value.clone());
+        cases.push((
+            format!("{path} = {value:?}"),
+            serde_json::to_vec_pretty(&v).unwrap(),
+        ));
+    }
+    cases.push(("empty file".into(), Vec::new()));
+    cases.push((
+        "truncated".into(),
+        text.as_bytes()[..text.len() / 2].to_vec(),
+    ));
+    cases.push(("not JSON".into(), b"\x00\xff garbage".to_vec()));
+    cases.push(("a JSON array".into(), b"[]".to_vec()));
+    let mut huge = text.clone().into_bytes();
+    huge.extend(std::iter::repeat_n(b' ', 70 << 20));
+    cases.push(("70 MiB of padding".into(), huge));
+    assert!(cases.len() >= 100, "{} cases", cases.len());
+
+    let mut refused = 0;
+    let mut accepted = 0;
+    let dir = tmp.path().join("case");
+    for (i, (what, bytes)) in cases.iter().enumerate() {
+        // Copy the good tileset and damage its manifest.
+        let _ = std::fs::remove_dir_all(&dir);
+        copy_tree(&good, &dir);
+        std::fs::write(dir.join("tileset.json"), bytes).unwrap();
+        let before = snapshot(&dir);
+        let d = dir.to_str().unwrap();
+        // Reading and writing commands, one per case in turn.
+        let cmd: Vec<&str> = match i % 5 {
+            0 => vec!["info", d, "--json"],
+            1 => vec!["query", "height", d, "--lat", "-89.9", "--lon", "0"],
+            2 => vec![
+                "query", "mip", d, "--lat", "-89.9", "--lon", "0", "--level", "1",
+            ],
+            3 => vec!["mip", d],
+            _ => vec!["horizon", d, "--levels", "3", "--azimuths", "8"],
+        };
+        let o = wait_with_timeout(
+            penumbra_bin()
+                .args(&cmd)
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap(),
+            Duration::from_secs(120),
+        );
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(!e.contains("panicked"), "{what}: {cmd:?} panicked: {e}");
+        match o.status.code() {
+            Some(0) => accepted += 1,
+            Some(2) => {
+                refused += 1;
+                assert!(e.contains("tileset.json"), "{what}: {cmd:?}: {e}");
+                assert_eq!(
+                    snapshot(&dir),
+                    before,
+                    "{what}: {cmd:?} altered the tileset"
+                );
+                assert!(
+                    !dir.join(".penumbra/staging").exists()
+                        || !has_entries(&dir.join(".penumbra/staging")),
+                    "{what}: staging left behind"
+                );
+            }
+            c => panic!("{what}: {cmd:?} exited {c:?}: {e}"),
+        }
+    }
+    eprintln!(
+        "damaged manifests: {} cases, {refused} refused, {accepted} accepted",
+        cases.len()
+    );
+    assert!(refused >= 90, "only {refused} of {} refused", cases.len());
+}
+
+#[test]
+fn a_manifest_that_is_a_device_is_not_read_to_the_end() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path().join("t");
+    std::fs::create_dir(&d).unwrap();
+    #[cfg(unix)]
+    std::os::unix::fs::symlink("/dev/zero", d.join("tileset.json")).unwrap();
+    #[cfg(unix)]
+    {
+        let o = run(&["info", d.to_str().unwrap()]);
+        assert_eq!(o.status.code(), Some(2));
+        assert!(String::from_utf8_lossy(&o.stderr).contains("too large"));
+    }
+}
