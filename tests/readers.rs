@@ -1343,7 +1343,8 @@ fn exr_damaged_inputs_fail_cleanly() {
 // ------------------------------------------------------------------------------------------
 
 fn shared() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+    // This test binary belongs to tools/penumbra; the repository root is two levels up.
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
     if p.is_dir() {
         Some(p)
     } else {

@@ -5,7 +5,12 @@ use penumbra::dem::{Crs, Dem, DemParts, GeoRef, Samples};
 
 /// `../shared/data` beside the repository, or `None` (the caller prints a skip message).
 pub fn shared_data() -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+    // This test binary belongs to tools/penumbra; the repository root is two levels up.
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .ancestors()
+        .nth(2)
+        .expect("tools/penumbra lies two levels below the repository root")
+        .join("../shared/data");
     if p.is_dir() {
         Some(p)
     } else {
