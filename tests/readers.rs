@@ -1,10 +1,12 @@
 //! DEM readers: synthetic files written to temp folders (good, damaged, truncated, absurd, not a
 //! DEM at all) and the real products in ../shared/data when that folder is present.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use penumbra::dem::{self, Crs, Dem, Resampling, DEFAULT_MAX_FILL_PX};
 use penumbra::Error;
+
+use crate::util::shared_data;
 
 fn open(p: &Path) -> penumbra::Result<Dem> {
     dem::open(p, DEFAULT_MAX_FILL_PX)
@@ -1342,19 +1344,9 @@ fn exr_damaged_inputs_fail_cleanly() {
 // Real data (../shared/data)
 // ------------------------------------------------------------------------------------------
 
-fn shared() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
-    if p.is_dir() {
-        Some(p)
-    } else {
-        eprintln!("skipping: ../shared/data not found");
-        None
-    }
-}
-
 #[test]
 fn real_lola_ldem4() {
-    let Some(data) = shared() else { return };
+    let Some(data) = shared_data() else { return };
     for name in ["LDEM_4.LBL", "LDEM_4.IMG"] {
         let d = open(&data.join("lola_ldem4").join(name)).unwrap();
         assert_eq!((d.width(), d.height()), (1440, 720));
@@ -1395,7 +1387,7 @@ fn real_lola_ldem4() {
 
 #[test]
 fn real_mola_megdr() {
-    let Some(data) = shared() else { return };
+    let Some(data) = shared_data() else { return };
     let d = open(&data.join("mola_megt90n000cb/megt90n000cb.lbl")).unwrap();
     let g = d.georef();
     assert!(
@@ -1428,7 +1420,7 @@ fn real_mola_megdr() {
 
 #[test]
 fn real_srtm_hawaii() {
-    let Some(data) = shared() else { return };
+    let Some(data) = shared_data() else { return };
     let d = open(&data.join("srtm3/N19W156.hgt")).unwrap();
     assert_eq!(d.void_counts(), (94, 0));
     let (_, (hi, hi_lat, hi_lon)) = extremes(&d);
@@ -1447,7 +1439,7 @@ fn real_srtm_hawaii() {
 
 #[test]
 fn real_lola_shoemaker_geotiff() {
-    let Some(data) = shared() else { return };
+    let Some(data) = shared_data() else { return };
     let d = open(&data.join("lola_shoemaker_1k/Shoemaker_final_adj_5mpp_surf_1k.tif")).unwrap();
     assert_eq!((d.width(), d.height()), (256, 256));
     let (lat, lon) = d.to_latlon(128.0, 128.0);
@@ -1467,7 +1459,7 @@ fn real_lola_shoemaker_geotiff() {
 
 #[test]
 fn real_mola_gale_raw() {
-    let Some(data) = shared() else { return };
+    let Some(data) = shared_data() else { return };
     let d = open(&data.join("mola_gale_128ppd_crop/gale-mola.bin")).unwrap();
     assert_eq!((d.width(), d.height()), (897, 897));
     let (v, m) = d.sample(-4.5895, 137.4417, Resampling::Bilinear);

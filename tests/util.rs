@@ -3,15 +3,55 @@ use std::path::{Path, PathBuf};
 
 use penumbra::dem::{Crs, Dem, DemParts, GeoRef, Samples};
 
-/// `../shared/data` beside the repository, or `None` (the caller prints a skip message).
+/// The real DEMs every real-data test reads: `$PENUMBRA_SHARED_DATA` when set, else
+/// `../shared/data` beside the repository root. When the folder is absent the test is skipped
+/// (`None`, after a message), except under CI (`CI` set, and not `false` or `0`), where it
+/// fails: a CI run must never pass by skipping the real-DEM checks.
 pub fn shared_data() -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
-    if p.is_dir() {
-        Some(p)
+    let dir = match std::env::var_os("PENUMBRA_SHARED_DATA") {
+        Some(p) => PathBuf::from(p),
+        // This test binary belongs to tools/penumbra; the repository root is two levels up.
+        None => Path::new(env!("CARGO_MANIFEST_DIR"))
+            .ancestors()
+            .nth(2)
+            .expect("tools/penumbra lies two levels below the repository root")
+            .join("../shared/data"),
+    };
+    let ci = std::env::var("CI").is_ok_and(|v| !matches!(v.trim(), "" | "0" | "false"));
+    found_or_skip(dir, ci)
+}
+
+/// `Some(dir)` when it is a folder; otherwise a skip (`None`), or a panic when `ci`.
+fn found_or_skip(dir: PathBuf, ci: bool) -> Option<PathBuf> {
+    if dir.is_dir() {
+        Some(dir)
+    } else if ci {
+        panic!(
+            "{}: real-DEM folder not found, and CI is set: CI must run the real-DEM tests \
+             (put the data in ../shared/data beside the repository or set PENUMBRA_SHARED_DATA)",
+            dir.display()
+        );
     } else {
-        eprintln!("skipping: ../shared/data not found (real-DEM checks need it)");
+        eprintln!(
+            "skipping: {} not found (real-DEM checks need it)",
+            dir.display()
+        );
         None
     }
+}
+
+#[test]
+fn shared_data_missing_skips_outside_ci() {
+    assert_eq!(
+        found_or_skip(PathBuf::from("/nonexistent/shared/data"), false),
+        None
+    );
+}
+
+#[test]
+#[should_panic(expected = "CI must run the real-DEM tests")]
+fn shared_data_missing_fails_under_ci() {
+    found_or_skip(PathBuf::from("/nonexistent/shared/data"), true);
 }
 
 /// A smooth analytic height field over the sphere (m), defined on directions so it has no

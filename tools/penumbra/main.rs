@@ -1,13 +1,10 @@
 //! `penumbra`: the command-line front end. Parses arguments, draws progress on stderr, prints
 //! tables or JSON, and turns every error into a message and exit code 2.
 
-mod bench;
-mod output;
-
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::{Args, Parser, Subcommand};
 
 use penumbra::bake::{self, BodyChoice, Input, Plan, Stage};
@@ -18,6 +15,7 @@ use penumbra::mip::{MipOptions, Precision};
 use penumbra::scene::SceneSpec;
 use penumbra::tileio::TileCompression;
 use penumbra::tiling::{Prefilter, TileOptions};
+use penumbra_cli::output;
 
 #[derive(Parser)]
 #[command(
@@ -89,9 +87,6 @@ enum Command {
     /// Ask a tileset about one point.
     #[command(subcommand)]
     Query(QueryCommand),
-    /// Measure throughput against baselines in the same run.
-    #[command(subcommand)]
-    Bench(bench::BenchCommand),
 }
 
 #[derive(Subcommand)]
@@ -162,7 +157,7 @@ struct HorizonFlags {
     #[arg(long, default_value_t = 4096)]
     max_margin_px: u64,
     /// How far (pixels) the fast method searches each pixel's own ray exactly before its sweep
-    /// takes over: larger is slower and more accurate (0..=1024; `penumbra bench horizon`
+    /// takes over: larger is slower and more accurate (0..=1024; `penumbra-bench horizon`
     /// measures the trade).
     #[arg(long, default_value_t = penumbra::horizon::DEFAULT_NEAR_PX)]
     near_px: f64,
@@ -290,12 +285,7 @@ fn body_arg(b: &BodyArgs) -> Result<BodyChoice> {
 }
 
 fn run(cli: Cli) -> Result<()> {
-    if let Some(n) = cli.threads {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n.max(1))
-            .build_global()
-            .context("setting up the thread pool")?;
-    }
+    penumbra_cli::set_threads(cli.threads)?;
     let progress = output::Bars::new(cli.quiet);
     match cli.command {
         Command::Tile(a) => {
@@ -416,28 +406,10 @@ fn run(cli: Cli) -> Result<()> {
             let ans = penumbra::horizon::query(&dir, lat, lon, level, &opts)?;
             output::print_horizon_answer(&ans, json)?;
         }
-        Command::Bench(b) => bench::run(b, cli.quiet)?,
     }
     Ok(())
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
-    match run(cli) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            if let Some(io) = e.downcast_ref::<std::io::Error>() {
-                if io.kind() == std::io::ErrorKind::BrokenPipe {
-                    return ExitCode::SUCCESS;
-                }
-            }
-            // The library names an out-of-range option by its field; show the flag instead.
-            if let Some(penumbra::Error::Param { param, msg }) = e.downcast_ref() {
-                eprintln!("penumbra: error: --{} {msg}", param.replace('_', "-"));
-            } else {
-                eprintln!("penumbra: error: {e:#}");
-            }
-            ExitCode::from(2)
-        }
-    }
+    penumbra_cli::exit_code("penumbra", run(Cli::parse()))
 }

@@ -1,4 +1,4 @@
-//! `penumbra bench`: throughput against a baseline measured in the same run, printed as a table
+//! The benchmarks: throughput against a baseline measured in the same run, printed as a table
 //! (markdown with `--markdown`, for docs/benchmarks.md) or JSON.
 
 use std::path::{Path, PathBuf};
@@ -309,8 +309,8 @@ fn run_tiling(
             data.display()
         );
     }
+    let exe = penumbra_exe()?;
     let tmp = tempfile_dir(work)?;
-    let exe = std::env::current_exe()?;
     let have_gdal = gdalwarp_available();
     let mut rows = Vec::new();
     for case in CASES {
@@ -378,7 +378,7 @@ fn run_tiling(
     }
     let _ = std::fs::remove_dir_all(&tmp);
     if json {
-        return crate::output::print_json(&rows);
+        return penumbra_cli::output::print_json(&rows);
     }
     let threads = rayon::current_num_threads();
     if markdown {
@@ -408,6 +408,22 @@ fn run_tiling(
         println!("{threads} threads; wall and peak RSS from GNU time around each whole process.");
     }
     Ok(())
+}
+
+/// The `penumbra` binary whose `tile` the benchmarks time in a child process: the one built
+/// beside this executable (both in target/release/), so the figures are for this checkout's
+/// build, not for whatever `penumbra` is installed.
+fn penumbra_exe() -> Result<PathBuf> {
+    let exe = std::env::current_exe()?
+        .with_file_name(format!("penumbra{}", std::env::consts::EXE_SUFFIX));
+    if !exe.is_file() {
+        bail!(
+            "{}: not found; build it beside penumbra-bench first: \
+             cargo build --release --workspace",
+            exe.display()
+        );
+    }
+    Ok(exe)
 }
 
 fn tempfile_dir(work: Option<PathBuf>) -> Result<PathBuf> {
@@ -596,8 +612,7 @@ fn run_mip(
         if !quiet {
             eprintln!("bench mip: tiling LDEM_4 (--tile-size 256 --levels 4)");
         }
-        let exe = std::env::current_exe()?;
-        let status = Command::new(&exe)
+        let status = Command::new(penumbra_exe()?)
             .args(["--quiet", "tile"])
             .arg(&src_dem)
             .args([
@@ -711,7 +726,7 @@ fn run_mip(
     }
 
     if json {
-        return crate::output::print_json(&serde_json::json!({
+        return penumbra_cli::output::print_json(&serde_json::json!({
             "tile": rows_a,
             "tileset": rows_b,
             "note": note_b,
@@ -1593,7 +1608,7 @@ fn run_horizon(
     }
 
     if json {
-        return crate::output::print_json(&serde_json::json!({
+        return penumbra_cli::output::print_json(&serde_json::json!({
             "dem": npy.display().to_string(),
             "width": w,
             "height": h,

@@ -1,0 +1,43 @@
+//! What the `penumbra` command and the `penumbra-bench` benchmarks share: how results are shown
+//! ([`output`]: progress bars, tables, JSON) and how a run starts and ends (the thread pool, the
+//! error message and exit code 2). It lives in this package's small library so that neither
+//! binary copies it; it is no API of its own (that is the `penumbra` library).
+
+pub mod output;
+
+use std::process::ExitCode;
+
+use anyhow::{Context, Result};
+
+/// Sizes rayon's global pool to `threads` (at least 1); all cores when `None`.
+pub fn set_threads(threads: Option<usize>) -> Result<()> {
+    if let Some(n) = threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n.max(1))
+            .build_global()
+            .context("setting up the thread pool")?;
+    }
+    Ok(())
+}
+
+/// The exit status of a run of the binary `name`: success, or the error chain on stderr as
+/// `name: error: …` and exit code 2. A broken pipe (output piped into `head`) is success.
+pub fn exit_code(name: &str, result: Result<()>) -> ExitCode {
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            if let Some(io) = e.downcast_ref::<std::io::Error>() {
+                if io.kind() == std::io::ErrorKind::BrokenPipe {
+                    return ExitCode::SUCCESS;
+                }
+            }
+            // The library names an out-of-range option by its field; show the flag instead.
+            if let Some(penumbra::Error::Param { param, msg }) = e.downcast_ref() {
+                eprintln!("{name}: error: --{} {msg}", param.replace('_', "-"));
+            } else {
+                eprintln!("{name}: error: {e:#}");
+            }
+            ExitCode::from(2)
+        }
+    }
+}
