@@ -79,6 +79,10 @@ pub struct TileOptions {
     pub max_fill_px: u32,
     /// Equirectangular albedo image and the longitude of its left edge.
     pub albedo: Option<(PathBuf, f64)>,
+    /// Refuse a run whose tiles would exceed this many GiB before compression (not part of
+    /// the run's identity: it changes no byte of the output).
+    #[serde(skip)]
+    pub max_output_gib: f64,
 }
 
 impl Default for TileOptions {
@@ -93,12 +97,29 @@ impl Default for TileOptions {
             compression: tileio::TileCompression::Zip,
             max_fill_px: crate::dem::DEFAULT_MAX_FILL_PX,
             albedo: None,
+            max_output_gib: DEFAULT_MAX_OUTPUT_GIB,
         }
     }
 }
 
+/// Default cap on a tiling run's output before compression.
+pub const DEFAULT_MAX_OUTPUT_GIB: f64 = 64.0;
+
+/// Check an output cap given in GiB: a positive number (NaN or a negative cap is refused, not
+/// read as "no cap").
+pub fn check_output_cap(param: &'static str, gib: f64) -> Result<()> {
+    if gib.is_nan() || gib <= 0.0 {
+        return Err(Error::param(
+            param,
+            format!("{gib} is not a size: give a positive number of GiB"),
+        ));
+    }
+    Ok(())
+}
+
 impl TileOptions {
     pub fn validate(&self) -> Result<()> {
+        check_output_cap("max_output_gib", self.max_output_gib)?;
         if !(8..=8192).contains(&self.tile_size) || self.tile_size % 2 != 0 {
             return Err(Error::param(
                 "tile_size",
@@ -259,6 +280,22 @@ pub fn tile_dem(
         }
     }
     let candidates: Vec<TileId> = candidates.into_iter().collect();
+    let side = layout.stored_size() as f64;
+    let per_tile = side * side * (4.0 + 2.0 + albedo.as_ref().map_or(0.0, |a| a.channels as f64 * 2.0));
+    let gib = candidates.len() as f64 * per_tile / (1u64 << 30) as f64;
+    if gib > opts.max_output_gib {
+        return Err(Error::param(
+            "max_output_gib",
+            format!(
+                "is {}, but {} levels of {}-px tiles over this DEM would write up to {gib:.1} GiB \
+                 before compression ({} tiles): use fewer levels or raise the cap",
+                opts.max_output_gib,
+                levels,
+                opts.tile_size,
+                candidates.len()
+            ),
+        ));
+    }
 
     // Only now, with the input read and the plan known, touch the output folder.
     let writer = Writer::begin(out)?;

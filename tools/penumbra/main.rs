@@ -220,6 +220,10 @@ struct TileFlags {
     /// East longitude of the albedo image's left edge.
     #[arg(long, default_value_t = -180.0, allow_hyphen_values = true)]
     albedo_west: f64,
+    /// Refuse a tiling whose tiles would exceed this many GiB before compression (the estimate
+    /// is made before anything is written).
+    #[arg(long = "max-output-gib", default_value_t = penumbra::tiling::DEFAULT_MAX_OUTPUT_GIB)]
+    max_output_gib: f64,
     /// Print the report as JSON.
     #[arg(long)]
     json: bool,
@@ -237,6 +241,7 @@ impl TileFlags {
             compression: self.compression,
             max_fill_px: self.void_fill_px,
             albedo: self.albedo.clone().map(|p| (p, self.albedo_west)),
+            max_output_gib: self.max_output_gib,
         }
     }
 }
