@@ -2,10 +2,10 @@
 //! azimuths, geodesic and curvature-exact, seeing across tile and face edges as far as any
 //! terrain of the body could rise above it. Specified in docs/horizons.md.
 //!
-//! [`geometry`] holds the context raster on one face's extended gnomonic plane (straight lines
-//! there are great circles) and the exact search along an observer's ray; [`method`] runs one of
-//! the two algorithms over it: the brute-force [`reference`] march, or the fast method (exact
-//! [`near`] field, per-azimuth upper-hull [`sweep`] beyond). [`stage`] builds those rasters from
+//! `geometry` holds the context raster on one face's extended gnomonic plane (straight lines
+//! there are great circles) and the exact search along an observer's ray; `method` runs one of
+//! the two algorithms over it: the brute-force `reference` march, or the fast method (exact
+//! `near` field, per-azimuth upper-hull `sweep` beyond). `stage` builds those rasters from
 //! a tileset, stores the raw maps and answers point queries.
 
 mod geometry;

@@ -16,9 +16,9 @@
 //! (one `maxps` on x86: a NaN `v` leaves `acc`), starting from −∞ (+∞ for the minimum), and
 //! turn a −∞ (+∞) result back into NaN. Heights are finite or NaN, never ±∞.
 //!
-//! [`kernels`]: level sizes, directed f16 rounding and the pyramid computation (SIMD on x86-64);
-//! [`io`]: the mip-mapped EXR files; [`schema`]: the storage [`Precision`] (a leaf, also used by
-//! the manifest); [`stage`]: the stage over a tileset and the point query.
+//! `kernels`: level sizes, directed f16 rounding and the pyramid computation (SIMD on x86-64);
+//! `io`: the mip-mapped EXR files; `schema`: the storage [`Precision`] (a leaf, also used by
+//! the manifest); `stage`: the stage over a tileset and the point query.
 
 mod io;
 mod kernels;
