@@ -1,5 +1,5 @@
 //! OpenEXR DEMs: one float channel of heights (f32 or f16; u32 is converted), georeferenced by
-//! a JSON sidecar `X.exr.json` or `X.json` with the schema of [`crate::dem::raw`] (crs, bounds
+//! a JSON sidecar `X.exr.json` or `X.json` with the schema of [`crate::dem::sidecar`] (crs, bounds
 //! or x0/y0/dx/dy, optional scale/offset/nodata; no sample encoding keys).
 //!
 //! The channel is the one named `height`, else `Y`, `R` or `Z` (in that order, names compared
@@ -11,8 +11,8 @@ use std::path::Path;
 
 use exr::prelude::{self as x, ReadChannels, ReadLayers, ReadSpecificChannel};
 
-use crate::dem::raw::{crs_name, require_sidecar, Sidecar};
-use crate::dem::{check_dimensions, DemParts, Samples};
+use crate::dem::sidecar::{crs_name, require_sidecar, Sidecar};
+use crate::dem::{check_dimensions, damaged_or_io, DemParts, Samples};
 use crate::error::{Error, IoContext, Result};
 
 /// Decoded samples may be at most this many times the file size (guards allocations driven by
@@ -23,7 +23,7 @@ fn exr_error(path: &Path, e: x::Error) -> Error {
     match e {
         x::Error::NotSupported(m) => Error::unsupported(path, format!("EXR feature: {m}")),
         x::Error::Invalid(m) => Error::invalid(path, format!("not a readable EXR file: {m}")),
-        x::Error::Io(io) => crate::dem::geotiff::damaged_or_io(path, io, "EXR"),
+        x::Error::Io(io) => damaged_or_io(path, io, "EXR"),
         x::Error::Aborted => Error::invalid(path, "EXR reading was aborted"),
     }
 }

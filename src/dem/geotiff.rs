@@ -37,7 +37,7 @@ use tiff::decoder::{ChunkType, Decoder, DecodingResult, DecodingSampleType, Limi
 use tiff::tags::Tag;
 use tiff::{ColorType, TiffError, TiffFormatError};
 
-use crate::dem::{check_dimensions, Crs, DemParts, GeoRef, Samples};
+use crate::dem::{check_dimensions, damaged_or_io, Crs, DemParts, GeoRef, Samples};
 use crate::error::{Error, IoContext, Result};
 
 /// Decoded samples may be at most this many bytes per byte of file (guards allocations driven
@@ -52,22 +52,6 @@ fn tiff_error(path: &Path, e: TiffError) -> Error {
         TiffError::IoError(io) => damaged_or_io(path, io, "TIFF"),
         TiffError::FormatError(f) => Error::invalid(path, format!("damaged TIFF: {f}")),
         other => Error::invalid(path, format!("cannot decode the TIFF: {other}")),
-    }
-}
-
-/// Decoders report corrupt or truncated streams as I/O errors; those are damaged files
-/// (Invalid), not failures of the operating system.
-pub(crate) fn damaged_or_io(path: &Path, io: std::io::Error, what: &str) -> Error {
-    use std::io::ErrorKind::{InvalidData, InvalidInput, Other, UnexpectedEof};
-    match io.kind() {
-        UnexpectedEof => Error::invalid(
-            path,
-            format!("truncated {what}: the file ends inside its data"),
-        ),
-        InvalidData | InvalidInput | Other => {
-            Error::invalid(path, format!("damaged {what} data: {io}"))
-        }
-        _ => Error::io(path, io),
     }
 }
 

@@ -16,6 +16,7 @@ pub mod exrdem;
 pub mod geotiff;
 pub mod pds3;
 pub mod raw;
+pub mod sidecar;
 pub mod srtm;
 
 use std::collections::HashMap;
@@ -848,6 +849,22 @@ pub fn check_dimensions(path: &Path, width: u64, height: u64) -> Result<()> {
     Ok(())
 }
 
+/// Decoders report corrupt or truncated streams as I/O errors; those are damaged files
+/// (Invalid), not failures of the operating system.
+pub(crate) fn damaged_or_io(path: &Path, io: std::io::Error, what: &str) -> Error {
+    use std::io::ErrorKind::{InvalidData, InvalidInput, Other, UnexpectedEof};
+    match io.kind() {
+        UnexpectedEof => Error::invalid(
+            path,
+            format!("truncated {what}: the file ends inside its data"),
+        ),
+        InvalidData | InvalidInput | Other => {
+            Error::invalid(path, format!("damaged {what} data: {io}"))
+        }
+        _ => Error::io(path, io),
+    }
+}
+
 /// Open a DEM, choosing the reader from the file name and contents:
 /// `.lbl`/`.img` → PDS3, `.hgt` → SRTM, `.tif`/`.tiff` → GeoTIFF, `.exr` → EXR (needs a JSON
 /// sidecar for its georeferencing), `.bin`/`.raw`/`.dat` or anything with a
@@ -870,8 +887,8 @@ pub fn open(path: &Path, max_fill_px: u32) -> Result<Dem> {
         "tif" | "tiff" => geotiff::read(path)?,
         "exr" => exrdem::read(path)?,
         "bin" | "raw" | "dat" => raw::read(path)?,
-        _ => match raw::sidecar_for(path) {
-            Some(_) => raw::read(path)?,
+        _ => match sidecar::sidecar_for(path) {
+            Some(_) => read_with_sidecar(path)?,
             None => {
                 return Err(Error::unsupported(
                     path,
@@ -882,6 +899,23 @@ pub fn open(path: &Path, max_fill_px: u32) -> Result<Dem> {
         },
     };
     Dem::new(parts, max_fill_px)
+}
+
+/// A raster found through its JSON sidecar: a `.json` sidecar opens the raster it describes,
+/// read as EXR when that is an `.exr`, else as raw.
+fn read_with_sidecar(path: &Path) -> Result<DemParts> {
+    if sidecar::is_json(path) {
+        let sc = sidecar::Sidecar::load(path)?;
+        let data = sidecar::data_for_sidecar(path, &sc)?;
+        if data
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+        {
+            return exrdem::read(&data);
+        }
+    }
+    raw::read(path)
 }
 
 #[cfg(test)]

@@ -12,11 +12,11 @@
 //!
 //! Precision: heights enter relative to the observer's (Δh) and the slope is written so that
 //! nothing cancels but the heights themselves (below); the f32 result is within ≈ 1e-4° of the
-//! f64 reference search ([`super::core`]'s `Ray::max_over`) on 30 m pixels, the size of an f32
+//! f64 reference search ([`super::geometry`]'s `Ray::max_over`) on 30 m pixels, the size of an f32
 //! ulp of a 1 km height over one pixel, and far below what an f16 map stores. Observers whose
 //! walk would leave the raster or touch no-data are handed to that f64 search instead.
 
-use super::core::{Axis, Azimuth, Context, PixelGeo, Ray, Rect};
+use super::geometry::{Axis, Azimuth, Context, PixelGeo, Ray, Rect};
 
 /// Default distance (plane pixels) from the observer that the fast method searches exactly.
 /// Within it the sweep's lines, up to ½ px beside the observer's own ray, see terrain at a
@@ -323,7 +323,7 @@ fn slope(s: f32, dh: f32, alpha: f32, beta: f32, r0: f32) -> f32 {
 mod tests {
     use super::*;
     use crate::cube::Face;
-    use crate::horizon::core::{pixel_geometry, plane_azimuth};
+    use crate::horizon::geometry::{pixel_geometry, plane_azimuth};
 
     /// A rough raster with a few no-data holes, `origin` placing it on the face.
     fn rough(w: usize, h: usize, face_pixels: f64, origin: (i64, i64), radius_m: f64) -> Context {

@@ -11,7 +11,8 @@ use exr::prelude::*;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::core::{compass_azimuth_deg, horizons_with, plane_azimuth, Context, Method, Rect};
+use super::geometry::{compass_azimuth_deg, plane_azimuth, Context, Rect};
+use super::method::{horizons_with, Method};
 use super::near::{DEFAULT_NEAR_PX, MAX_NEAR_PX};
 use crate::cube::{Face, Projection};
 use crate::error::{Error, IoContext, Result};

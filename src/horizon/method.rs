@@ -1,0 +1,148 @@
+//! The horizon methods and their entry points: [`horizons`] runs the brute-force
+//! [`super::reference`] search or the fast method (exact near field in [`super::near`],
+//! per-azimuth upper-hull [`super::sweep`] beyond) over a [`Context`] raster.
+
+use rayon::prelude::*;
+
+use super::geometry::{pixel_geometry, plane_azimuth, Azimuth, Context, Rect};
+use super::near;
+use super::reference::reference;
+use super::sweep::{finish, sweep, Scratch};
+
+/// Which algorithm computes the horizons.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// Each pixel's own ray searched exactly out to a near field (`near_px`, default 24 px),
+    /// beyond that a per-azimuth sweep of parallel great circles with an upper convex hull
+    /// per line.
+    #[default]
+    Fast,
+    /// Brute force: each pixel's own ray walked cell by cell to the end of the context, the
+    /// maximum over the continuous bilinear surface.
+    Reference,
+}
+
+impl std::str::FromStr for Method {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "fast" => Ok(Method::Fast),
+            "reference" => Ok(Method::Reference),
+            _ => Err(format!("unknown method '{s}' (fast, reference)")),
+        }
+    }
+}
+
+impl Method {
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Fast => "fast",
+            Method::Reference => "reference",
+        }
+    }
+}
+
+/// Horizons of every pixel of `rect` in `a` plane azimuths: `a` planes of `rect.w × rect.h`
+/// elevation angles in degrees (row-major), plane k at plane azimuth 2πk/a. NaN where the
+/// observer has no data; −90 where nothing at all lies in a direction.
+pub fn horizons(ctx: &Context, rect: Rect, a: usize, method: Method) -> Vec<f32> {
+    horizons_with(ctx, rect, a, method, near::DEFAULT_NEAR_PX)
+}
+
+/// [`horizons`] with the fast method's exact near field reaching `near_px` plane pixels
+/// (0..=[`near::MAX_NEAR_PX`]; the reference ignores it): larger is slower and closer to the
+/// reference.
+pub fn horizons_with(
+    ctx: &Context,
+    rect: Rect,
+    a: usize,
+    method: Method,
+    near_px: f64,
+) -> Vec<f32> {
+    assert!(rect.x0 + rect.w <= ctx.width && rect.y0 + rect.h <= ctx.height);
+    assert!(
+        (0.0..=near::MAX_NEAR_PX).contains(&near_px),
+        "near field of {near_px} px outside 0..={}",
+        near::MAX_NEAR_PX
+    );
+    let plane = rect.w * rect.h;
+    let mut out = vec![0.0f32; plane * a];
+    if plane == 0 {
+        return out;
+    }
+    match method {
+        Method::Fast => {
+            let geo = pixel_geometry(ctx, rect);
+            let nodata = near::NoData::new(ctx);
+            out.par_chunks_mut(plane).enumerate().for_each_init(
+                || FastBuffers::new(plane),
+                |b, (k, dst)| {
+                    let phi = plane_azimuth(k, a);
+                    let az = Azimuth::new(ctx, phi);
+                    let walk = near::NearWalk::new(&az, near_px);
+                    near::near_field(ctx, rect, &az, &walk, &geo, &nodata, &mut b.ns, &mut b.near);
+                    b.acc.fill(f64::NEG_INFINITY);
+                    b.acc_s.fill(f64::NAN);
+                    sweep(
+                        ctx,
+                        rect,
+                        phi,
+                        &b.near,
+                        &mut b.acc,
+                        &mut b.acc_s,
+                        &mut b.sweep,
+                    );
+                    finish(
+                        ctx, rect, &az, near_px, &geo, &b.near, &b.acc, &b.acc_s, dst,
+                    );
+                },
+            )
+        }
+        Method::Reference => {
+            let hmax = ctx.max_height();
+            let geo = pixel_geometry(ctx, rect);
+            out.par_chunks_mut(plane).enumerate().for_each(|(k, dst)| {
+                reference(ctx, rect, plane_azimuth(k, a), hmax, 0.0, &geo, dst)
+            })
+        }
+    }
+    out
+}
+
+/// The reference sampling every `step` plane pixels instead of the exact cell-by-cell search
+/// (tests: how far a sampled march is from the continuous answer).
+#[doc(hidden)]
+pub fn horizons_reference_step(ctx: &Context, rect: Rect, a: usize, step: f64) -> Vec<f32> {
+    let plane = rect.w * rect.h;
+    let mut out = vec![0.0f32; plane * a];
+    let hmax = ctx.max_height();
+    let geo = pixel_geometry(ctx, rect);
+    out.par_chunks_mut(plane)
+        .enumerate()
+        .for_each(|(k, dst)| reference(ctx, rect, plane_azimuth(k, a), hmax, step, &geo, dst));
+    out
+}
+
+/// Per-thread buffers of the fast method, one azimuth at a time.
+struct FastBuffers {
+    /// Exact maximum slope within the near field of each observer.
+    near: Vec<f64>,
+    /// The sweep's best slope per observer beyond that, and its distance (plane pixels).
+    acc: Vec<f64>,
+    acc_s: Vec<f64>,
+    sweep: Scratch,
+    ns: near::NearScratch,
+}
+
+impl FastBuffers {
+    fn new(plane: usize) -> FastBuffers {
+        FastBuffers {
+            near: vec![0.0; plane],
+            acc: vec![0.0; plane],
+            acc_s: vec![0.0; plane],
+            sweep: Scratch::default(),
+            ns: near::NearScratch::default(),
+        }
+    }
+}
