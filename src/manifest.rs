@@ -105,9 +105,9 @@ pub struct MipProduct {
     /// Path pattern of the face pyramids of whole-tile extrema, one per (tile level, face).
     pub face_path: String,
     /// Sample type of the tile pyramids (`f32`, or `f16` rounded outwards).
-    pub precision: crate::mip::Precision,
+    pub precision: crate::mip::schema::Precision,
     /// Sample type of the face pyramids.
-    pub face_precision: crate::mip::Precision,
+    pub face_precision: crate::mip::schema::Precision,
     /// How level sizes halve: `up` (⌈n/2⌉, OpenEXR's ROUND_UP).
     pub level_rounding: String,
     /// The texel convention in one line.

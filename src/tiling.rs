@@ -281,7 +281,8 @@ pub fn tile_dem(
     }
     let candidates: Vec<TileId> = candidates.into_iter().collect();
     let side = layout.stored_size() as f64;
-    let per_tile = side * side * (4.0 + 2.0 + albedo.as_ref().map_or(0.0, |a| a.channels as f64 * 2.0));
+    let per_tile =
+        side * side * (4.0 + 2.0 + albedo.as_ref().map_or(0.0, |a| a.channels as f64 * 2.0));
     let gib = candidates.len() as f64 * per_tile / (1u64 << 30) as f64;
     if gib > opts.max_output_gib {
         return Err(Error::param(

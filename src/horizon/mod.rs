@@ -6,20 +6,20 @@
 //! there are great circles) and the exact search along an observer's ray; `method` runs one of
 //! the two algorithms over it: the brute-force `reference` march, or the fast method (exact
 //! `near` field, per-azimuth upper-hull `sweep` beyond). `stage` builds those rasters from
-//! a tileset, stores the raw maps and answers point queries.
+//! a tileset and stores the raw maps (the point query is `crate::query::horizon`).
 
 mod geometry;
 mod method;
 mod near;
 mod reference;
-mod stage;
+pub(crate) mod stage;
 mod sweep;
 
 pub use self::geometry::{compass_azimuth_deg, plane_azimuth, Context, Rect};
 pub use self::method::{horizons, horizons_reference_step, horizons_with, Method};
 pub use self::near::{DEFAULT_NEAR_PX, MAX_NEAR_PX};
 pub use self::stage::{
-    build_horizons, context_for, query, reach_rad, read_horizon_exr, terrain_range, tile_path,
-    write_horizon_exr, HorizonAnswer, HorizonOptions, HorizonPrecision, HorizonReport, Reach,
-    AZIMUTH_CONVENTION, PATTERN, STAGE,
+    build_horizons, context_for, reach_rad, read_horizon_exr, terrain_range, tile_path,
+    write_horizon_exr, HorizonOptions, HorizonPrecision, HorizonReport, Reach, AZIMUTH_CONVENTION,
+    PATTERN, STAGE,
 };

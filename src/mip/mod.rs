@@ -22,7 +22,7 @@
 
 mod io;
 mod kernels;
-pub(crate) mod schema;
+pub mod schema;
 mod stage;
 
 pub use self::io::{read_mip_exr, write_mip_exr, MipFile};
@@ -32,6 +32,6 @@ pub use self::kernels::{
 };
 pub use self::schema::Precision;
 pub use self::stage::{
-    build_mips, face_path, query, tile_paths, tile_pyramid, MipAnswer, MipOptions, MipReport,
-    FACE_PATTERN, MAX_PATTERN, MINMAX_PATTERN, MIP_FORMAT, PARTIAL, TEXEL_CONVENTION,
+    build_mips, face_path, tile_paths, MipOptions, MipReport, FACE_PATTERN, MAX_PATTERN,
+    MINMAX_PATTERN, MIP_FORMAT, STAGE, TEXEL_CONVENTION,
 };

@@ -9,8 +9,8 @@ use serde::Serialize;
 
 use super::io::{read_mip_exr, write_mip_exr};
 use super::kernels::{
-    f16_down, f16_up, face_pyramid, fmax, fmin, level_sizes, minmax_pyramid, minmax_pyramid_into,
-    nan_if, MinMaxPyramid, NEG_INF, POS_INF,
+    f16_down, f16_up, face_pyramid, fmax, fmin, minmax_pyramid_into, nan_if, MinMaxPyramid,
+    NEG_INF, POS_INF,
 };
 use super::schema::Precision;
 use crate::cube::Face;
@@ -18,14 +18,13 @@ use crate::error::{Error, Result};
 use crate::layout::TileId;
 use crate::manifest::{self, MipLevelRange, MipProduct, Tileset};
 use crate::progress::Progress;
-use crate::query;
+use crate::runner::{self, StageSpec, Start};
 use crate::tileio::{self, TileCompression};
+use crate::tileset::{Product, Store};
 
 pub const MAX_PATTERN: &str = "maxmip/{level}/{face}/{y}/{x}.exr";
 pub const MINMAX_PATTERN: &str = "minmax/{level}/{face}/{y}/{x}.exr";
 pub const FACE_PATTERN: &str = "minmax/{level}/{face}/face.exr";
-/// Written at the start of a mip run and removed at its end; a rerun with the same key resumes.
-pub const PARTIAL: &str = ".penumbra-mip-partial.json";
 /// Version of the mip products' layout and convention (part of the run key).
 pub const MIP_FORMAT: &str = "penumbra-mip-1";
 /// One-line statement of the texel convention, recorded in the manifest.
@@ -78,50 +77,54 @@ pub fn face_path(dir: &Path, level: u8, face: Face) -> PathBuf {
     tileio::tile_path(dir, FACE_PATTERN, level, face.name(), 0, 0)
 }
 
-/// Read a height tile and compute its (min, max) pyramid, checking the tile's size.
-pub fn tile_pyramid(path: &Path, stored_size: usize, halo: usize) -> Result<MinMaxPyramid> {
-    let t = tileio::read_height_tile(path)?;
-    if t.size != stored_size {
+/// The mip stage writes the max and (min, max) pyramids of the height tiles.
+pub const STAGE: StageSpec = StageSpec {
+    name: "mip",
+    writes: &[Product::Mip],
+    format: &[MIP_FORMAT],
+};
+
+/// Refuse what the mip stage cannot build from.
+fn check_tileset(dir: &Path, ts: &Tileset) -> Result<()> {
+    let manifest_path = dir.join(manifest::MANIFEST);
+    if ts.products.height.is_none() {
         return Err(Error::invalid(
-            path,
-            format!("tile is {}² but the manifest says {stored_size}²", t.size),
+            &manifest_path,
+            "tileset has no height product to build mipmaps from",
         ));
     }
-    minmax_pyramid(&t.height, t.size, halo)
+    if ts.layout.halo < 1 {
+        return Err(Error::unsupported(
+            &manifest_path,
+            "mipmaps need a halo of at least 1 pixel: retile with a halo of 1 or more",
+        ));
+    }
+    Ok(())
 }
 
 /// Build every mip product of the tileset in `dir` and record them in its manifest.
 pub fn build_mips(dir: &Path, opts: &MipOptions, progress: &dyn Progress) -> Result<MipReport> {
-    let mut ts = Tileset::load(dir)?;
+    check_tileset(dir, &Tileset::load(dir)?)?;
+    let (writer, ts) = runner::lock_and_load(dir)?;
+    check_tileset(dir, &ts)?;
+    let store = Store::open_unlocked(dir)?;
     let manifest_path = dir.join(manifest::MANIFEST);
-    let height = ts.products.height.clone().ok_or_else(|| {
-        Error::invalid(
-            &manifest_path,
-            "tileset has no height product to build mipmaps from",
-        )
-    })?;
+    let height = ts.products.height.clone().expect("checked");
     let lay = ts.layout;
-    if lay.halo < 1 {
-        return Err(Error::unsupported(
-            &manifest_path,
-            "mipmaps need a halo of at least 1 pixel: retile with --halo 1 or more",
-        ));
-    }
     let (n, s, halo) = (lay.tile_size as usize, lay.stored_size(), lay.halo as usize);
-    let run_key = {
-        let mut h = blake3::Hasher::new();
-        h.update(env!("CARGO_PKG_VERSION").as_bytes());
-        h.update(MIP_FORMAT.as_bytes());
-        h.update(ts.run_key.as_bytes());
-        h.update(height.path.as_bytes());
-        h.update(serde_json::to_string(opts).unwrap_or_default().as_bytes());
-        h.finalize().to_hex().to_string()
-    };
+    let run_key = runner::run_key(
+        &STAGE,
+        &[&ts.run_key],
+        &[
+            height.path.as_bytes(),
+            serde_json::to_string(opts).unwrap_or_default().as_bytes(),
+        ],
+    );
     let tiles: Vec<TileId> = ts.tile_set().into_iter().collect();
     let tile_bytes = (s * s * 4) as u64;
-    let partial_path = dir.join(PARTIAL);
-    if let Some(m) = &ts.products.mip {
-        if m.run_key == run_key && !partial_path.exists() {
+    let run = match runner::start(writer, STAGE, &run_key, Some(&ts))? {
+        Start::UpToDate => {
+            let m = ts.products.mip.as_ref().expect("up to date");
             return Ok(MipReport {
                 out: dir.to_path_buf(),
                 tiles: tiles.len() as u64,
@@ -135,19 +138,9 @@ pub fn build_mips(dir: &Path, opts: &MipOptions, progress: &dyn Progress) -> Res
                 up_to_date: true,
             });
         }
-    }
-    let previous = manifest::partial_run_key(&partial_path);
-    let resume = previous.as_deref() == Some(run_key.as_str());
-    if !resume {
-        // Products of other heights or options are stale.
-        for sub in ["maxmip", "minmax"] {
-            let p = dir.join(sub);
-            if p.exists() {
-                std::fs::remove_dir_all(&p).map_err(|e| Error::io(&p, e))?;
-            }
-        }
-    }
-    manifest::write_partial(&partial_path, &run_key)?;
+        Start::Run(run) => run,
+    };
+    let (out, resume) = (run.out().to_path_buf(), run.resume());
 
     progress.start("mipmaps", tiles.len() as u64);
     let results: Vec<Result<(f32, f32, bool)>> = tiles
@@ -157,7 +150,7 @@ pub fn build_mips(dir: &Path, opts: &MipOptions, progress: &dyn Progress) -> Res
         .map_init(
             || MinMaxPyramid::new(n),
             |pyr, &id| {
-                let r = mip_tile(dir, &ts, id, n, s, halo, opts, resume, pyr);
+                let r = mip_tile(&store, &out, id, n, s, halo, opts, resume, pyr);
                 progress.inc(1);
                 r
             },
@@ -213,7 +206,7 @@ pub fn build_mips(dir: &Path, opts: &MipOptions, progress: &dyn Progress) -> Res
             lmin = fmin(lmin, a);
             lmax = fmax(lmax, b);
             write_mip_exr(
-                &face_path(dir, level, face),
+                &face_path(&out, level, face),
                 g,
                 Some(&p.min),
                 &p.max,
@@ -254,10 +247,9 @@ pub fn build_mips(dir: &Path, opts: &MipOptions, progress: &dyn Progress) -> Res
         run_key,
     };
     let (gmin, gmax) = (product.global_min_m, product.global_max_m);
-    ts.products.mip = Some(product);
-    let json = serde_json::to_string_pretty(&ts).expect("manifest serialises");
-    tileio::write_atomic_bytes(&manifest_path, json.as_bytes())?;
-    std::fs::remove_file(&partial_path).map_err(|e| Error::io(&partial_path, e))?;
+    let mut manifest = ts.clone();
+    manifest.products.mip = Some(product);
+    run.commit(manifest)?;
     Ok(MipReport {
         out: dir.to_path_buf(),
         tiles: tiles.len() as u64,
@@ -275,8 +267,8 @@ pub fn build_mips(dir: &Path, opts: &MipOptions, progress: &dyn Progress) -> Res
 /// One tile: (1×1 min, 1×1 max, kept from an earlier run).
 #[allow(clippy::too_many_arguments)]
 fn mip_tile(
-    dir: &Path,
-    ts: &Tileset,
+    store: &Store,
+    out: &Path,
     id: TileId,
     n: usize,
     s: usize,
@@ -285,7 +277,7 @@ fn mip_tile(
     resume: bool,
     p: &mut MinMaxPyramid,
 ) -> Result<(f32, f32, bool)> {
-    let (pmax, pmm) = tile_paths(dir, id);
+    let (pmax, pmm) = tile_paths(out, id);
     if resume && pmax.exists() && pmm.exists() {
         if let Ok(f) = read_mip_exr(&pmm) {
             if f.sizes[0] == n {
@@ -295,15 +287,7 @@ fn mip_tile(
             }
         }
     }
-    let pattern = &ts.products.height.as_ref().expect("checked").path;
-    let hpath = tileio::tile_path(dir, pattern, id.level, id.face.name(), id.x, id.y);
-    let t = tileio::read_height_tile(&hpath)?;
-    if t.size != s {
-        return Err(Error::invalid(
-            &hpath,
-            format!("tile is {}² but the manifest says {s}²", t.size),
-        ));
-    }
+    let t = store.read_height(id)?;
     minmax_pyramid_into(&t.height, s, halo, p)?;
     write_mip_exr(
         &pmax,
@@ -328,147 +312,5 @@ fn mip_tile(
     Ok(match opts.precision {
         Precision::F32 => (lo, hi, false),
         Precision::F16 => (f16_down(lo).to_f32(), f16_up(hi).to_f32(), false),
-    })
-}
-
-// ---------------------------------------------------------------------------------------------
-// Query
-
-/// The texel of a mip level that contains a point.
-#[derive(Clone, Debug, Serialize)]
-pub struct MipAnswer {
-    pub lat_deg: f64,
-    pub lon_deg: f64,
-    /// Tile level whose tiles the pyramid belongs to.
-    pub tile_level: u8,
-    /// Mip level asked for: 0..=`tile_mip_levels`−1 inside the tile, above that the face
-    /// pyramid (`tile_mip_levels`−1 + f is face-pyramid level f).
-    pub level: u32,
-    /// Levels of a tile's own pyramid (tile_size … 1).
-    pub tile_mip_levels: u32,
-    /// Highest level accepted (the face's 1×1).
-    pub max_level: u32,
-    /// `tile` or `face`.
-    pub scope: String,
-    pub face: String,
-    pub tile: [u32; 2],
-    /// Fractional interior pixel at `tile_level` (centres at integers).
-    pub pixel: [f64; 2],
-    /// Texel (column, row) at this level, in the tile (`scope` tile) or the face grid (face).
-    pub texel: [u32; 2],
-    /// Texels per side at this level.
-    pub texels: u32,
-    /// Lower and upper bound of the interpolated surface over the texel (null: no data).
-    pub min_m: Option<f64>,
-    pub max_m: Option<f64>,
-    pub file: String,
-}
-
-/// The texel containing (lat, lon) at mip `level` of the tiles at `tile_level` (default the
-/// finest).
-pub fn query(
-    dir: &Path,
-    lat: f64,
-    lon: f64,
-    level: u32,
-    tile_level: Option<u8>,
-) -> Result<MipAnswer> {
-    query::check_latlon(lat, lon)?;
-    let ts = Tileset::load(dir)?;
-    let tl = query::pick_level(&ts, tile_level)?;
-    let mp = ts.products.mip.as_ref().ok_or_else(|| {
-        Error::usage(format!(
-            "{} has no mipmaps: run `penumbra mip {}` first",
-            dir.display(),
-            dir.display()
-        ))
-    })?;
-    let n = ts.layout.tile_size as usize;
-    let m = level_sizes(n).len() as u32;
-    let max_level = m - 1 + tl as u32;
-    if level > max_level {
-        return Err(Error::usage(format!(
-            "mip level {level} does not exist: tile level {tl} has mip levels 0..={max_level} \
-             (0..={} inside a {n}-px tile, then the face pyramid up to the face's 1×1)",
-            m - 1
-        )));
-    }
-    let (tile, px, py) = query::locate(&ts, lat, lon, tl);
-    let clampi = |p: f64| ((p + 0.5).floor().max(0.0) as u64).min(n as u64 - 1) as u32;
-    let (i0, j0) = (clampi(px), clampi(py));
-    let (scope, file, texel, texels, lo, hi);
-    if level < m {
-        if !ts.has_tile(tile) {
-            return Err(Error::usage(format!(
-                "no height tile covers {lat}°, {lon}° at level {tl} (tile {tile}): the source DEM \
-                 does not reach there; `penumbra info {}` lists the coverage",
-                dir.display()
-            )));
-        }
-        let path = tileio::tile_path(dir, &mp.minmax_path, tl, tile.face.name(), tile.x, tile.y);
-        let f = read_mip_exr(&path)?;
-        if f.sizes[0] != n {
-            return Err(Error::invalid(
-                &path,
-                format!("mipmap is {}² but tiles are {n}²", f.sizes[0]),
-            ));
-        }
-        let k = level as usize;
-        let w = f.sizes[k];
-        let (x, y) = (i0 >> level, j0 >> level);
-        let idx = y as usize * w + x as usize;
-        scope = "tile";
-        texel = [x, y];
-        texels = w as u32;
-        lo = f.channel(&path, "min")?[k][idx];
-        hi = f.channel(&path, "max")?[k][idx];
-        file = path;
-    } else {
-        let fl = level - (m - 1);
-        let path = tileio::tile_path(dir, &mp.face_path, tl, tile.face.name(), 0, 0);
-        if !path.exists() {
-            return Err(Error::usage(format!(
-                "no tile of face {} at level {tl} has data: no face pyramid there",
-                tile.face
-            )));
-        }
-        let f = read_mip_exr(&path)?;
-        let g = ts.layout.tiles_per_side(tl) as usize;
-        if f.sizes[0] != g {
-            return Err(Error::invalid(
-                &path,
-                format!(
-                    "face pyramid is {}² but level {tl} has {g}² tiles",
-                    f.sizes[0]
-                ),
-            ));
-        }
-        let k = fl as usize;
-        let w = f.sizes[k];
-        let (x, y) = (tile.x >> fl, tile.y >> fl);
-        let idx = y as usize * w + x as usize;
-        scope = "face";
-        texel = [x, y];
-        texels = w as u32;
-        lo = f.channel(&path, "min")?[k][idx];
-        hi = f.channel(&path, "max")?[k][idx];
-        file = path;
-    }
-    Ok(MipAnswer {
-        lat_deg: lat,
-        lon_deg: lon,
-        tile_level: tl,
-        level,
-        tile_mip_levels: m,
-        max_level,
-        scope: scope.into(),
-        face: tile.face.name().into(),
-        tile: [tile.x, tile.y],
-        pixel: [px, py],
-        texel,
-        texels,
-        min_m: nan_to_none(lo),
-        max_m: nan_to_none(hi),
-        file: file.display().to_string(),
     })
 }

@@ -390,7 +390,7 @@ fn run(cli: Cli) -> Result<()> {
             tile_level,
             json,
         }) => {
-            let ans = penumbra::mip::query(&dir, lat, lon, level, tile_level)?;
+            let ans = penumbra::query::mip(&dir, lat, lon, level, tile_level)?;
             output::print_mip_answer(&ans, json)?;
         }
         Command::Query(QueryCommand::Horizon {
@@ -408,7 +408,7 @@ fn run(cli: Cli) -> Result<()> {
                 near_px: flags.near_px,
                 ..Default::default()
             };
-            let ans = penumbra::horizon::query(&dir, lat, lon, level, &opts)?;
+            let ans = penumbra::query::horizon(&dir, lat, lon, level, &opts)?;
             output::print_horizon_answer(&ans, json)?;
         }
     }

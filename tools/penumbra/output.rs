@@ -8,10 +8,11 @@ use anyhow::Result;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use penumbra::bake::BakeReport;
-use penumbra::horizon::{HorizonAnswer, HorizonReport};
+use penumbra::horizon::HorizonReport;
 use penumbra::manifest::Tileset;
-use penumbra::mip::{MipAnswer, MipReport};
+use penumbra::mip::MipReport;
 use penumbra::query::HeightAnswer;
+use penumbra::query::{HorizonAnswer, MipAnswer};
 
 /// indicatif bars on stderr; nothing when quiet or when stderr is not a terminal.
 pub struct Bars {

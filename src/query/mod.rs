@@ -1,5 +1,11 @@
-//! Point queries against a tileset: which tile and pixel a latitude/longitude falls in, and the
-//! stored products there.
+//! Point queries against a tileset, one per product, all through the [`Store`]: which tile and
+//! pixel a latitude/longitude falls in, and the stored products there.
+
+mod horizon;
+mod mip;
+
+pub use self::horizon::{horizon, HorizonAnswer};
+pub use self::mip::{mip, MipAnswer};
 
 use std::path::Path;
 
@@ -8,8 +14,8 @@ use serde::Serialize;
 use crate::cube;
 use crate::error::{Error, Result};
 use crate::layout::TileId;
-use crate::manifest::{self, Tileset};
-use crate::tileio;
+use crate::manifest::Tileset;
+use crate::tileset::Store;
 
 #[derive(Clone, Debug, Serialize)]
 pub struct HeightAnswer {
@@ -66,15 +72,10 @@ pub fn locate(ts: &Tileset, lat: f64, lon: f64, level: u8) -> (TileId, f64, f64)
 
 pub fn height(dir: &Path, lat: f64, lon: f64, level: Option<u8>) -> Result<HeightAnswer> {
     check_latlon(lat, lon)?;
-    let ts = Tileset::load(dir)?;
-    let level = pick_level(&ts, level)?;
-    let (tile, px, py) = locate(&ts, lat, lon, level);
-    let product = ts.products.height.as_ref().ok_or_else(|| {
-        Error::invalid(
-            dir.join(manifest::MANIFEST),
-            "tileset has no height product",
-        )
-    })?;
+    let store = Store::open(dir)?;
+    let ts = store.manifest();
+    let level = pick_level(ts, level)?;
+    let (tile, px, py) = locate(ts, lat, lon, level);
     if !ts.has_tile(tile) {
         return Err(Error::usage(format!(
             "no height tile covers {lat}°, {lon}° at level {level} (tile {tile}): the source DEM \
@@ -82,18 +83,8 @@ pub fn height(dir: &Path, lat: f64, lon: f64, level: Option<u8>) -> Result<Heigh
             dir.display()
         )));
     }
-    let file = tileio::tile_path(dir, &product.path, level, tile.face.name(), tile.x, tile.y);
-    let t = tileio::read_height_tile(&file)?;
-    if t.size != ts.layout.stored_size() {
-        return Err(Error::invalid(
-            &file,
-            format!(
-                "tile is {}² but the manifest says {}²",
-                t.size,
-                ts.layout.stored_size()
-            ),
-        ));
-    }
+    let file = store.height_path(tile)?;
+    let t = store.read_height(tile)?;
     let h = ts.layout.halo as f64;
     let (x, y) = (px + h, py + h);
     let height_m = t.bilinear(x, y) as f64;

@@ -1,0 +1,153 @@
+//! The (min, max) mipmap texel over a point: inside a tile's own pyramid, then the face pyramid.
+
+use std::path::Path;
+
+use serde::Serialize;
+
+use crate::error::{Error, Result};
+use crate::mip::{level_sizes, read_mip_exr};
+use crate::tileset::{self, Store};
+
+fn nan_to_none(v: f32) -> Option<f64> {
+    (!v.is_nan()).then_some(v as f64)
+}
+
+/// The texel of a mip level that contains a point.
+#[derive(Clone, Debug, Serialize)]
+pub struct MipAnswer {
+    pub lat_deg: f64,
+    pub lon_deg: f64,
+    /// Tile level whose tiles the pyramid belongs to.
+    pub tile_level: u8,
+    /// Mip level asked for: 0..=`tile_mip_levels`−1 inside the tile, above that the face
+    /// pyramid (`tile_mip_levels`−1 + f is face-pyramid level f).
+    pub level: u32,
+    /// Levels of a tile's own pyramid (tile_size … 1).
+    pub tile_mip_levels: u32,
+    /// Highest level accepted (the face's 1×1).
+    pub max_level: u32,
+    /// `tile` or `face`.
+    pub scope: String,
+    pub face: String,
+    pub tile: [u32; 2],
+    /// Fractional interior pixel at `tile_level` (centres at integers).
+    pub pixel: [f64; 2],
+    /// Texel (column, row) at this level, in the tile (`scope` tile) or the face grid (face).
+    pub texel: [u32; 2],
+    /// Texels per side at this level.
+    pub texels: u32,
+    /// Lower and upper bound of the interpolated surface over the texel (null: no data).
+    pub min_m: Option<f64>,
+    pub max_m: Option<f64>,
+    pub file: String,
+}
+
+/// The texel containing (lat, lon) at mip `level` of the tiles at `tile_level` (default the
+/// finest).
+pub fn mip(
+    dir: &Path,
+    lat: f64,
+    lon: f64,
+    level: u32,
+    tile_level: Option<u8>,
+) -> Result<MipAnswer> {
+    super::check_latlon(lat, lon)?;
+    let store = Store::open(dir)?;
+    let ts = store.manifest();
+    let tl = super::pick_level(ts, tile_level)?;
+    let mp = ts.products.mip.as_ref().ok_or_else(|| {
+        Error::usage(format!(
+            "{} has no mipmaps: run `penumbra mip {}` first",
+            dir.display(),
+            dir.display()
+        ))
+    })?;
+    let n = ts.layout.tile_size as usize;
+    let m = level_sizes(n).len() as u32;
+    let max_level = m - 1 + tl as u32;
+    if level > max_level {
+        return Err(Error::usage(format!(
+            "mip level {level} does not exist: tile level {tl} has mip levels 0..={max_level} \
+             (0..={} inside a {n}-px tile, then the face pyramid up to the face's 1×1)",
+            m - 1
+        )));
+    }
+    let (tile, px, py) = super::locate(ts, lat, lon, tl);
+    let clampi = |p: f64| ((p + 0.5).floor().max(0.0) as u64).min(n as u64 - 1) as u32;
+    let (i0, j0) = (clampi(px), clampi(py));
+    let (scope, file, texel, texels, lo, hi);
+    if level < m {
+        if !ts.has_tile(tile) {
+            return Err(Error::usage(format!(
+                "no height tile covers {lat}°, {lon}° at level {tl} (tile {tile}): the source DEM \
+                 does not reach there; `penumbra info {}` lists the coverage",
+                dir.display()
+            )));
+        }
+        let path = tileset::tile_path(dir, &mp.minmax_path, tile);
+        let f = read_mip_exr(&path)?;
+        if f.sizes[0] != n {
+            return Err(Error::invalid(
+                &path,
+                format!("mipmap is {}² but tiles are {n}²", f.sizes[0]),
+            ));
+        }
+        let k = level as usize;
+        let w = f.sizes[k];
+        let (x, y) = (i0 >> level, j0 >> level);
+        let idx = y as usize * w + x as usize;
+        scope = "tile";
+        texel = [x, y];
+        texels = w as u32;
+        lo = f.channel(&path, "min")?[k][idx];
+        hi = f.channel(&path, "max")?[k][idx];
+        file = path;
+    } else {
+        let fl = level - (m - 1);
+        let path = tileset::face_file_path(dir, &mp.face_path, tl, tile.face);
+        if !path.exists() {
+            return Err(Error::usage(format!(
+                "no tile of face {} at level {tl} has data: no face pyramid there",
+                tile.face
+            )));
+        }
+        let f = read_mip_exr(&path)?;
+        let g = ts.layout.tiles_per_side(tl) as usize;
+        if f.sizes[0] != g {
+            return Err(Error::invalid(
+                &path,
+                format!(
+                    "face pyramid is {}² but level {tl} has {g}² tiles",
+                    f.sizes[0]
+                ),
+            ));
+        }
+        let k = fl as usize;
+        let w = f.sizes[k];
+        let (x, y) = (tile.x >> fl, tile.y >> fl);
+        let idx = y as usize * w + x as usize;
+        scope = "face";
+        texel = [x, y];
+        texels = w as u32;
+        lo = f.channel(&path, "min")?[k][idx];
+        hi = f.channel(&path, "max")?[k][idx];
+        file = path;
+    }
+    Ok(MipAnswer {
+        lat_deg: lat,
+        lon_deg: lon,
+        tile_level: tl,
+        level,
+        tile_mip_levels: m,
+        max_level,
+        scope: scope.into(),
+        face: tile.face.name().into(),
+        tile: [tile.x, tile.y],
+        pixel: [px, py],
+        texel,
+        texels,
+        min_m: nan_to_none(lo),
+        max_m: nan_to_none(hi),
+        file: file.display().to_string(),
+    })
+}
