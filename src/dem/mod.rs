@@ -14,6 +14,7 @@
 
 pub mod exrdem;
 pub mod geotiff;
+pub mod limits;
 pub mod pds3;
 pub mod raw;
 pub mod srtm;
@@ -355,22 +356,17 @@ impl Dem {
                 }
             }
         }
+        // The readers check each key as they parse it; this catches what they combined (and
+        // DEMs built by code rather than read from a file).
         let g = &parts.georef;
-        let finite = [g.dx, g.dy, g.x0, g.y0].iter().all(|v| v.is_finite());
-        if !(finite && g.dx > 0.0 && g.dy != 0.0) {
-            return Err(Error::invalid(
-                &path,
-                format!("pixel spacing ({}, {}) is not usable", g.dx, g.dy),
-            ));
-        }
-        if !(parts.scale.is_finite() && parts.scale != 0.0 && parts.offset.is_finite()) {
-            return Err(Error::invalid(
-                &path,
-                format!(
-                    "scale {} / offset {} are not usable",
-                    parts.scale, parts.offset
-                ),
-            ));
+        limits::check_georef(&path, g, w, h, "the georeferencing")?;
+        let ty = match &parts.samples {
+            Samples::Mapped { ty, .. } => Some(*ty),
+            Samples::Owned(_) => None,
+        };
+        limits::scale_offset(&path, ("scale", parts.scale), ("offset", parts.offset), ty)?;
+        if let Some(r) = parts.datum_radius_m {
+            limits::radius(&path, "datum radius", r)?;
         }
         let (global_lon, global_lat) = match g.crs {
             Crs::Geographic => {
