@@ -155,6 +155,9 @@ pub fn tile_dem(
         levels,
     };
     let height_shift = dem.datum_radius_m().map_or(0.0, |r0| r0 - radius);
+    // Implausible input (heights, pixel size, datum for this body) is refused before `out`
+    // is touched.
+    dem.check_plausible(radius)?;
 
     // Identity of this run.
     let mut files = Vec::new();
