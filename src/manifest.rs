@@ -13,8 +13,6 @@ use crate::error::{Error, IoContext, Result};
 use crate::layout::{Layout, TileId};
 
 pub const MANIFEST: &str = "tileset.json";
-/// Written at the start of a run and removed at its end; a rerun with the same run key resumes.
-pub const PARTIAL: &str = ".penumbra-partial.json";
 pub const FORMAT: &str = "penumbra-tileset";
 pub const FORMAT_VERSION: u32 = 1;
 pub const HEIGHT_PATTERN: &str = "height/{level}/{face}/{y}/{x}.exr";
@@ -295,20 +293,6 @@ pub fn coverage_of(tiles: &BTreeSet<TileId>, levels: u8) -> Vec<LevelCoverage> {
             }
         })
         .collect()
-}
-
-/// The run key recorded in a stage's in-progress marker, if there is a readable one.
-pub fn partial_run_key(marker: &Path) -> Option<String> {
-    let text = std::fs::read_to_string(marker).ok()?;
-    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
-    v["run_key"].as_str().map(str::to_string)
-}
-
-/// Record that a run with `run_key` is under way (atomically); a rerun with the same key keeps
-/// what that run already wrote.
-pub fn write_partial(marker: &Path, run_key: &str) -> Result<()> {
-    let json = serde_json::json!({ "run_key": run_key }).to_string();
-    crate::tileio::write_atomic_bytes(marker, json.as_bytes())
 }
 
 /// blake3 of a file, streamed through a memory map.

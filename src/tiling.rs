@@ -226,6 +226,9 @@ pub fn tile_dem(
         levels,
     };
     let height_shift = dem.datum_radius_m().map_or(0.0, |r0| r0 - radius);
+    // Implausible input (heights, pixel size, datum for this body) is refused before `out`
+    // is touched.
+    dem.check_plausible(radius)?;
 
     // Identity of this run.
     let mut files = Vec::new();
@@ -357,8 +360,11 @@ pub fn tile_dem(
         }
     }
     if present.is_empty() {
-        return Err(Error::usage(
-            "the DEM covers no tile: check its georeferencing (docs/formats.md)",
+        let source = dem.sources().first().cloned().unwrap_or_default();
+        return Err(Error::invalid(
+            source,
+            "covers no tile: no tile pixel falls on its data; check its georeferencing \
+             (docs/formats.md)",
         ));
     }
     let (voids, voids_unfilled) = dem.void_counts();

@@ -1202,6 +1202,231 @@ fn raw_damaged_inputs_fail_cleanly() {
     );
 }
 
+/// Keys outside the plausibility limits (docs/formats.md) are refused by name where they are
+/// parsed: the reports of issue #13 and their kin, in each reader that has such keys.
+#[test]
+fn implausible_keys_are_refused_by_name() {
+    let t = tempfile::tempdir().unwrap();
+    let dir = t.path();
+    write(dir.join("g.img"), pds_img_le());
+    let good = pds_label("\"g.img\"", INT16_LSB, PROJ_EDGES);
+    write(dir.join("good.lbl"), &good);
+    open(&dir.join("good.lbl")).unwrap();
+    for (name, from, to, words) in [
+        (
+            "scale",
+            "SCALING_FACTOR = 0.5",
+            "SCALING_FACTOR = 1e308",
+            &["SCALING_FACTOR = 1e308"][..],
+        ),
+        (
+            "tiny",
+            "SCALING_FACTOR = 0.5",
+            "SCALING_FACTOR = 1e-300",
+            &["SCALING_FACTOR"][..],
+        ),
+        (
+            "res",
+            "MAP_RESOLUTION = 0.0444444444444444444",
+            "MAP_RESOLUTION = 1e-300",
+            &["MAP_RESOLUTION"],
+        ),
+        (
+            "maxlat",
+            "MAXIMUM_LATITUDE = 90",
+            "MAXIMUM_LATITUDE = 1000",
+            &["MAXIMUM_LATITUDE = 1000", "latitude"],
+        ),
+        (
+            "west",
+            "WESTERNMOST_LONGITUDE = 0",
+            "WESTERNMOST_LONGITUDE = 1e30",
+            &["WESTERNMOST_LONGITUDE", "longitude"],
+        ),
+        (
+            "datum",
+            "OFFSET = 1737400.",
+            "OFFSET = -1737400.",
+            &["OFFSET", "radius"],
+        ),
+        (
+            "axis",
+            "A_AXIS_RADIUS = 1737.4",
+            "A_AXIS_RADIUS = 1e300",
+            &["A_AXIS_RADIUS"],
+        ),
+        (
+            "clat",
+            "CENTER_LATITUDE = 0",
+            "CENTER_LATITUDE = -95",
+            &["CENTER_LATITUDE = -95"],
+        ),
+    ] {
+        let text = good.replace(from, to);
+        assert_ne!(text, good, "{name}: nothing replaced");
+        let p = dir.join(format!("{name}.lbl"));
+        write(&p, text);
+        expect_err(&p, Kind::Invalid, words);
+    }
+    // Projection offsets that put rows beyond the pole (no edge keywords).
+    let offsets = pds_label("\"g.img\"", INT16_LSB, PROJ_OFFSETS);
+    write(
+        dir.join("off.lbl"),
+        offsets.replace(
+            "LINE_PROJECTION_OFFSET = 4.5",
+            "LINE_PROJECTION_OFFSET = 40",
+        ),
+    );
+    expect_err(
+        &dir.join("off.lbl"),
+        Kind::Invalid,
+        &["LINE/SAMPLE_PROJECTION_OFFSET", "latitude"],
+    );
+
+    // Sidecars.
+    write(dir.join("r.bin"), [0u8; 24]);
+    let base = r#"{"width": 4, "height": 3, "format": "int16-le", "x0": 10, "y0": 20, "dx": 0.25, "dy": 0.25"#;
+    write(dir.join("r.json"), format!("{base}}}"));
+    open(&dir.join("r.bin")).unwrap();
+    for (extra, words) in [
+        (
+            r#", "datum_radius_m": 1e300"#,
+            &["datum_radius_m = 1e300"][..],
+        ),
+        (
+            r#", "datum_radius_m": -1737400"#,
+            &["datum_radius_m", "radius"][..],
+        ),
+        (r#", "scale": 1e308"#, &["scale = 1e308"][..]),
+        (r#", "offset": -1e12"#, &["offset"][..]),
+    ] {
+        write(dir.join("r.json"), format!("{base}{extra}}}"));
+        expect_err(&dir.join("r.bin"), Kind::Invalid, words);
+    }
+    for (from, to, words) in [
+        (r#""dx": 0.25"#, r#""dx": 1e300"#, &["dx = 1e300"][..]),
+        (r#""dy": 0.25"#, r#""dy": 1e-14"#, &["dy = 1e-14"][..]),
+        (r#""y0": 20"#, r#""y0": 95"#, &["y0 = 95", "latitude"][..]),
+        (
+            r#""x0": 10"#,
+            r#""x0": -400"#,
+            &["x0 = -400", "longitude"][..],
+        ),
+        (
+            r#""dy": 0.25"#,
+            r#""dy": 60"#,
+            &["x0, y0, dx, dy", "row 2"][..],
+        ),
+    ] {
+        write(dir.join("r.json"), format!("{base}}}").replace(from, to));
+        expect_err(&dir.join("r.bin"), Kind::Invalid, words);
+    }
+    let polar = r#"{"width": 4, "height": 3, "format": "int16-le", "crs": {"kind": "polar-stereographic", "north": false, "lon0_deg": 0, "lat_ts_deg": -90, "radius_m": 1737400}, "x0": 0, "y0": 0, "dx": 20, "dy": 20}"#;
+    write(dir.join("r.json"), polar);
+    open(&dir.join("r.bin")).unwrap();
+    for (from, to, word) in [
+        ("\"radius_m\": 1737400", "\"radius_m\": 0.5", "radius_m"),
+        ("\"lon0_deg\": 0", "\"lon0_deg\": 1000", "lon0_deg"),
+        ("\"dx\": 20", "\"dx\": 1e-6", "dx"),
+        ("\"x0\": 0", "\"x0\": 1e9", "150°"),
+    ] {
+        write(dir.join("r.json"), polar.replace(from, to));
+        expect_err(&dir.join("r.bin"), Kind::Invalid, &[word]);
+    }
+
+    // GeoTIFF: pixel scale, radius and angles of the Shoemaker-like keys.
+    let v: Vec<f32> = (0..16).map(|i| i as f32).collect();
+    let mut g = tif::south_polar(-20.0, 20.0, 10.0);
+    g.doubles[5] = -1737400.0;
+    write(
+        dir.join("a.tif"),
+        tif::encode(4, 4, tif::Data::F32(&v), "none", Some(&g)),
+    );
+    expect_err(
+        &dir.join("a.tif"),
+        Kind::Invalid,
+        &["GeogSemiMajorAxisGeoKey"],
+    );
+    let mut g = tif::south_polar(-20.0, 20.0, 10.0);
+    g.doubles[1] = 900.0;
+    write(
+        dir.join("b.tif"),
+        tif::encode(4, 4, tif::Data::F32(&v), "none", Some(&g)),
+    );
+    expect_err(&dir.join("b.tif"), Kind::Invalid, &["3095", "longitude"]);
+    let g = tif::geographic(10.0, 20.0, 1e-14, false);
+    write(
+        dir.join("c.tif"),
+        tif::encode(4, 4, tif::Data::F32(&v), "none", Some(&g)),
+    );
+    expect_err(
+        &dir.join("c.tif"),
+        Kind::Invalid,
+        &["ModelPixelScale", "pixel spacing"],
+    );
+    let g = tif::geographic(10.0, 2000.0, 1.0, false);
+    write(
+        dir.join("d.tif"),
+        tif::encode(4, 4, tif::Data::F32(&v), "none", Some(&g)),
+    );
+    expect_err(
+        &dir.join("d.tif"),
+        Kind::Invalid,
+        &["ModelTiepoint", "latitude"],
+    );
+}
+
+/// What only the body can tell: heights beyond its radius, a datum far from it, pixels below
+/// a millimetre or above its circumference.
+#[test]
+fn implausible_for_the_body() {
+    let t = tempfile::tempdir().unwrap();
+    let dir = t.path();
+    let sc = |extra: &str| {
+        format!(
+            r#"{{"width": 4, "height": 3, "format": "float32-le", "x0": 10, "y0": 20, "dx": 0.25, "dy": 0.25{extra}}}"#
+        )
+    };
+    let samples = |spike: f32| -> Vec<u8> {
+        (0..12)
+            .flat_map(|i| if i == 7 { spike } else { i as f32 }.to_le_bytes())
+            .collect()
+    };
+    write(dir.join("h.bin"), samples(5.0));
+    write(dir.join("h.json"), sc(""));
+    let d = open(&dir.join("h.bin")).unwrap();
+    d.check_plausible(1_737_400.0).unwrap();
+    // Small bodies: a 0.25° pixel is 4.4 mm on a 1 m sphere, heights of 11 m are not.
+    assert!(d.check_plausible(1.0).is_err());
+    // A pixel of 0.25° is more than 1 mm only on spheres above 0.23 m, less than a turn always.
+    assert!(d.check_plausible(0.2).is_err());
+
+    // A sample of 3e38 m (an undeclared void value): named by column and row, data file first.
+    write(dir.join("h.bin"), samples(3.0e38));
+    let d = open(&dir.join("h.bin")).unwrap();
+    let e = d.check_plausible(1_737_400.0).unwrap_err().to_string();
+    assert!(
+        e.contains("h.bin") && e.contains("column 3, row 1") && e.contains("h.json"),
+        "{e}"
+    );
+    // The same as a void is fine.
+    write(dir.join("h.json"), sc(r#", "nodata": 3e38"#));
+    open(&dir.join("h.bin"))
+        .unwrap()
+        .check_plausible(1_737_400.0)
+        .unwrap();
+
+    // Datum radius more than 50 % off the body, and a shift pushing heights below the centre.
+    write(dir.join("h.bin"), samples(5.0));
+    write(dir.join("h.json"), sc(r#", "datum_radius_m": 1737400"#));
+    let d = open(&dir.join("h.bin")).unwrap();
+    d.check_plausible(1_737_400.0).unwrap();
+    d.check_plausible(3_396_190.0).unwrap(); // 49 % off: allowed, heights −1.66e6 m
+    let e = d.check_plausible(6_371_008.8).unwrap_err().to_string();
+    assert!(e.contains("datum radius") && e.contains("h.json"), "{e}");
+    assert!(d.check_plausible(1_000_000.0).is_err());
+}
+
 // ------------------------------------------------------------------------------------------
 // EXR
 // ------------------------------------------------------------------------------------------

@@ -15,6 +15,8 @@ mod cli;
 mod readers;
 // Real DEMs tiled and queried at landmarks (skipped without ../shared/data).
 mod realdata;
+// Hundreds of damaged crops of the real DEMs through `penumbra tile`: exit 0 or 2, old tileset kept.
+mod corpus;
 // Max and min/max mipmaps: bounds of the interpolated surface, reference twin, CLI.
 mod mip;
 // Horizon maps: fast sweep against brute force, analytic terrains, stiff cases, the CLI.

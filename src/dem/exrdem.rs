@@ -98,6 +98,7 @@ pub fn read(path: &Path) -> Result<DemParts> {
     }
     let georef = sc.georef(&sidecar_path, w as u64, h as u64)?;
     let (scale, offset) = sc.scale_offset(&sidecar_path, None)?;
+    let datum_radius_m = sc.datum_radius(&sidecar_path)?;
     let sample_name = format!("{:?}", channel.sample_type).to_lowercase();
     let name = names[ci].clone();
 
@@ -150,7 +151,7 @@ pub fn read(path: &Path) -> Result<DemParts> {
         offset,
         nodata: sc.nodata.map(|v| v as f32 as f64),
         georef,
-        datum_radius_m: sc.datum_radius_m,
+        datum_radius_m,
         target: sc.target.as_ref().map(|t| t.to_ascii_lowercase()),
         sources: vec![sidecar_path, path.to_path_buf()],
         format,

@@ -37,7 +37,7 @@ use tiff::decoder::{ChunkType, Decoder, DecodingResult, DecodingSampleType, Limi
 use tiff::tags::Tag;
 use tiff::{ColorType, TiffError, TiffFormatError};
 
-use crate::dem::{check_dimensions, damaged_or_io, Crs, DemParts, GeoRef, Samples};
+use crate::dem::{check_dimensions, damaged_or_io, limits, Crs, DemParts, GeoRef, Samples};
 use crate::error::{Error, IoContext, Result};
 
 /// Decoded samples may be at most this many bytes per byte of file (guards allocations driven
@@ -202,7 +202,7 @@ fn read_inner(path: &Path) -> Result<DemParts> {
             }
         }
     };
-    let (georef, crs_desc) = georef(path, keys.as_ref(), scale, tie, transform)?;
+    let (georef, crs_desc) = georef(path, keys.as_ref(), scale, tie, transform, (w, h))?;
 
     // Samples.
     let (w, h) = (w as usize, h as usize);
@@ -327,8 +327,14 @@ fn georef(
     scale: Option<Vec<f64>>,
     tie: Option<Vec<f64>>,
     transform: Option<Vec<f64>>,
+    (w, h): (u32, u32),
 ) -> Result<(GeoRef, String)> {
     // Raster point (0, 0) in CRS units, and the pixel size.
+    let placed_by = if scale.is_some() && tie.is_some() {
+        "ModelPixelScale and ModelTiepoint"
+    } else {
+        "ModelTransformation"
+    };
     let (cx, cy, sx, sy) = match (scale, tie, transform) {
         // With several tiepoints and a pixel scale, the first tiepoint places the grid.
         (Some(s), Some(t), _) if s.len() >= 2 && t.len() >= 6 => {
@@ -358,13 +364,25 @@ fn georef(
             ))
         }
     };
-    if !(sx.is_finite() && sy.is_finite() && cx.is_finite() && cy.is_finite())
-        || sx <= 0.0
-        || sy == 0.0
-    {
+    if !(cx.is_finite() && cy.is_finite()) {
         return Err(Error::invalid(
             path,
-            format!("pixel scale ({sx}, {sy}) is not usable"),
+            format!(
+                "the raster's origin ({}, {}) from {placed_by} is not finite",
+                limits::show(cx),
+                limits::show(cy)
+            ),
+        ));
+    }
+    if !(sx.is_finite() && sy.is_finite()) || sx <= 0.0 || sy == 0.0 {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "pixel scale ({}, {}) from {placed_by} is not usable: it must be finite, x > 0, \
+                 y ≠ 0",
+                limits::show(sx),
+                limits::show(sy)
+            ),
         ));
     }
     let Some(keys) = keys else {
@@ -391,9 +409,30 @@ fn georef(
                     ));
                 }
             }
+            limits::pixel_deg(path, &format!("{placed_by} x pixel size"), sx)?;
+            limits::pixel_deg(path, &format!("{placed_by} y pixel size"), sy)?;
             Crs::Geographic
         }
-        Some(1) => projected(path, keys, &mut x0, &mut y0)?,
+        Some(1) => {
+            let crs = projected(path, keys, &mut x0, &mut y0)?;
+            if let Crs::Equirectangular { radius_m, .. }
+            | Crs::PolarStereographic { radius_m, .. } = crs
+            {
+                limits::pixel_m(
+                    path,
+                    &format!("{placed_by} x pixel size"),
+                    sx,
+                    Some(radius_m),
+                )?;
+                limits::pixel_m(
+                    path,
+                    &format!("{placed_by} y pixel size"),
+                    sy,
+                    Some(radius_m),
+                )?;
+            }
+            crs
+        }
         Some(m) => {
             return Err(Error::unsupported(
                 path,
@@ -419,16 +458,15 @@ fn georef(
             if *north { "north" } else { "south" }
         ),
     };
-    Ok((
-        GeoRef {
-            crs,
-            x0,
-            y0,
-            dx: sx,
-            dy: sy,
-        },
-        desc,
-    ))
+    let g = GeoRef {
+        crs,
+        x0,
+        y0,
+        dx: sx,
+        dy: sy,
+    };
+    limits::check_georef(path, &g, w as usize, h as usize, placed_by)?;
+    Ok((g, desc))
 }
 
 fn projected(path: &Path, keys: &GeoKeys, x0: &mut f64, y0: &mut f64) -> Result<Crs> {
@@ -481,12 +519,7 @@ fn projected(path: &Path, keys: &GeoKeys, x0: &mut f64, y0: &mut f64) -> Result<
             ),
         });
     };
-    if !(a > 0.0 && a.is_finite()) {
-        return Err(Error::invalid(
-            path,
-            format!("sphere radius {a} is not usable"),
-        ));
-    }
+    limits::radius(path, "GeogSemiMajorAxisGeoKey (2057)", a)?;
     let b = keys.dbl(2058);
     let inv_f = keys.dbl(2059);
     let flattened = b.is_some_and(|b| (a - b).abs() > 1e-9 * a) || inv_f.is_some_and(|f| f != 0.0);
@@ -499,8 +532,34 @@ fn projected(path: &Path, keys: &GeoKeys, x0: &mut f64, y0: &mut f64) -> Result<
             ),
         ));
     }
-    *x0 -= keys.dbl(3082).unwrap_or(0.0);
-    *y0 -= keys.dbl(3083).unwrap_or(0.0);
+    *x0 -= limits::finite(
+        path,
+        "ProjFalseEastingGeoKey (3082)",
+        keys.dbl(3082).unwrap_or(0.0),
+    )?;
+    *y0 -= limits::finite(
+        path,
+        "ProjFalseNorthingGeoKey (3083)",
+        keys.dbl(3083).unwrap_or(0.0),
+    )?;
+    // Every angle the projections below may read.
+    for (key, name, lat) in [
+        (3078, "ProjStdParallel1GeoKey (3078)", true),
+        (3081, "ProjNatOriginLatGeoKey (3081)", true),
+        (3085, "ProjFalseOriginLatGeoKey (3085)", true),
+        (3089, "ProjCenterLatGeoKey (3089)", true),
+        (3080, "ProjNatOriginLongGeoKey (3080)", false),
+        (3088, "ProjCenterLongGeoKey (3088)", false),
+        (3095, "ProjStraightVertPoleLongGeoKey (3095)", false),
+    ] {
+        if let Some(v) = keys.dbl(key) {
+            if lat {
+                limits::latitude(path, name, v)?;
+            } else {
+                limits::longitude(path, name, v)?;
+            }
+        }
+    }
     match ct {
         15 | 14 => {
             let lat_origin = keys.first_dbl(&[3081, 3089, 3085]).unwrap_or(0.0);

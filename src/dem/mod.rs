@@ -14,6 +14,7 @@
 
 pub mod exrdem;
 pub mod geotiff;
+pub mod limits;
 pub mod pds3;
 pub mod raw;
 pub mod sidecar;
@@ -29,6 +30,9 @@ use crate::error::{Error, IoContext, Result};
 
 /// Refuse rasters larger than this many samples before allocating anything (2^34 = 16 Gi).
 pub const MAX_SAMPLES: u64 = 1 << 34;
+/// A DEM's datum radius may differ from the body's radius by at most this fraction of it
+/// ([`Dem::check_plausible`]).
+pub const MAX_DATUM_MISMATCH: f64 = 0.5;
 /// Default distance (pixels) up to which voids are filled from neighbours.
 pub const DEFAULT_MAX_FILL_PX: u32 = 64;
 
@@ -356,22 +360,17 @@ impl Dem {
                 }
             }
         }
+        // The readers check each key as they parse it; this catches what they combined (and
+        // DEMs built by code rather than read from a file).
         let g = &parts.georef;
-        let finite = [g.dx, g.dy, g.x0, g.y0].iter().all(|v| v.is_finite());
-        if !(finite && g.dx > 0.0 && g.dy != 0.0) {
-            return Err(Error::invalid(
-                &path,
-                format!("pixel spacing ({}, {}) is not usable", g.dx, g.dy),
-            ));
-        }
-        if !(parts.scale.is_finite() && parts.scale != 0.0 && parts.offset.is_finite()) {
-            return Err(Error::invalid(
-                &path,
-                format!(
-                    "scale {} / offset {} are not usable",
-                    parts.scale, parts.offset
-                ),
-            ));
+        limits::check_georef(&path, g, w, h, "the georeferencing")?;
+        let ty = match &parts.samples {
+            Samples::Mapped { ty, .. } => Some(*ty),
+            Samples::Owned(_) => None,
+        };
+        limits::scale_offset(&path, ("scale", parts.scale), ("offset", parts.offset), ty)?;
+        if let Some(r) = parts.datum_radius_m {
+            limits::radius(&path, "datum radius", r)?;
         }
         let (global_lon, global_lat) = match g.crs {
             Crs::Geographic => {
@@ -433,10 +432,10 @@ impl Dem {
         (self.global_lon, self.global_lat)
     }
 
-    /// Height in metres of the sample at (`col`, `row`), NaN for a void, before filling.
+    /// The DN stored at (`col`, `row`), before scaling and the void test.
     #[inline]
-    pub fn raw(&self, col: usize, row: usize) -> f32 {
-        let v = match &self.p.samples {
+    fn dn(&self, col: usize, row: usize) -> f64 {
+        match &self.p.samples {
             Samples::Owned(v) => v[row * self.p.width + col] as f64,
             Samples::Mapped {
                 map,
@@ -448,7 +447,13 @@ impl Dem {
                 let at = offset + row * row_stride + col * ty.size();
                 decode(&map[at..at + ty.size()], *ty, *order)
             }
-        };
+        }
+    }
+
+    /// Height in metres of the sample at (`col`, `row`), NaN for a void, before filling.
+    #[inline]
+    pub fn raw(&self, col: usize, row: usize) -> f32 {
+        let v = self.dn(col, row);
         if !v.is_finite() || self.p.nodata == Some(v) {
             return f32::NAN;
         }
@@ -520,10 +525,17 @@ impl Dem {
         }
         self.void_count = voids.len() as u64;
         if voids.len() as u64 == (w * h) as u64 {
-            let path = self.p.sources.first().cloned().unwrap_or_default();
+            // Name the samples' file; the no-data value may come from the label or sidecar.
+            let data = self.p.sources.last().cloned().unwrap_or_default();
+            let first = self.p.sources.first().cloned().unwrap_or_default();
+            let also = if first != data {
+                format!(" (no-data value from {})", first.display())
+            } else {
+                String::new()
+            };
             return Err(Error::invalid(
-                path,
-                "every sample is a void (no-data value or NaN): nothing to tile",
+                data,
+                format!("every sample is a void (no-data value or NaN{also}): nothing to tile"),
             ));
         }
         let mut filled: HashMap<u64, f32> = HashMap::new();
@@ -602,6 +614,181 @@ impl Dem {
             Crs::Geographic => g.dy.abs().to_radians() * radius_m,
             _ => g.dx.abs().min(g.dy.abs()),
         }
+    }
+
+    /// Refuse a DEM that cannot be terrain on a sphere of `radius_m` (the body it is tiled
+    /// for), before anything is written:
+    ///
+    /// * a datum radius that differs from `radius_m` by more than half of it
+    ///   ([`MAX_DATUM_MISMATCH`]): every height would move by more than half the body, which
+    ///   only happens when the DEM belongs to another body or its radius is in the wrong unit;
+    /// * a pixel smaller than 1 mm or larger than the body's circumference on the body;
+    /// * a raster that covers less than one of its own pixels of the sphere (rows beyond a
+    ///   pole);
+    /// * a measured sample whose height above the body's sphere — `DN · scale + offset`, plus
+    ///   the datum shift `datum_radius − radius_m` — is not finite or beyond ±`radius_m`.
+    ///
+    /// Reads every sample once (in parallel by rows); voids are skipped.
+    pub fn check_plausible(&self, radius_m: f64) -> Result<()> {
+        let first = self.p.sources.first().cloned().unwrap_or_default();
+        let data = self.p.sources.last().cloned().unwrap_or_default();
+        let see = "see docs/formats.md, \"Plausibility limits\"";
+        let show = limits::show;
+        let shift = match self.p.datum_radius_m {
+            None => 0.0,
+            Some(r0) => {
+                let off = (r0 - radius_m).abs();
+                if !(off.is_finite() && off <= MAX_DATUM_MISMATCH * radius_m) {
+                    return Err(Error::invalid(
+                        &first,
+                        format!(
+                            "datum radius {} m (PDS3 OFFSET above 100 km, or sidecar \
+                             datum_radius_m) is more than 50 % away from the body's radius {} m: \
+                             heights would move by more than half the body. The DEM is of \
+                             another body, or the radius is in the wrong unit; give the right \
+                             --body/--radius-m or fix the datum ({see})",
+                            show(r0),
+                            show(radius_m)
+                        ),
+                    ));
+                }
+                r0 - radius_m
+            }
+        };
+
+        let g = &self.p.georef;
+        let (px, py) = match g.crs {
+            Crs::Geographic => (
+                g.dx.abs().to_radians() * radius_m,
+                g.dy.abs().to_radians() * radius_m,
+            ),
+            Crs::Equirectangular { radius_m: rc, .. }
+            | Crs::PolarStereographic { radius_m: rc, .. } => {
+                (g.dx.abs() * radius_m / rc, g.dy.abs() * radius_m / rc)
+            }
+        };
+        let circumference = 2.0 * std::f64::consts::PI * radius_m;
+        for (axis, v) in [("x", px), ("y", py)] {
+            if !(v.is_finite() && (limits::MIN_PIXEL_M..=circumference).contains(&v)) {
+                return Err(Error::invalid(
+                    &first,
+                    format!(
+                        "pixel size along {axis} is {} m on a body of radius {} m: it must lie \
+                         within 1 mm .. the body's circumference ({} m); check the pixel \
+                         spacing / resolution keys and the body ({see})",
+                        show(v),
+                        show(radius_m),
+                        show(circumference)
+                    ),
+                ));
+            }
+        }
+
+        // Latitude extent of the raster's edges on the sphere, against one pixel.
+        let lat_of = |y: f64| match g.crs {
+            Crs::Equirectangular { radius_m: rc, .. } => Some((y / rc).to_degrees()),
+            Crs::Geographic => Some(y),
+            Crs::PolarStereographic { .. } => None,
+        };
+        let top = g.y0 + g.dy / 2.0;
+        let bottom = g.y0 - (self.p.height as f64 - 0.5) * g.dy;
+        if let (Some(a), Some(b), Some(d0), Some(d1)) =
+            (lat_of(top), lat_of(bottom), lat_of(0.0), lat_of(g.dy.abs()))
+        {
+            let (a, b) = (a.clamp(-90.0, 90.0), b.clamp(-90.0, 90.0));
+            let extent = (a - b).abs();
+            if !(extent.is_finite() && extent >= (d1 - d0) * (1.0 - 1e-9)) {
+                return Err(Error::invalid(
+                    &first,
+                    format!(
+                        "the raster covers less than one pixel of the sphere (its rows lie \
+                         beyond a pole: edges at latitude {} and {}); fix the georeferencing \
+                         ({see})",
+                        show(lat_of(top).unwrap_or(f64::NAN)),
+                        show(lat_of(bottom).unwrap_or(f64::NAN))
+                    ),
+                ));
+            }
+        }
+
+        // One pass over the samples: the measured height farthest from the sphere.
+        let (scale, offset, nodata) = (self.p.scale, self.p.offset, self.p.nodata);
+        let worst_of_row = |r: usize| -> (f64, usize, usize) {
+            let (mut wm, mut wc) = (-1.0f64, 0usize);
+            let mut see = |c: usize, v: f64| {
+                if v.is_finite() && nodata != Some(v) {
+                    let h = v * scale + offset + shift;
+                    let m = if h.is_finite() {
+                        h.abs()
+                    } else {
+                        f64::INFINITY
+                    };
+                    if m > wm {
+                        (wm, wc) = (m, c);
+                    }
+                }
+            };
+            match &self.p.samples {
+                Samples::Owned(v) => {
+                    let row = &v[r * self.p.width..(r + 1) * self.p.width];
+                    for (c, &x) in row.iter().enumerate() {
+                        see(c, x as f64);
+                    }
+                }
+                Samples::Mapped {
+                    map,
+                    offset,
+                    row_stride,
+                    ty,
+                    order,
+                } => {
+                    let at = offset + r * row_stride;
+                    for_each_dn(&map[at..at + self.p.width * ty.size()], *ty, *order, see);
+                }
+            }
+            (wm, wc, r)
+        };
+        // The largest |height|; ties go to the first sample in the file (deterministic).
+        let pick = |a: (f64, usize, usize), b: (f64, usize, usize)| {
+            if b.0 > a.0 || (b.0 == a.0 && (b.2, b.1) < (a.2, a.1)) {
+                b
+            } else {
+                a
+            }
+        };
+        use rayon::prelude::*;
+        let (m, c, r) = (0..self.p.height)
+            .into_par_iter()
+            .map(worst_of_row)
+            .reduce(|| (-1.0, 0, 0), pick);
+        let worst = (m >= 0.0).then_some((m, c, r));
+        if let Some((m, c, r)) = worst {
+            if !(m.is_finite() && m <= radius_m) {
+                let dn = self.dn(c, r);
+                let h = dn * scale + offset + shift;
+                let also = if first != data {
+                    format!(" and the scale/offset in {}", first.display())
+                } else {
+                    String::new()
+                };
+                return Err(Error::invalid(
+                    &data,
+                    format!(
+                        "sample (column {c}, row {r}) is DN {} → {} m above the body's sphere \
+                         (DN × scale {} + offset {} + datum shift {} m): heights must be finite \
+                         and within ± the body's radius {} m. Check the samples (a void value \
+                         not declared as no-data?){also} ({see})",
+                        show(dn),
+                        show(h),
+                        show(scale),
+                        show(offset),
+                        show(shift),
+                        show(radius_m)
+                    ),
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Resolve a possibly out-of-range integer pixel to one inside the raster: wrap in
@@ -829,6 +1016,32 @@ fn decode(b: &[u8], ty: SampleType, order: ByteOrder) -> f64 {
         SampleType::U32 => rd!(u32, 4),
         SampleType::F32 => rd!(f32, 4),
         SampleType::F64 => rd!(f64, 8),
+    }
+}
+
+/// Call `f(column, DN)` for every sample of one row's bytes (one dispatch on the type).
+#[inline]
+fn for_each_dn(bytes: &[u8], ty: SampleType, order: ByteOrder, mut f: impl FnMut(usize, f64)) {
+    macro_rules! go {
+        ($t:ty, $n:expr) => {{
+            for (c, b) in bytes.chunks_exact($n).enumerate() {
+                let a: [u8; $n] = b.try_into().expect("chunk has the sample size");
+                let v = match order {
+                    ByteOrder::Little => <$t>::from_le_bytes(a),
+                    ByteOrder::Big => <$t>::from_be_bytes(a),
+                };
+                f(c, v as f64);
+            }
+        }};
+    }
+    match ty {
+        SampleType::U8 => bytes.iter().enumerate().for_each(|(c, &b)| f(c, b as f64)),
+        SampleType::I16 => go!(i16, 2),
+        SampleType::U16 => go!(u16, 2),
+        SampleType::I32 => go!(i32, 4),
+        SampleType::U32 => go!(u32, 4),
+        SampleType::F32 => go!(f32, 4),
+        SampleType::F64 => go!(f64, 8),
     }
 }
 

@@ -59,7 +59,7 @@ use std::io::Read;
 use std::path::{Path, PathBuf};
 
 use crate::dem::{
-    check_dimensions, map_file, ByteOrder, Crs, DemParts, GeoRef, SampleType, Samples,
+    check_dimensions, limits, map_file, ByteOrder, Crs, DemParts, GeoRef, SampleType, Samples,
 };
 use crate::error::{Error, IoContext, Result};
 
@@ -586,7 +586,10 @@ impl Ctx<'_> {
             None => Ok(None),
             Some((x, _)) => {
                 if x < 0.0 || x.fract() != 0.0 || x > 9.0e15 {
-                    Err(self.invalid(format!("{key} = {x} is not a non-negative integer")))
+                    Err(self.invalid(format!(
+                        "{key} = {} is not a non-negative integer",
+                        crate::dem::limits::show(x)
+                    )))
                 } else {
                     Ok(Some(x as u64))
                 }
@@ -893,9 +896,20 @@ fn interpret(label_path: &Path, given: &Path, root: &Node) -> Result<DemParts> {
     };
     let mut datum_radius_m = None;
     if offset.abs() > RADIUS_OFFSET_M {
+        limits::radius(
+            label_path,
+            "OFFSET (above 100 km: the reference sphere's radius)",
+            offset,
+        )?;
         datum_radius_m = Some(offset);
         offset = 0.0;
     }
+    limits::scale_offset(
+        label_path,
+        ("SCALING_FACTOR", scale),
+        ("OFFSET", offset),
+        Some(st),
+    )?;
     let nodata = nodata_value(&c, image, st)?;
     let target = c.text(root, "TARGET_NAME")?.map(|t| t.to_ascii_lowercase());
 
@@ -970,7 +984,7 @@ fn georef(c: &Ctx, proj: &Node, samples: u64, lines: u64) -> Result<(GeoRef, Str
                     unit.unwrap_or_default()
                 ))
             })?;
-            Some(r * f)
+            Some(limits::radius(c.path, "A_AXIS_RADIUS", r * f)?)
         }
     };
     let map_scale_m = match c.num(proj, "MAP_SCALE")? {
@@ -982,8 +996,23 @@ fn georef(c: &Ctx, proj: &Node, samples: u64, lines: u64) -> Result<(GeoRef, Str
                     unit.unwrap_or_default()
                 ))
             })?;
-            Some(s * f)
+            if s <= 0.0 {
+                return Err(c.invalid(format!(
+                    "MAP_SCALE = {} is not a positive pixel size",
+                    limits::show(s)
+                )));
+            }
+            Some(limits::pixel_m(c.path, "MAP_SCALE", s * f, radius_m)?)
         }
+    };
+    // Angles, wherever they are used below.
+    let center_lat = match c.num(proj, "CENTER_LATITUDE")? {
+        Some((v, _)) => Some(limits::latitude(c.path, "CENTER_LATITUDE", v)?),
+        None => None,
+    };
+    let center_lon = match c.num(proj, "CENTER_LONGITUDE")? {
+        Some((v, _)) => Some(limits::longitude(c.path, "CENTER_LONGITUDE", v)?),
+        None => None,
     };
     if let Some(dir) = c.text(proj, "POSITIVE_LONGITUDE_DIRECTION")? {
         if !dir.eq_ignore_ascii_case("EAST") {
@@ -1000,7 +1029,7 @@ fn georef(c: &Ctx, proj: &Node, samples: u64, lines: u64) -> Result<(GeoRef, Str
     match norm.as_str() {
         "SIMPLE CYLINDRICAL" | "EQUIRECTANGULAR" | "EQUIDISTANT" => {
             let lat_ts = if norm == "EQUIRECTANGULAR" {
-                c.num(proj, "CENTER_LATITUDE")?.map_or(0.0, |v| v.0)
+                center_lat.unwrap_or(0.0)
             } else {
                 0.0
             };
@@ -1022,15 +1051,32 @@ fn georef(c: &Ctx, proj: &Node, samples: u64, lines: u64) -> Result<(GeoRef, Str
                 },
             };
             if !(res > 0.0 && res.is_finite()) {
-                return Err(c.invalid(format!("MAP_RESOLUTION = {res} is not a positive number")));
+                return Err(c.invalid(format!(
+                    "MAP_RESOLUTION = {} is not a positive number of pixels per degree",
+                    limits::show(res)
+                )));
             }
+            limits::pixel_deg(c.path, "1 / MAP_RESOLUTION (the pixel spacing)", 1.0 / res)?;
             let dy = 1.0 / res;
             let dx = dy / lat_ts.to_radians().cos();
+            let angle = |key: &str, lat: bool| -> Result<Option<(f64, Option<String>)>> {
+                match c.num(proj, key)? {
+                    None => Ok(None),
+                    Some((v, u)) => {
+                        if lat {
+                            limits::latitude(c.path, key, v)?;
+                        } else {
+                            limits::longitude(c.path, key, v)?;
+                        }
+                        Ok(Some((v, u)))
+                    }
+                }
+            };
             let edges = (
-                c.num(proj, "MAXIMUM_LATITUDE")?,
-                c.num(proj, "MINIMUM_LATITUDE")?,
-                c.num(proj, "WESTERNMOST_LONGITUDE")?,
-                c.num(proj, "EASTERNMOST_LONGITUDE")?,
+                angle("MAXIMUM_LATITUDE", true)?,
+                angle("MINIMUM_LATITUDE", true)?,
+                angle("WESTERNMOST_LONGITUDE", false)?,
+                angle("EASTERNMOST_LONGITUDE", false)?,
             );
             let from_edges = match edges {
                 (Some((n, _)), Some((s, _)), Some((we, _)), Some((ea, _))) => {
@@ -1046,8 +1092,12 @@ fn georef(c: &Ctx, proj: &Node, samples: u64, lines: u64) -> Result<(GeoRef, Str
                 }
                 _ => None,
             };
-            let (x0, y0) = match from_edges {
-                Some(p) => p,
+            let (x0, y0, placed_by) = match from_edges {
+                Some((x0, y0)) => (
+                    x0,
+                    y0,
+                    "MAXIMUM/MINIMUM_LATITUDE and WESTERNMOST/EASTERNMOST_LONGITUDE",
+                ),
                 None => {
                     if lat_ts != 0.0 {
                         return Err(Error::unsupported(
@@ -1062,9 +1112,14 @@ fn georef(c: &Ctx, proj: &Node, samples: u64, lines: u64) -> Result<(GeoRef, Str
                                 place the grid";
                     let lpo = c.req_num(proj, "LINE_PROJECTION_OFFSET", need)?.0;
                     let spo = c.req_num(proj, "SAMPLE_PROJECTION_OFFSET", need)?.0;
-                    let clat = c.num(proj, "CENTER_LATITUDE")?.map_or(0.0, |v| v.0);
-                    let clon = c.num(proj, "CENTER_LONGITUDE")?.map_or(0.0, |v| v.0);
-                    (clon + (1.0 - spo) * dx, clat - (1.0 - lpo) * dy)
+                    let clat = center_lat.unwrap_or(0.0);
+                    let clon = center_lon.unwrap_or(0.0);
+                    (
+                        clon + (1.0 - spo) * dx,
+                        clat - (1.0 - lpo) * dy,
+                        "LINE/SAMPLE_PROJECTION_OFFSET, CENTER_LATITUDE/LONGITUDE and \
+                         MAP_RESOLUTION",
+                    )
                 }
             };
             let desc = if lat_ts == 0.0 {
@@ -1076,21 +1131,25 @@ fn georef(c: &Ctx, proj: &Node, samples: u64, lines: u64) -> Result<(GeoRef, Str
                     fmt_num(lat_ts)
                 )
             };
-            Ok((
-                GeoRef {
-                    crs: Crs::Geographic,
-                    x0,
-                    y0,
-                    dx,
-                    dy,
-                },
-                desc,
-            ))
+            let g = GeoRef {
+                crs: Crs::Geographic,
+                x0,
+                y0,
+                dx,
+                dy,
+            };
+            limits::check_georef(c.path, &g, samples as usize, lines as usize, placed_by)?;
+            Ok((g, desc))
         }
         "POLAR STEREOGRAPHIC" | "POLARSTEREOGRAPHIC" => {
             let what = "a polar stereographic grid needs CENTER_LATITUDE, MAP_SCALE, \
                         A_AXIS_RADIUS and the LINE/SAMPLE_PROJECTION_OFFSET";
-            let clat = c.req_num(proj, "CENTER_LATITUDE", what)?.0;
+            let clat = center_lat.ok_or_else(|| {
+                c.invalid(format!(
+                    "CENTER_LATITUDE is missing from the {} object: {what}",
+                    proj.name
+                ))
+            })?;
             if (clat.abs() - 90.0).abs() > 1e-9 {
                 return Err(Error::unsupported(
                     c.path,
@@ -1098,7 +1157,7 @@ fn georef(c: &Ctx, proj: &Node, samples: u64, lines: u64) -> Result<(GeoRef, Str
                 ));
             }
             let north = clat > 0.0;
-            let lon0 = c.num(proj, "CENTER_LONGITUDE")?.map_or(0.0, |v| v.0);
+            let lon0 = center_lon.unwrap_or(0.0);
             let scale =
                 map_scale_m.ok_or_else(|| c.invalid(format!("MAP_SCALE is missing: {what}")))?;
             let radius =
@@ -1113,21 +1172,21 @@ fn georef(c: &Ctx, proj: &Node, samples: u64, lines: u64) -> Result<(GeoRef, Str
                 if north { "north" } else { "south" },
                 fmt_num(scale)
             );
-            Ok((
-                GeoRef {
-                    crs: Crs::PolarStereographic {
-                        north,
-                        lon0_deg: lon0,
-                        lat_ts_deg: if north { 90.0 } else { -90.0 },
-                        radius_m: radius,
-                    },
-                    x0: -spo * scale,
-                    y0: lpo * scale,
-                    dx: scale,
-                    dy: scale,
+            let g = GeoRef {
+                crs: Crs::PolarStereographic {
+                    north,
+                    lon0_deg: lon0,
+                    lat_ts_deg: if north { 90.0 } else { -90.0 },
+                    radius_m: radius,
                 },
-                desc,
-            ))
+                x0: -spo * scale,
+                y0: lpo * scale,
+                dx: scale,
+                dy: scale,
+            };
+            let placed_by = "MAP_SCALE and LINE/SAMPLE_PROJECTION_OFFSET";
+            limits::check_georef(c.path, &g, samples as usize, lines as usize, placed_by)?;
+            Ok((g, desc))
         }
         _ => Err(Error::unsupported(
             c.path,

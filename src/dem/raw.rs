@@ -103,7 +103,7 @@ pub fn read(path: &Path) -> Result<DemParts> {
         offset,
         nodata,
         georef,
-        datum_radius_m: sc.datum_radius_m,
+        datum_radius_m: sc.datum_radius(&sidecar_path)?,
         target: sc.target.as_ref().map(|t| t.to_ascii_lowercase()),
         sources: vec![sidecar_path, data_path],
         format,

@@ -45,7 +45,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use crate::dem::{ByteOrder, Crs, GeoRef, SampleType};
+use crate::dem::{limits, ByteOrder, Crs, GeoRef, SampleType};
 use crate::error::{Error, IoContext, Result};
 
 /// Sidecars larger than this are refused (they are a few hundred bytes).
@@ -227,8 +227,24 @@ impl Sidecar {
         Ok((st, order))
     }
 
-    /// Scale and offset turning a DN into metres.
+    /// Scale and offset turning a DN into metres, range-checked (`st`: the sample type, float
+    /// when unknown).
     pub fn scale_offset(&self, path: &Path, st: Option<SampleType>) -> Result<(f64, f64)> {
+        let (scale, offset) = self.scale_offset_unchecked(path, st)?;
+        if self.elevation_min.is_some() {
+            limits::scale_offset(
+                path,
+                ("(elevationMax − elevationMin) / (2^bits − 1)", scale),
+                ("elevationMin", offset),
+                st,
+            )?;
+        } else {
+            limits::scale_offset(path, ("scale", scale), ("offset", offset), st)?;
+        }
+        Ok((scale, offset))
+    }
+
+    fn scale_offset_unchecked(&self, path: &Path, st: Option<SampleType>) -> Result<(f64, f64)> {
         let explicit = self.scale.is_some() || self.offset.is_some();
         match (self.elevation_min, self.elevation_max) {
             (None, None) => Ok((self.scale.unwrap_or(1.0), self.offset.unwrap_or(0.0))),
@@ -252,7 +268,11 @@ impl Sidecar {
                 if hi <= lo {
                     return Err(Error::invalid(
                         path,
-                        format!("elevationMax {hi} is not above elevationMin {lo}"),
+                        format!(
+                            "elevationMax {} is not above elevationMin {}",
+                            limits::show(hi),
+                            limits::show(lo)
+                        ),
                     ));
                 }
                 Ok(((hi - lo) / qmax, lo))
@@ -264,11 +284,53 @@ impl Sidecar {
         }
     }
 
-    /// The CRS (geographic unless given).
+    /// The datum radius, range-checked.
+    pub fn datum_radius(&self, path: &Path) -> Result<Option<f64>> {
+        match self.datum_radius_m {
+            None => Ok(None),
+            Some(r) => Ok(Some(limits::radius(path, "datum_radius_m", r)?)),
+        }
+    }
+
+    /// The CRS (geographic unless given), its parameters range-checked.
     pub fn crs(&self, path: &Path) -> Result<Crs> {
         match &self.crs {
             None => Ok(Crs::Geographic),
-            Some(CrsSpec::Full(c)) => Ok(c.clone()),
+            Some(CrsSpec::Full(c)) => {
+                match *c {
+                    Crs::Geographic => {}
+                    Crs::Equirectangular {
+                        lat_ts_deg,
+                        lon0_deg,
+                        radius_m,
+                    } => {
+                        limits::radius(path, "crs radius_m", radius_m)?;
+                        limits::longitude(path, "crs lon0_deg", lon0_deg)?;
+                        if !(lat_ts_deg.is_finite() && lat_ts_deg.abs() <= limits::MAX_LAT_TS_DEG) {
+                            return Err(Error::invalid(
+                                path,
+                                format!(
+                                    "crs lat_ts_deg = {} leaves no usable longitude scale: an \
+                                     equirectangular true-scale latitude must lie within ±{}°",
+                                    limits::show(lat_ts_deg),
+                                    limits::MAX_LAT_TS_DEG
+                                ),
+                            ));
+                        }
+                    }
+                    Crs::PolarStereographic {
+                        lon0_deg,
+                        lat_ts_deg,
+                        radius_m,
+                        ..
+                    } => {
+                        limits::radius(path, "crs radius_m", radius_m)?;
+                        limits::longitude(path, "crs lon0_deg", lon0_deg)?;
+                        limits::latitude(path, "crs lat_ts_deg", lat_ts_deg)?;
+                    }
+                }
+                Ok(c.clone())
+            }
             Some(CrsSpec::Name(n)) if n.eq_ignore_ascii_case("geographic") => Ok(Crs::Geographic),
             Some(CrsSpec::Name(n)) => Err(Error::invalid(
                 path,
@@ -285,16 +347,12 @@ impl Sidecar {
     /// Georeferencing of a `width × height` raster.
     pub fn georef(&self, path: &Path, width: u64, height: u64) -> Result<GeoRef> {
         let crs = self.crs(path)?;
-        if let Crs::Equirectangular { radius_m, .. } | Crs::PolarStereographic { radius_m, .. } =
-            crs
-        {
-            if !(radius_m > 0.0 && radius_m.is_finite()) {
-                return Err(Error::invalid(
-                    path,
-                    format!("crs radius_m {radius_m} is not positive"),
-                ));
+        let crs_radius = match crs {
+            Crs::Equirectangular { radius_m, .. } | Crs::PolarStereographic { radius_m, .. } => {
+                Some(radius_m)
             }
-        }
+            Crs::Geographic => None,
+        };
         let affine = [self.x0, self.y0, self.dx, self.dy];
         let any_affine = affine.iter().any(Option::is_some);
         let geographic = crs == Crs::Geographic;
@@ -329,10 +387,16 @@ impl Sidecar {
                         return Err(Error::invalid(
                             path,
                             format!(
-                                "bounds north {} / south {} are not latitudes in degrees",
-                                b.north, b.south
+                                "bounds north {} / south {} are not latitudes in degrees (they \
+                                 must lie within −90..90)",
+                                limits::show(b.north),
+                                limits::show(b.south)
                             ),
                         ));
+                    }
+                    if geographic {
+                        limits::longitude(path, "bounds west", b.west)?;
+                        limits::longitude(path, "bounds east", b.east)?;
                     }
                     let dx = (east - b.west) / w;
                     let dy = (b.north - b.south) / h;
@@ -340,7 +404,20 @@ impl Sidecar {
                 }
                 (None, true) => {
                     match affine {
-                        [Some(x0), Some(y0), Some(dx), Some(dy)] => (x0, y0, dx, dy),
+                        [Some(x0), Some(y0), Some(dx), Some(dy)] => {
+                            if geographic {
+                                limits::longitude(path, "x0", x0)?;
+                                limits::latitude(path, "y0", y0)?;
+                                limits::pixel_deg(path, "dx", dx)?;
+                                limits::pixel_deg(path, "dy", dy)?;
+                            } else {
+                                limits::finite(path, "x0", x0)?;
+                                limits::finite(path, "y0", y0)?;
+                                limits::pixel_m(path, "dx", dx, crs_radius)?;
+                                limits::pixel_m(path, "dy", dy, crs_radius)?;
+                            }
+                            (x0, y0, dx, dy)
+                        }
                         _ => return Err(Error::invalid(
                             path,
                             "x0, y0, dx and dy must all be given (centre of the first pixel and \
@@ -358,16 +435,27 @@ impl Sidecar {
         if !(dx > 0.0 && dx.is_finite() && dy != 0.0 && dy.is_finite()) {
             return Err(Error::invalid(
                 path,
-                format!("pixel spacing dx {dx} / dy {dy} is not usable (dx > 0, dy ≠ 0)"),
+                format!(
+                    "pixel spacing dx {} / dy {} is not usable (dx > 0, dy ≠ 0)",
+                    limits::show(dx),
+                    limits::show(dy)
+                ),
             ));
         }
-        Ok(GeoRef {
+        let g = GeoRef {
             crs,
             x0,
             y0,
             dx,
             dy,
-        })
+        };
+        let keys = if self.bounds.is_some() {
+            "the sidecar's bounds"
+        } else {
+            "the sidecar's x0, y0, dx, dy"
+        };
+        limits::check_georef(path, &g, width as usize, height as usize, keys)?;
+        Ok(g)
     }
 }
 
