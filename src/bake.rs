@@ -76,6 +76,9 @@ pub struct BakeReport {
 }
 
 pub fn bake(input: &Input, out: &Path, plan: &Plan, progress: &dyn Progress) -> Result<BakeReport> {
+    // One writer for the whole bake: no other process can slip in between two stages. (A
+    // folder this makes is removed again if the bake fails before its first commit.)
+    let _writer = crate::tileset::writer::Writer::begin(out)?;
     let mut report = BakeReport {
         out: out.to_path_buf(),
         stages: plan.stages.clone(),

@@ -50,6 +50,8 @@ pub struct Run {
     spec: StageSpec,
     writer: Writer,
     staging: Staging,
+    /// The run key differs from the one the manifest records (not a repair of missing files).
+    changed: bool,
 }
 
 /// What [`start`] found.
@@ -67,8 +69,9 @@ pub fn start(
     key: &str,
     current: Option<&Tileset>,
 ) -> Result<Start> {
+    let primary = spec.writes[0];
+    let changed = current.and_then(|ts| primary.recorded_key(ts)) != Some(key);
     if let Some(ts) = current {
-        let primary = spec.writes[0];
         if primary.recorded_key(ts) == Some(key)
             && spec
                 .writes
@@ -85,6 +88,7 @@ pub fn start(
         spec,
         writer,
         staging,
+        changed,
     }))
 }
 
@@ -118,7 +122,8 @@ impl Run {
             spec,
             mut writer,
             staging,
+            changed,
         } = self;
-        writer.commit(staging, spec.writes, manifest)
+        writer.commit(staging, spec.writes, manifest, changed)
     }
 }

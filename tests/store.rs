@@ -200,13 +200,23 @@ fn retile_with_other_parameters_leaves_no_stale_product() {
         !after.keys().any(|k| k.starts_with("horizon/")),
         "old horizon maps remain"
     );
-    for (k, v) in &after {
-        if k.starts_with("maxmip/") || k.starts_with("minmax/") {
-            assert_ne!(before.get(k), Some(v), "{k} is the old run's");
-        }
-    }
-    let m: serde_json::Value = serde_json::from_slice(&after["tileset.json"]).unwrap();
-    assert!(m["products"].get("horizon").is_none());
+    let old: serde_json::Value = serde_json::from_slice(&before["tileset.json"]).unwrap();
+    let new: serde_json::Value = serde_json::from_slice(&after["tileset.json"]).unwrap();
+    assert!(new["products"].get("horizon").is_none());
+    assert_ne!(new["run_key"], old["run_key"]);
+    // The mipmaps are the new heights' (bake rebuilt them), not the old ones kept.
+    assert_ne!(
+        new["products"]["mip"]["run_key"],
+        old["products"]["mip"]["run_key"]
+    );
+    let index: Vec<(String, u64)> =
+        serde_json::from_slice(&std::fs::read(out.join(".penumbra/index/mip.json")).unwrap())
+            .unwrap();
+    let on_disk: Vec<&String> = after
+        .keys()
+        .filter(|k| k.starts_with("maxmip/") || k.starts_with("minmax/"))
+        .collect();
+    assert_eq!(index.len(), on_disk.len(), "mip files beyond the new run's");
 }
 
 #[test]

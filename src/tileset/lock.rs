@@ -9,7 +9,8 @@
 
 use std::fs::{File, OpenOptions, TryLockError};
 use std::io::{Read, Seek, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, Weak};
 
 use crate::error::{Error, IoContext, Result};
 
@@ -18,19 +19,35 @@ pub const STATE_DIR: &str = ".penumbra";
 const LOCK: &str = "lock";
 const COMMIT_LOCK: &str = "commit.lock";
 
-/// The exclusive right to write one tileset; dropped = released.
+/// The exclusive right to write one tileset; released when the last holder in this process
+/// drops it.
 #[derive(Debug)]
 pub struct WriteLock {
-    _file: File,
+    _file: Arc<File>,
 }
+
+/// Writer locks this process holds, by lock-file path: a run that holds a tileset (`bake`,
+/// across its stages) lets its own stages take the lock again.
+static HELD: Mutex<Vec<(PathBuf, Weak<File>)>> = Mutex::new(Vec::new());
 
 impl WriteLock {
     /// Take the writer lock of the tileset in `dir` (creating `dir` and its state folder), or
-    /// fail at once, naming the pid that holds it.
+    /// fail at once, naming the pid that holds it. Within one process the lock is shared by
+    /// whoever takes it while it is held.
     pub fn acquire(dir: &Path) -> Result<WriteLock> {
         let state = dir.join(STATE_DIR);
         std::fs::create_dir_all(&state).at(&state)?;
         let path = state.join(LOCK);
+        let key = std::fs::canonicalize(&state).at(&state)?.join(LOCK);
+        let mut held = HELD.lock().unwrap_or_else(|e| e.into_inner());
+        held.retain(|(_, w)| w.strong_count() > 0);
+        if let Some(f) = held
+            .iter()
+            .find(|(p, _)| *p == key)
+            .and_then(|(_, w)| w.upgrade())
+        {
+            return Ok(WriteLock { _file: f });
+        }
         let mut f = OpenOptions::new()
             .read(true)
             .write(true)
@@ -64,6 +81,8 @@ impl WriteLock {
         let _ = f.rewind();
         let _ = write!(f, "{}", std::process::id());
         let _ = f.flush();
+        let f = Arc::new(f);
+        held.push((key, Arc::downgrade(&f)));
         Ok(WriteLock { _file: f })
     }
 }

@@ -154,16 +154,23 @@ impl Writer {
     }
 
     /// Swap a completed run into the tileset: the product folders of `writes` found in the
-    /// staging folder replace the tileset's; folders of `writes` the run did not make and of
-    /// every product downstream of `writes` are removed, and so are their manifest entries;
-    /// `manifest` becomes the tileset's manifest.
+    /// staging folder replace the tileset's; folders of `writes` the run did not make and, when
+    /// the products `changed` (a new run key), of every product downstream of `writes` are
+    /// removed, and so are their manifest entries; `manifest` becomes the tileset's manifest.
     pub fn commit(
         &mut self,
         staging: Staging,
         writes: &[Product],
         mut manifest: Tileset,
+        changed: bool,
     ) -> Result<()> {
-        let downstream = Product::downstream(writes);
+        // A product rebuilt with its old run key (files had gone missing) is what it was: what
+        // was derived from it stays valid.
+        let downstream = if changed {
+            Product::downstream(writes)
+        } else {
+            Vec::new()
+        };
         for p in &downstream {
             p.clear(&mut manifest);
         }
@@ -290,9 +297,11 @@ impl Drop for Writer {
         if let Some(s) = self.staging.take() {
             let _ = std::fs::remove_dir_all(s);
         }
+        // Only what this writer made, and only if nothing was ever committed there (a nested
+        // writer of the same process may have committed while this one held the lock).
         if self.created_dir && !self.dir.join(MANIFEST).exists() {
             let _ = std::fs::remove_dir_all(&self.dir);
-        } else if self.created_state {
+        } else if self.created_state && !self.state().join("index").exists() {
             let _ = std::fs::remove_dir_all(self.state());
         }
     }
