@@ -131,9 +131,9 @@ fn bad_input_exits_2_and_writes_nothing() {
     assert_refused(
         &["bake", "--out", o, "--tile-size", "7"],
         &out,
-        "tile size 7",
+        "--tile-size 7",
     );
-    assert_refused(&["bake", "--out", o, "--halo", "0"], &out, "halo 0");
+    assert_refused(&["bake", "--out", o, "--halo", "0"], &out, "--halo 0");
     assert_refused(
         &["bake", "--out", o, "--body", "vulcan", "--dem", "x.hgt"],
         &out,

@@ -1201,10 +1201,14 @@ fn hashes(dir: &Path) -> BTreeMap<String, String> {
     while let Some(d) = stack.pop() {
         for e in std::fs::read_dir(&d).unwrap() {
             let p = e.unwrap().path();
+            let rel = p.strip_prefix(dir).unwrap().display().to_string();
+            if rel == ".penumbra/lock" {
+                // Holds the pid of the last writer that took the lock: not tileset content.
+                continue;
+            }
             if p.is_dir() {
                 stack.push(p);
             } else {
-                let rel = p.strip_prefix(dir).unwrap().display().to_string();
                 let h = blake3::hash(&std::fs::read(&p).unwrap())
                     .to_hex()
                     .to_string();
