@@ -12,7 +12,7 @@ use std::path::Path;
 use exr::prelude::{self as x, ReadChannels, ReadLayers, ReadSpecificChannel};
 
 use crate::dem::sidecar::{crs_name, require_sidecar, Sidecar};
-use crate::dem::{check_dimensions, damaged_or_io, DemParts, Samples};
+use crate::dem::types::{check_dimensions, damaged_or_io, DemParts, Samples};
 use crate::error::{Error, IoContext, Result};
 
 /// Decoded samples may be at most this many times the file size (guards allocations driven by

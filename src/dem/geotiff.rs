@@ -37,7 +37,8 @@ use tiff::decoder::{ChunkType, Decoder, DecodingResult, DecodingSampleType, Limi
 use tiff::tags::Tag;
 use tiff::{ColorType, TiffError, TiffFormatError};
 
-use crate::dem::{check_dimensions, damaged_or_io, limits, Crs, DemParts, GeoRef, Samples};
+use crate::dem::limits;
+use crate::dem::types::{check_dimensions, damaged_or_io, Crs, DemParts, GeoRef, Samples};
 use crate::error::{Error, IoContext, Result};
 
 /// Decoded samples may be at most this many bytes per byte of file (guards allocations driven

@@ -10,7 +10,7 @@
 use std::f64::consts::PI;
 use std::path::Path;
 
-use crate::dem::{Crs, GeoRef, SampleType};
+use crate::dem::types::{Crs, GeoRef, SampleType};
 use crate::error::{Error, Result};
 
 /// Latitudes (degrees) lie within ±this.

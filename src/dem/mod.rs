@@ -20,7 +20,7 @@ mod raster;
 pub mod raw;
 pub mod sidecar;
 pub mod srtm;
-mod types;
+pub(crate) mod types;
 
 pub use self::raster::Dem;
 pub use self::types::*;

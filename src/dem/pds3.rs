@@ -58,8 +58,9 @@
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
-use crate::dem::{
-    check_dimensions, limits, map_file, ByteOrder, Crs, DemParts, GeoRef, SampleType, Samples,
+use crate::dem::limits;
+use crate::dem::types::{
+    check_dimensions, map_file, ByteOrder, Crs, DemParts, GeoRef, SampleType, Samples,
 };
 use crate::error::{Error, IoContext, Result};
 

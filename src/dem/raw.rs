@@ -12,7 +12,7 @@ use std::path::Path;
 
 use crate::dem::sidecar::{crs_name, data_for_sidecar, is_json, require_sidecar};
 pub use crate::dem::sidecar::{sidecar_for, Bounds, Sidecar};
-use crate::dem::{check_dimensions, map_file, ByteOrder, DemParts, SampleType, Samples};
+use crate::dem::types::{check_dimensions, map_file, ByteOrder, DemParts, SampleType, Samples};
 use crate::error::{Error, IoContext, Result};
 
 pub fn read(path: &Path) -> Result<DemParts> {

@@ -45,7 +45,8 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use crate::dem::{limits, ByteOrder, Crs, GeoRef, SampleType};
+use crate::dem::limits;
+use crate::dem::types::{ByteOrder, Crs, GeoRef, SampleType};
 use crate::error::{Error, IoContext, Result};
 
 /// Sidecars larger than this are refused (they are a few hundred bytes).

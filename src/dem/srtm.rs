@@ -6,7 +6,7 @@
 
 use std::path::Path;
 
-use crate::dem::{map_file, ByteOrder, Crs, DemParts, GeoRef, SampleType, Samples};
+use crate::dem::types::{map_file, ByteOrder, Crs, DemParts, GeoRef, SampleType, Samples};
 use crate::error::{Error, IoContext, Result};
 
 /// SRTM's void value.
