@@ -498,7 +498,7 @@ impl Dem {
     /// Resolve a possibly out-of-range integer pixel to one inside the raster: wrap in
     /// longitude and reflect across the poles for global rasters, clamp otherwise.
     #[inline]
-    fn resolve(&self, c: i64, r: i64) -> (usize, usize) {
+    pub(crate) fn resolve(&self, c: i64, r: i64) -> (usize, usize) {
         let (w, h) = (self.p.width as i64, self.p.height as i64);
         let (mut c, mut r) = (c, r);
         if self.global_lat && (r < 0 || r >= h) {
