@@ -80,24 +80,48 @@ fn wait_with_timeout(mut child: Child, limit: Duration) -> Output {
     }
 }
 
-#[test]
-fn killed_runs_resume_to_the_uninterrupted_bytes() {
+/// A deeper tileset of the embedded scene (about 200 tiles) so that each stage runs long
+/// enough to be killed in the middle.
+const DEEP: &[&str] = &[
+    "bake",
+    "--scene-size",
+    "1024",
+    "--levels",
+    "11",
+    "--tile-size",
+    "32",
+];
+
+/// Ten `kill -9` at random moments of `cmd` (each on a fresh copy of `start`, or from nothing),
+/// each followed by a rerun of `cmd` to completion: the result must equal an uninterrupted
+/// run's bytes, `tileset.json` included, with no temp file or staged run left.
+fn kill_trials(label: &str, start: Option<&Path>, cmd: &dyn Fn(&Path) -> Command, seed: u64) {
     let tmp = tempfile::tempdir().unwrap();
+    let fresh = |dir: &Path| {
+        let _ = std::fs::remove_dir_all(dir);
+        if let Some(s) = start {
+            copy_tree(s, dir);
+        }
+    };
     let reference = tmp.path().join("reference");
+    fresh(&reference);
     let t0 = Instant::now();
-    let o = bake(&reference, &[]).output().unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = cmd(&reference).output().unwrap();
+    assert!(
+        o.status.success(),
+        "{label}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     let full = t0.elapsed();
     let want = snapshot(&reference);
-    // Ten kill -9 moments spread over the whole bake (scene, tiling, mipmaps, horizons), each
-    // followed by a rerun to completion.
-    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let mut rng = Rng(seed);
     let out = tmp.path().join("killed");
     let mut interrupted = 0;
     for k in 0..10 {
-        let frac = (k as f64 + rng.unit()) / 10.0;
-        let at = full.mul_f64(frac);
-        let mut child = bake(&out, &[])
+        fresh(&out);
+        // Spread over the first 10/11 of an uninterrupted run's time (machines vary).
+        let at = full.mul_f64((k as f64 + rng.unit()) / 11.0);
+        let mut child = cmd(&out)
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
@@ -109,22 +133,88 @@ fn killed_runs_resume_to_the_uninterrupted_bytes() {
         child.kill().unwrap(); // SIGKILL
         child.wait().unwrap();
         let o = wait_with_timeout(
-            bake(&out, &["--json"]).spawn().unwrap(),
+            cmd(&out)
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap(),
             Duration::from_secs(600),
         );
         assert!(
             o.status.success(),
-            "rerun after kill {k}: {}",
+            "{label}: rerun after kill {k}: {}",
             String::from_utf8_lossy(&o.stderr)
         );
-        assert_eq!(snapshot(&out), want, "rerun after a kill at {at:?} differs");
-        assert!(leftovers(&out).is_empty(), "{:?}", leftovers(&out));
-        // Start the next trial from nothing.
-        std::fs::remove_dir_all(&out).unwrap();
+        assert_eq!(
+            snapshot(&out),
+            want,
+            "{label}: rerun after a kill at {at:?} differs"
+        );
+        assert!(leftovers(&out).is_empty(), "{label}: {:?}", leftovers(&out));
     }
+    eprintln!("{label}: {interrupted} of 10 kills hit a running process ({full:?} a run)");
     assert!(
-        interrupted >= 5,
-        "only {interrupted} of 10 kills hit a running bake"
+        interrupted >= 6,
+        "{label}: only {interrupted} of 10 kills hit a running process"
+    );
+}
+
+#[test]
+fn killed_tiling_resumes_to_the_uninterrupted_bytes() {
+    kill_trials(
+        "bake (tile + mip)",
+        None,
+        &|out| {
+            let mut c = penumbra_bin();
+            c.args(DEEP).args(["--out", out.to_str().unwrap()]);
+            c
+        },
+        0x9e37_79b9_7f4a_7c15,
+    );
+}
+
+fn deep_tileset(dir: &Path) {
+    ok(&[DEEP, &["--out", dir.to_str().unwrap()]].concat());
+}
+
+#[test]
+fn killed_mip_resumes_to_the_uninterrupted_bytes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let base = tmp.path().join("base");
+    deep_tileset(&base);
+    kill_trials(
+        "mip",
+        Some(&base),
+        &|out| {
+            let mut c = penumbra_bin();
+            c.args(["mip", out.to_str().unwrap(), "--precision", "f16"]);
+            c
+        },
+        0x2545_f491_4f6c_dd1d,
+    );
+}
+
+#[test]
+fn killed_horizon_resumes_to_the_uninterrupted_bytes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let base = tmp.path().join("base");
+    deep_tileset(&base);
+    kill_trials(
+        "horizon",
+        Some(&base),
+        &|out| {
+            let mut c = penumbra_bin();
+            c.args([
+                "horizon",
+                out.to_str().unwrap(),
+                "--levels",
+                "9",
+                "--azimuths",
+                "64",
+            ]);
+            c
+        },
+        0x1234_5678_9abc_def1,
     );
 }
 

@@ -13,7 +13,7 @@ cd "$(dirname "$0")/../.."
 mode=${1:-check}
 data=../shared/data
 bin=target/release/penumbra
-cargo build --release --locked --quiet -p penumbra-cli 2>/dev/null || cargo build --release --locked --quiet
+cargo build --release --locked --quiet -p penumbra-cli
 work=target/golden
 rm -rf "$work"
 mkdir -p "$work"

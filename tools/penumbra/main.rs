@@ -8,6 +8,7 @@ use anyhow::Result;
 use clap::{Args, Parser, Subcommand};
 
 use penumbra::bake::{self, BodyChoice, Input, Plan, Stage};
+use penumbra::body::Body;
 use penumbra::cube::Projection;
 use penumbra::dem::Resampling;
 use penumbra::horizon::{HorizonOptions, HorizonPrecision, Method};
@@ -283,6 +284,10 @@ struct BakeArgs {
 }
 
 fn body_arg(b: &BodyArgs) -> Result<BodyChoice> {
+    // An unknown name or a bad radius is refused before any file is read.
+    if b.body.is_some() || b.radius_m.is_some() {
+        Body::resolve(b.body.as_deref(), b.radius_m)?;
+    }
     Ok(BodyChoice {
         name: b.body.clone(),
         radius_m: b.radius_m,
