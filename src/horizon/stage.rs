@@ -517,6 +517,9 @@ fn check_output_size(opts: &HorizonOptions, levels: &[u8], tiles: usize, n: usiz
     Ok(())
 }
 
+/// What the checks before a horizon run find: the levels, their tiles and the terrain range.
+type Checked = (Vec<u8>, Vec<TileId>, (f64, f64));
+
 /// Compute and store the raw horizon maps of the levels asked.
 pub fn build_horizons(
     dir: &Path,
@@ -525,7 +528,7 @@ pub fn build_horizons(
 ) -> Result<HorizonReport> {
     check_options(opts)?;
     // Everything that can refuse the run is checked before the tileset's folder is touched.
-    let check = |ts: &Tileset| -> Result<(Vec<u8>, Vec<TileId>, (f64, f64))> {
+    let check = |ts: &Tileset| -> Result<Checked> {
         let manifest_path = dir.join(manifest::MANIFEST);
         check_layout(dir, ts)?;
         if ts.products.height.is_none() {
