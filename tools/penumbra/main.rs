@@ -175,6 +175,7 @@ impl MipFlags {
         MipOptions {
             precision: self.precision,
             compression,
+            ..Default::default()
         }
     }
 }
