@@ -102,6 +102,15 @@ pub struct MipProduct {
     pub minmax_channels: Vec<String>,
     /// Path pattern of the face pyramids of whole-tile extrema, one per (tile level, face).
     pub face_path: String,
+    /// Path pattern (`{level}`, `{face}`, `{cx}`, `{cy}`) of the chunks of the face pyramids of
+    /// tile levels with more than `face_chunk_tiles` tiles per side: chunk (cx, cy) holds the
+    /// pyramid of tiles `cx·c .. (cx+1)·c − 1` × `cy·c ..` down to its 1×1, and `face_path` then
+    /// holds only the levels above, from one texel per chunk. Absent when no level is chunked.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub face_chunk_path: Option<String>,
+    /// Tiles per side of a face-pyramid chunk (1024), with `face_chunk_path`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub face_chunk_tiles: Option<u32>,
     /// Sample type of the tile pyramids (`f32`, or `f16` rounded outwards).
     pub precision: crate::mip::schema::Precision,
     /// Sample type of the face pyramids.

@@ -13,7 +13,7 @@ use penumbra::progress::NoProgress;
 use penumbra::tileio::{self, HeightTile};
 use penumbra::tiling::{tile_dem, TileOptions};
 
-use crate::util::{global_dem, penumbra_bin, shared_data, snapshot, Rng};
+use crate::util::{analytic, dem_from, global_dem, penumbra_bin, shared_data, snapshot, Rng};
 
 fn same(a: f32, b: f32) -> bool {
     a == b || (a.is_nan() && b.is_nan())
@@ -453,6 +453,184 @@ fn f16_files_bound_the_f32_files() {
             }
         }
     }
+}
+
+/// A regional tileset (lat −20..20, lon 20..70: two faces, partly covered) of 8-px tiles on
+/// 5 levels: 16 tiles per face side at the finest.
+fn regional_tileset(dir: &Path) {
+    use penumbra::dem::{Crs, GeoRef};
+    let (w, h, d) = (200usize, 160usize, 0.25f64);
+    let georef = GeoRef {
+        crs: Crs::Geographic,
+        x0: 20.0 + d / 2.0,
+        y0: 20.0 - d / 2.0,
+        dx: d,
+        dy: d,
+    };
+    let mut v = Vec::with_capacity(w * h);
+    for r in 0..h {
+        for c in 0..w {
+            v.push(analytic(georef.y0 - r as f64 * d, georef.x0 + c as f64 * d) as f32);
+        }
+    }
+    let opts = TileOptions {
+        tile_size: 8,
+        halo: 2,
+        levels: Some(5),
+        ..Default::default()
+    };
+    let moon = Body::preset("moon").unwrap();
+    let dem = dem_from(georef, w, h, v, "regional test raster");
+    tile_dem(&dem, &moon, dir, &opts, None, &NoProgress).unwrap();
+}
+
+/// Face pyramids cut into chunks of 4 tiles per side (1024 in production) answer every texel
+/// of every level exactly as the one-file pyramids, through `query::face_texel` and through
+/// `query::mip` at every tile; the files are where the manifest says.
+#[test]
+fn chunked_face_pyramids_answer_as_the_dense_ones() {
+    use penumbra::cube::Face;
+    use penumbra::query;
+    let a = tempfile::tempdir().unwrap();
+    regional_tileset(a.path());
+    let b = tempfile::tempdir().unwrap();
+    copy_dir(a.path(), b.path());
+    let (a, b) = (a.path(), b.path());
+    mip::build_mips(a, &MipOptions::default(), &NoProgress).unwrap();
+    let opts = MipOptions {
+        face_chunk_tiles: 4,
+        ..Default::default()
+    };
+    let rb = mip::build_mips(b, &opts, &NoProgress).unwrap();
+    let (ta, tb) = (Tileset::load(a).unwrap(), Tileset::load(b).unwrap());
+    let (ma, mb) = (
+        ta.products.mip.clone().unwrap(),
+        tb.products.mip.clone().unwrap(),
+    );
+    // The dense tileset's manifest has no chunk keys at all (shallow manifests are unchanged).
+    assert!(ma.face_chunk_path.is_none() && ma.face_chunk_tiles.is_none());
+    let text = std::fs::read_to_string(a.join("tileset.json")).unwrap();
+    assert!(!text.contains("face_chunk"));
+    assert_eq!(mb.face_chunk_path.as_deref(), Some(mip::FACE_CHUNK_PATTERN));
+    assert_eq!(mb.face_chunk_tiles, Some(4));
+    assert_eq!(
+        (ma.global_min_m, ma.global_max_m),
+        (mb.global_min_m, mb.global_max_m)
+    );
+    assert_eq!(ma.levels, mb.levels);
+
+    let mut chunk_files = 0;
+    let mut compared = 0;
+    for level in 0..ta.layout.levels {
+        let g = ta.layout.tiles_per_side(level);
+        for face in Face::ALL {
+            let dense = mip::face_path(a, level, face);
+            assert_eq!(dense.exists(), mip::face_path(b, level, face).exists());
+            if !dense.exists() {
+                continue;
+            }
+            let fp = mip::read_mip_exr(&dense).unwrap();
+            let coarse = mip::read_mip_exr(&mip::face_path(b, level, face)).unwrap();
+            assert_eq!(coarse.sizes[0] as u32, if g > 4 { g / 4 } else { g });
+            for (fl, &w) in fp.sizes.iter().enumerate() {
+                for y in 0..w {
+                    for x in 0..w {
+                        let (tx, ty) = ((x << fl) as u32, (y << fl) as u32);
+                        let t = query::face_texel(b, &tb, level, face, fl as u32, tx, ty).unwrap();
+                        let k = y * w + x;
+                        let what = format!("L{level} {face} f{fl} ({x}, {y})");
+                        assert_eq!(
+                            t.min.to_bits(),
+                            fp.channels["min"][fl][k].to_bits(),
+                            "{what}"
+                        );
+                        assert_eq!(
+                            t.max.to_bits(),
+                            fp.channels["max"][fl][k].to_bits(),
+                            "{what}"
+                        );
+                        assert_eq!(t.texels as usize, w, "{what}");
+                        let in_chunk = g > 4 && fl < 2;
+                        let name = t.file.file_name().unwrap().to_str().unwrap().to_string();
+                        assert!(in_chunk || name == "face.exr", "{what}: {name}");
+                        compared += 1;
+                    }
+                }
+            }
+            // One chunk file per chunk with a tile, 4² at level 0.
+            if g > 4 {
+                let mut chunks = std::collections::BTreeSet::new();
+                for id in ta
+                    .tile_set()
+                    .iter()
+                    .filter(|t| t.level == level && t.face == face)
+                {
+                    chunks.insert((id.x / 4, id.y / 4));
+                }
+                for cy in 0..g / 4 {
+                    for cx in 0..g / 4 {
+                        let p = mip::face_chunk_path(b, level, face, cx, cy);
+                        assert_eq!(p.exists(), chunks.contains(&(cx, cy)), "{}", p.display());
+                        if p.exists() {
+                            assert_eq!(mip::read_mip_exr(&p).unwrap().sizes, [4, 2, 1]);
+                            chunk_files += 1;
+                        }
+                    }
+                }
+                assert!(chunks.len() > 1 && chunks.len() < (g as usize / 4).pow(2));
+            }
+        }
+    }
+    assert_eq!(rb.face_chunks, chunk_files);
+    assert!(
+        chunk_files >= 4 && compared > 500,
+        "{chunk_files} {compared}"
+    );
+
+    // `query mip` at a pixel of every tile, every face-pyramid level: the same answers.
+    let n = ta.layout.tile_size as i64;
+    let m = mip::level_sizes(n as usize).len() as u32;
+    for id in ta.tile_set() {
+        let (lat, lon) = penumbra::cube::dir_to_latlon(ta.layout.pixel_dir(id, n / 2, n / 2));
+        let (lat, lon) = (lat.to_degrees(), lon.to_degrees());
+        for level in m - 1..=m - 1 + id.level as u32 {
+            let qa = query::mip(a, lat, lon, level, Some(id.level)).unwrap();
+            let qb = query::mip(b, lat, lon, level, Some(id.level)).unwrap();
+            let key = |q: &query::MipAnswer| {
+                (q.min_m, q.max_m, q.texel, q.texels, q.scope.clone(), q.tile)
+            };
+            assert_eq!(key(&qa), key(&qb), "{id} level {level}");
+        }
+    }
+
+    // A damaged chunk pattern or size is refused when the tileset is opened.
+    let mp = b.join("tileset.json");
+    let good: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&mp).unwrap()).unwrap();
+    for (key, bad) in [
+        (
+            "face_chunk_path",
+            serde_json::json!("height/{level}/{face}/{cy}/{cx}.exr"),
+        ),
+        (
+            "face_chunk_path",
+            serde_json::json!("minmax/{level}/{face}/{cx}.exr"),
+        ),
+        (
+            "face_chunk_path",
+            serde_json::json!("minmax/../{level}/{face}/{cy}/{cx}.exr"),
+        ),
+        ("face_chunk_tiles", serde_json::json!(3)),
+        ("face_chunk_tiles", serde_json::json!(0)),
+    ] {
+        let mut v = good.clone();
+        v["products"]["mip"][key] = bad.clone();
+        std::fs::write(&mp, serde_json::to_vec_pretty(&v).unwrap()).unwrap();
+        let e = penumbra::tileset::Store::open(b).err();
+        assert!(e.is_some(), "{key} = {bad} accepted");
+    }
+    std::fs::write(&mp, serde_json::to_vec_pretty(&good).unwrap()).unwrap();
+    assert!(penumbra::tileset::Store::open(b).is_ok());
 }
 
 #[test]

@@ -433,6 +433,12 @@ fn damages() -> Vec<(String, Option<serde_json::Value>)> {
     d.push(("products.horizon.method".into(), Some(json!("magic"))));
     d.push(("products.horizon.levels".into(), Some(json!([200]))));
     d.push(("products.mip.precision".into(), Some(json!("f64"))));
+    // Chunked face pyramids: the pattern and the chunk size come together.
+    d.push((
+        "products.mip.face_chunk_path".into(),
+        Some(json!("minmax/{level}/{face}/face/{cy}/{cx}.exr")),
+    ));
+    d.push(("products.mip.face_chunk_tiles".into(), Some(json!(1024))));
     d.push(("format".into(), Some(json!("something-else"))));
     d
 }

@@ -32,6 +32,7 @@ pub use self::kernels::{
 };
 pub use self::schema::Precision;
 pub use self::stage::{
-    build_mips, face_path, tile_paths, MipOptions, MipReport, FACE_PATTERN, MAX_PATTERN,
-    MINMAX_PATTERN, MIP_FORMAT, STAGE, TEXEL_CONVENTION,
+    build_mips, face_chunk_path, face_path, tile_paths, MipOptions, MipReport, FACE_CHUNK_PATTERN,
+    FACE_CHUNK_TILES, FACE_PATTERN, MAX_PATTERN, MINMAX_PATTERN, MIP_FORMAT, STAGE,
+    TEXEL_CONVENTION,
 };

@@ -20,11 +20,17 @@ use crate::manifest::{self, MipLevelRange, MipProduct, Tileset};
 use crate::progress::Progress;
 use crate::runner::{self, StageSpec, Start};
 use crate::tileio::{self, TileCompression};
-use crate::tileset::{Product, Store};
+use crate::tileset::{self, Product, Store};
 
 pub const MAX_PATTERN: &str = "maxmip/{level}/{face}/{y}/{x}.exr";
 pub const MINMAX_PATTERN: &str = "minmax/{level}/{face}/{y}/{x}.exr";
 pub const FACE_PATTERN: &str = "minmax/{level}/{face}/face.exr";
+/// Chunks of the face pyramids of faces with more than [`FACE_CHUNK_TILES`] tiles per side.
+pub const FACE_CHUNK_PATTERN: &str = "minmax/{level}/{face}/face/{cy}/{cx}.exr";
+/// Tiles per side of a face-pyramid chunk: a face with more tiles per side than this keeps
+/// the fine levels of its pyramid in chunks of this many tiles squared, so that building one
+/// never holds more than a chunk (docs/mipmaps.md).
+pub const FACE_CHUNK_TILES: u32 = 1024;
 /// Version of the mip products' layout and convention (part of the run key).
 pub const MIP_FORMAT: &str = "penumbra-mip-1";
 /// One-line statement of the texel convention, recorded in the manifest.
@@ -37,10 +43,25 @@ pub const TEXEL_CONVENTION: &str =
 // Stage
 
 /// What the user chose.
-#[derive(Clone, Debug, Default, Serialize)]
+#[derive(Clone, Debug, Serialize)]
 pub struct MipOptions {
     pub precision: Precision,
     pub compression: TileCompression,
+    /// Tiles per side of a face-pyramid chunk, a power of two: [`FACE_CHUNK_TILES`]. Only tests
+    /// lower it (to chunk the faces of a small tileset); not part of the run key.
+    #[doc(hidden)]
+    #[serde(skip)]
+    pub face_chunk_tiles: u32,
+}
+
+impl Default for MipOptions {
+    fn default() -> Self {
+        MipOptions {
+            precision: Precision::default(),
+            compression: TileCompression::default(),
+            face_chunk_tiles: FACE_CHUNK_TILES,
+        }
+    }
 }
 
 /// What a run did.
@@ -51,6 +72,8 @@ pub struct MipReport {
     pub tiles_written: u64,
     pub tiles_kept: u64,
     pub face_pyramids: u64,
+    /// Chunk files of the face pyramids of faces with more tiles per side than a chunk.
+    pub face_chunks: u64,
     pub precision: Precision,
     pub global_min_m: f64,
     pub global_max_m: f64,
@@ -75,6 +98,11 @@ pub fn tile_paths(dir: &Path, id: TileId) -> (PathBuf, PathBuf) {
 /// Path of a face pyramid.
 pub fn face_path(dir: &Path, level: u8, face: Face) -> PathBuf {
     tileio::tile_path(dir, FACE_PATTERN, level, face.name(), 0, 0)
+}
+
+/// Path of chunk (cx, cy) of a face pyramid.
+pub fn face_chunk_path(dir: &Path, level: u8, face: Face, cx: u32, cy: u32) -> PathBuf {
+    tileset::face_chunk_file_path(dir, FACE_CHUNK_PATTERN, level, face, cx, cy)
 }
 
 /// The mip stage writes the max and (min, max) pyramids of the height tiles.
@@ -104,6 +132,12 @@ fn check_tileset(dir: &Path, ts: &Tileset) -> Result<()> {
 
 /// Build every mip product of the tileset in `dir` and record them in its manifest.
 pub fn build_mips(dir: &Path, opts: &MipOptions, progress: &dyn Progress) -> Result<MipReport> {
+    let chunk = opts.face_chunk_tiles;
+    if !chunk.is_power_of_two() || chunk < 2 {
+        return Err(Error::usage(format!(
+            "face-pyramid chunks of {chunk} tiles per side: not a power of two of at least 2"
+        )));
+    }
     check_tileset(dir, &Tileset::load(dir)?)?;
     let (writer, ts) = runner::lock_and_load(dir)?;
     check_tileset(dir, &ts)?;
@@ -131,6 +165,7 @@ pub fn build_mips(dir: &Path, opts: &MipOptions, progress: &dyn Progress) -> Res
                 tiles_written: 0,
                 tiles_kept: tiles.len() as u64,
                 face_pyramids: 0,
+                face_chunks: 0,
                 precision: opts.precision,
                 global_min_m: m.global_min_m,
                 global_max_m: m.global_max_m,
@@ -169,18 +204,20 @@ pub fn build_mips(dir: &Path, opts: &MipOptions, progress: &dyn Progress) -> Res
         tops.insert(*id, (lo, hi));
     }
 
-    // Face pyramids of whole-tile extrema, and per-level and global ranges.
+    // Face pyramids of whole-tile extrema, and per-level and global ranges. A face of at most
+    // `chunk` tiles per side is one file; a larger one is cut into chunks of `chunk`² tiles,
+    // built one at a time from the tiles present, and a file of the chunks' extrema above
+    // them: nothing here grows with the number of tiles per side.
+    let chunk = chunk as usize;
     let mut ranges = Vec::new();
-    let mut face_pyramids = 0u64;
+    let (mut face_pyramids, mut face_chunks) = (0u64, 0u64);
+    let mut chunked = false;
     let (mut gmin, mut gmax) = (POS_INF, NEG_INF);
     for level in 0..lay.levels {
         let g = lay.tiles_per_side(level) as usize;
         let (mut lmin, mut lmax) = (POS_INF, NEG_INF);
         for face in Face::ALL {
-            let mut lo = vec![f32::NAN; g * g];
-            let mut hi = vec![f32::NAN; g * g];
-            let mut any = false;
-            for (id, &(a, b)) in tops.range(
+            let on_face = tops.range(
                 TileId {
                     level,
                     face,
@@ -192,28 +229,55 @@ pub fn build_mips(dir: &Path, opts: &MipOptions, progress: &dyn Progress) -> Res
                     x: u32::MAX,
                     y: u32::MAX,
                 },
-            ) {
-                let k = id.y as usize * g + id.x as usize;
-                lo[k] = a;
-                hi[k] = b;
-                any = true;
-            }
-            if !any {
-                continue;
-            }
-            let p = face_pyramid(g, lo, hi);
-            let (a, b) = p.top();
-            lmin = fmin(lmin, a);
-            lmax = fmax(lmax, b);
-            write_mip_exr(
-                &face_path(&out, level, face),
-                g,
-                Some(&p.min),
-                &p.max,
-                Precision::F32,
-                opts.compression,
-                "penumbra-face-minmax",
-            )?;
+            );
+            let top = if g <= chunk {
+                let mut lo = vec![f32::NAN; g * g];
+                let mut hi = vec![f32::NAN; g * g];
+                let mut any = false;
+                for (id, &(a, b)) in on_face {
+                    let k = id.y as usize * g + id.x as usize;
+                    lo[k] = a;
+                    hi[k] = b;
+                    any = true;
+                }
+                if !any {
+                    continue;
+                }
+                write_face_pyramid(&face_path(&out, level, face), g, lo, hi, opts)?
+            } else {
+                let mut chunks: BTreeMap<(usize, usize), Vec<ChunkTile>> = BTreeMap::new();
+                for (id, &(a, b)) in on_face {
+                    let (x, y) = (id.x as usize, id.y as usize);
+                    chunks.entry((y / chunk, x / chunk)).or_default().push((
+                        (y % chunk) * chunk + x % chunk,
+                        a,
+                        b,
+                    ));
+                }
+                if chunks.is_empty() {
+                    continue;
+                }
+                let nc = g / chunk;
+                let mut clo = vec![f32::NAN; nc * nc];
+                let mut chi = vec![f32::NAN; nc * nc];
+                for ((cy, cx), list) in chunks {
+                    let mut lo = vec![f32::NAN; chunk * chunk];
+                    let mut hi = vec![f32::NAN; chunk * chunk];
+                    for (k, a, b) in list {
+                        lo[k] = a;
+                        hi[k] = b;
+                    }
+                    let path = face_chunk_path(&out, level, face, cx as u32, cy as u32);
+                    let (a, b) = write_face_pyramid(&path, chunk, lo, hi, opts)?;
+                    clo[cy * nc + cx] = a;
+                    chi[cy * nc + cx] = b;
+                    face_chunks += 1;
+                }
+                chunked = true;
+                write_face_pyramid(&face_path(&out, level, face), nc, clo, chi, opts)?
+            };
+            lmin = fmin(lmin, top.0);
+            lmax = fmax(lmax, top.1);
             face_pyramids += 1;
         }
         gmin = fmin(gmin, lmin);
@@ -237,6 +301,8 @@ pub fn build_mips(dir: &Path, opts: &MipOptions, progress: &dyn Progress) -> Res
         minmax_path: MINMAX_PATTERN.into(),
         minmax_channels: vec!["min".into(), "max".into()],
         face_path: FACE_PATTERN.into(),
+        face_chunk_path: chunked.then(|| FACE_CHUNK_PATTERN.into()),
+        face_chunk_tiles: chunked.then_some(chunk as u32),
         precision: opts.precision,
         face_precision: Precision::F32,
         level_rounding: "up".into(),
@@ -256,12 +322,39 @@ pub fn build_mips(dir: &Path, opts: &MipOptions, progress: &dyn Progress) -> Res
         tiles_written: written,
         tiles_kept: kept,
         face_pyramids,
+        face_chunks,
         precision: opts.precision,
         global_min_m: gmin,
         global_max_m: gmax,
         input_bytes: written * tile_bytes,
         up_to_date: false,
     })
+}
+
+/// A tile of a face-pyramid chunk: (index in the chunk's grid, min, max); chunks are keyed by
+/// (cy, cx).
+type ChunkTile = (usize, f32, f32);
+
+/// Reduce a `g`² grid of whole-tile (min, max) to its pyramid and write it (always f32);
+/// the pyramid's 1×1 (min, max).
+fn write_face_pyramid(
+    path: &Path,
+    g: usize,
+    lo: Vec<f32>,
+    hi: Vec<f32>,
+    opts: &MipOptions,
+) -> Result<(f32, f32)> {
+    let p = face_pyramid(g, lo, hi);
+    write_mip_exr(
+        path,
+        g,
+        Some(&p.min),
+        &p.max,
+        Precision::F32,
+        opts.compression,
+        "penumbra-face-minmax",
+    )?;
+    Ok(p.top())
 }
 
 /// One tile: (1×1 min, 1×1 max, kept from an earlier run).

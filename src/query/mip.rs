@@ -4,7 +4,9 @@ use std::path::Path;
 
 use serde::Serialize;
 
+use crate::cube::Face;
 use crate::error::{Error, Result};
+use crate::manifest::Tileset;
 use crate::mip::{level_sizes, read_mip_exr};
 use crate::tileset::{self, Store};
 
@@ -104,34 +106,13 @@ pub fn mip(
         file = path;
     } else {
         let fl = level - (m - 1);
-        let path = tileset::face_file_path(dir, &mp.face_path, tl, tile.face);
-        if !path.exists() {
-            return Err(Error::usage(format!(
-                "no tile of face {} at level {tl} has data: no face pyramid there",
-                tile.face
-            )));
-        }
-        let f = read_mip_exr(&path)?;
-        let g = ts.layout.tiles_per_side(tl) as usize;
-        if f.sizes[0] != g {
-            return Err(Error::invalid(
-                &path,
-                format!(
-                    "face pyramid is {}² but level {tl} has {g}² tiles",
-                    f.sizes[0]
-                ),
-            ));
-        }
-        let k = fl as usize;
-        let w = f.sizes[k];
-        let (x, y) = (tile.x >> fl, tile.y >> fl);
-        let idx = y as usize * w + x as usize;
+        let t = face_texel(dir, ts, tl, tile.face, fl, tile.x, tile.y)?;
         scope = "face";
-        texel = [x, y];
-        texels = w as u32;
-        lo = f.channel(&path, "min")?[k][idx];
-        hi = f.channel(&path, "max")?[k][idx];
-        file = path;
+        texel = [tile.x >> fl, tile.y >> fl];
+        texels = t.texels;
+        lo = t.min;
+        hi = t.max;
+        file = t.file;
     }
     Ok(MipAnswer {
         lat_deg: lat,
@@ -149,5 +130,90 @@ pub fn mip(
         min_m: nan_to_none(lo),
         max_m: nan_to_none(hi),
         file: file.display().to_string(),
+    })
+}
+
+/// One texel of a face pyramid, wherever it is stored.
+#[derive(Clone, Debug)]
+pub struct FaceTexel {
+    /// NaN: no tile with data below it.
+    pub min: f32,
+    pub max: f32,
+    /// Texels per side of the face pyramid at this level.
+    pub texels: u32,
+    /// The file read (the face file for a texel inside a chunk that has no file: no tiles).
+    pub file: std::path::PathBuf,
+}
+
+/// Texel (tx >> `fl`, ty >> `fl`) of level `fl` of the face pyramid of `face` at tile level
+/// `tl` (level 0: one texel per tile), for tile (tx, ty): from the face file, or, at the
+/// levels inside a chunk of a chunked face, from the chunk's file (docs/mipmaps.md).
+pub fn face_texel(
+    dir: &Path,
+    ts: &Tileset,
+    tl: u8,
+    face: Face,
+    fl: u32,
+    tx: u32,
+    ty: u32,
+) -> Result<FaceTexel> {
+    let mp = ts
+        .products
+        .mip
+        .as_ref()
+        .ok_or_else(|| Error::usage(format!("{} has no mipmaps", dir.display())))?;
+    let g = ts.layout.tiles_per_side(tl);
+    if fl > tl as u32 || tx >= g || ty >= g {
+        return Err(Error::usage(format!(
+            "face-pyramid level {fl} texel of tile ({tx}, {ty}) does not exist at tile level {tl}"
+        )));
+    }
+    let face_file = tileset::face_file_path(dir, &mp.face_path, tl, face);
+    if !face_file.exists() {
+        return Err(Error::usage(format!(
+            "no tile of face {face} at level {tl} has data: no face pyramid there"
+        )));
+    }
+    // (file, its level-0 size, level in it, texel x, y in it).
+    let (path, size, k, x, y) = match (&mp.face_chunk_path, mp.face_chunk_tiles) {
+        (Some(pattern), Some(c)) if g > c => {
+            let kc = c.trailing_zeros();
+            if fl < kc {
+                let (cx, cy) = (tx / c, ty / c);
+                let p = tileset::face_chunk_file_path(dir, pattern, tl, face, cx, cy);
+                if !p.exists() {
+                    // No tile in this chunk: no terrain (as the chunk's texel in the face file).
+                    return Ok(FaceTexel {
+                        min: f32::NAN,
+                        max: f32::NAN,
+                        texels: g >> fl,
+                        file: face_file,
+                    });
+                }
+                (p, c, fl, (tx % c) >> fl, (ty % c) >> fl)
+            } else {
+                (face_file, g / c, fl - kc, tx >> fl, ty >> fl)
+            }
+        }
+        _ => (face_file, g, fl, tx >> fl, ty >> fl),
+    };
+    let f = read_mip_exr(&path)?;
+    if f.sizes[0] != size as usize {
+        return Err(Error::invalid(
+            &path,
+            format!(
+                "face pyramid is {}² but should be {size}² at tile level {tl}",
+                f.sizes[0]
+            ),
+        ));
+    }
+    let k = k as usize;
+    let w = f.sizes[k];
+    let idx = y as usize * w + x as usize;
+    Ok(FaceTexel {
+        min: f.channel(&path, "min")?[k][idx],
+        max: f.channel(&path, "max")?[k][idx],
+        texels: g >> fl,
+        file: path,
     })
 }

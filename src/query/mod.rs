@@ -5,7 +5,7 @@ mod horizon;
 mod mip;
 
 pub use self::horizon::{horizon, HorizonAnswer};
-pub use self::mip::{mip, MipAnswer};
+pub use self::mip::{face_texel, mip, FaceTexel, MipAnswer};
 
 use std::path::Path;
 

@@ -144,6 +144,25 @@ pub fn face_file_path(root: &Path, pattern: &str, level: u8, face: Face) -> Path
     )
 }
 
+/// Path of chunk (cx, cy) of a per-(level, face) file below `root` from a pattern with
+/// `{level}`, `{face}`, `{cx}` and `{cy}`.
+pub fn face_chunk_file_path(
+    root: &Path,
+    pattern: &str,
+    level: u8,
+    face: Face,
+    cx: u32,
+    cy: u32,
+) -> PathBuf {
+    root.join(
+        pattern
+            .replace("{level}", &level.to_string())
+            .replace("{face}", face.name())
+            .replace("{cx}", &cx.to_string())
+            .replace("{cy}", &cy.to_string()),
+    )
+}
+
 /// Default byte budget of a store's height-tile cache.
 pub const DEFAULT_CACHE_BYTES: u64 = 1 << 30;
 

@@ -250,6 +250,33 @@ pub fn check(ts: &Tileset, path: &Path) -> Result<()> {
             &["{level}", "{face}"],
             ".exr",
         )?;
+        match (&m.face_chunk_path, m.face_chunk_tiles) {
+            (None, None) => {}
+            (Some(p), Some(c)) => {
+                pattern(
+                    path,
+                    "products.mip.face_chunk_path",
+                    p,
+                    &["minmax"],
+                    &["{level}", "{face}", "{cy}", "{cx}"],
+                    ".exr",
+                )?;
+                if !c.is_power_of_two() || !(2..=1 << 24).contains(&c) {
+                    return Err(bad(
+                        path,
+                        "products.mip.face_chunk_tiles",
+                        format!("{c} is not a power of two from 2 to 2^24"),
+                    ));
+                }
+            }
+            _ => {
+                return Err(bad(
+                    path,
+                    "products.mip.face_chunk_path",
+                    "face_chunk_path and face_chunk_tiles come together".into(),
+                ))
+            }
+        }
         for (k, l) in m.levels.iter().enumerate() {
             if l.level >= lay.levels {
                 return Err(bad(

@@ -43,6 +43,30 @@ pub enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Peak RSS and wall time of `penumbra mip` and `penumbra horizon` on the same DEM tiled
+    /// with more and more levels (issue #13, item 3): each run is a fresh child process under
+    /// GNU time. Memory should not depend on the level count.
+    MipMemory {
+        /// Folder holding the shared DEMs (lola_shoemaker_1k/ is used).
+        #[arg(long, default_value = "../shared/data")]
+        data: PathBuf,
+        /// Scratch folder for the tilesets (removed afterwards).
+        #[arg(long)]
+        work: Option<PathBuf>,
+        /// Level counts to tile with.
+        #[arg(long, value_delimiter = ',', default_values_t = [12u8, 14, 16])]
+        levels: Vec<u8>,
+        /// Interior tile size.
+        #[arg(long, default_value_t = 64)]
+        tile_size: u32,
+        /// Azimuths of the horizon runs.
+        #[arg(long, default_value_t = 16)]
+        azimuths: usize,
+        #[arg(long)]
+        markdown: bool,
+        #[arg(long)]
+        json: bool,
+    },
     /// Horizon throughput on the peers' synthetic 30 m UTM DEM (the whole map as observers and
     /// as context, 1 thread and all cores), the brute-force reference on random pixels, the
     /// fast sweep's error against it, the peers' horizon tools from their results.tsv, and an
@@ -282,6 +306,17 @@ pub fn run(cmd: BenchCommand, quiet: bool) -> Result<()> {
             markdown,
             json,
         } => run_mip(&data, work, reps.max(1), markdown, json, quiet),
+        BenchCommand::MipMemory {
+            data,
+            work,
+            levels,
+            tile_size,
+            azimuths,
+            markdown,
+            json,
+        } => run_mip_memory(
+            &data, work, &levels, tile_size, azimuths, markdown, json, quiet,
+        ),
         BenchCommand::Horizon {
             peers,
             azimuths,
@@ -431,6 +466,175 @@ fn tempfile_dir(work: Option<PathBuf>) -> Result<PathBuf> {
     let p = base.join(format!("penumbra-bench-{}", std::process::id()));
     std::fs::create_dir_all(&p).with_context(|| format!("creating {}", p.display()))?;
     Ok(p)
+}
+
+// ---------------------------------------------------------------------------------------------
+// bench mip-memory
+
+#[derive(Serialize)]
+struct MemRow {
+    levels: u8,
+    tiles: u64,
+    finest_tiles: u64,
+    /// Face-pyramid chunk files written by mip.
+    face_chunks: u64,
+    tile_wall_s: f64,
+    tile_rss_mib: f64,
+    mip_wall_s: f64,
+    mip_rss_mib: f64,
+    /// Horizon of the finest level (its tiles grow ~4× per level on this DEM).
+    horizon_level: u8,
+    horizon_wall_s: f64,
+    horizon_rss_mib: f64,
+    /// Horizon of one fixed level (the first run's finest) in every tileset: the same work.
+    fixed_level: u8,
+    fixed_wall_s: f64,
+    fixed_rss_mib: f64,
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run_mip_memory(
+    data: &Path,
+    work: Option<PathBuf>,
+    levels: &[u8],
+    tile_size: u32,
+    azimuths: usize,
+    markdown: bool,
+    json: bool,
+    quiet: bool,
+) -> Result<()> {
+    let src = data.join("lola_shoemaker_1k/Shoemaker_final_adj_5mpp_surf_1k.tif");
+    if !src.exists() {
+        bail!("{}: not found; give --data", src.display());
+    }
+    if levels.is_empty() {
+        bail!("give at least one level count");
+    }
+    let exe = penumbra_exe()?;
+    let tmp = tempfile_dir(work)?;
+    let threads = rayon::current_num_threads().to_string();
+    let fixed = levels[0] - 1;
+    let pen = |args: &[&str], dir: &Path| {
+        let mut c = Command::new(&exe);
+        c.args(["--quiet", "--threads", &threads])
+            .args(args)
+            .arg(dir);
+        c
+    };
+    let mut rows = Vec::new();
+    for &l in levels {
+        let out = tmp.join(format!("shoemaker-{l}"));
+        let _ = std::fs::remove_dir_all(&out);
+        if !quiet {
+            eprintln!("bench mip-memory: {l} levels");
+        }
+        let mut c = Command::new(&exe);
+        c.args(["--quiet", "--threads", &threads, "tile"])
+            .arg(&src)
+            .args(["--body", "moon", "--tile-size", &tile_size.to_string()])
+            .args(["--levels", &l.to_string(), "--out"])
+            .arg(&out);
+        let (tile_wall, tile_rss) = timed(&mut c, &tmp)?;
+        let (mip_wall, mip_rss) = timed(&mut pen(&["mip"], &out), &tmp)?;
+        let ts = Tileset::load(&out)?;
+        let finest = ts.layout.levels - 1;
+        let hz = |level: u8| {
+            let (lv, az) = (level.to_string(), azimuths.to_string());
+            timed(
+                &mut pen(&["horizon", "--levels", &lv, "--azimuths", &az], &out),
+                &tmp,
+            )
+        };
+        let (hz_wall, hz_rss) = hz(finest)?;
+        // A second run of the same level would be "up to date": reuse the finest's figures.
+        let (fixed_wall, fixed_rss) = if fixed == finest {
+            (hz_wall, hz_rss)
+        } else {
+            hz(fixed)?
+        };
+        let face_chunks = walk_count(&out.join("minmax"), &|p: &Path| {
+            p.components().any(|c| c.as_os_str() == "face")
+        });
+        rows.push(MemRow {
+            levels: ts.layout.levels,
+            tiles: ts.coverage.iter().map(|c| c.tiles).sum(),
+            finest_tiles: ts
+                .coverage
+                .iter()
+                .find(|c| c.level == finest)
+                .map_or(0, |c| c.tiles),
+            face_chunks,
+            tile_wall_s: tile_wall,
+            tile_rss_mib: tile_rss,
+            mip_wall_s: mip_wall,
+            mip_rss_mib: mip_rss,
+            horizon_level: finest,
+            horizon_wall_s: hz_wall,
+            horizon_rss_mib: hz_rss,
+            fixed_level: fixed,
+            fixed_wall_s: fixed_wall,
+            fixed_rss_mib: fixed_rss,
+        });
+        let _ = std::fs::remove_dir_all(&out);
+    }
+    let _ = std::fs::remove_dir_all(&tmp);
+    if json {
+        return penumbra_cli::output::print_json(&rows);
+    }
+    let base = &rows[0];
+    let ratio = |v: f64, b: f64| v / b;
+    if markdown {
+        println!("| levels | tiles | finest-level tiles | face chunk files | tile RSS MiB | mip wall s | mip RSS MiB | mip RSS ÷ first | horizon level | horizon wall s | horizon RSS MiB | horizon RSS ÷ first | horizon L{fixed} wall s | horizon L{fixed} RSS MiB | L{fixed} RSS ÷ first |");
+        println!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    }
+    for r in &rows {
+        let (rm, rh, rf) = (
+            ratio(r.mip_rss_mib, base.mip_rss_mib),
+            ratio(r.horizon_rss_mib, base.horizon_rss_mib),
+            ratio(r.fixed_rss_mib, base.fixed_rss_mib),
+        );
+        if markdown {
+            println!(
+                "| {} | {} | {} | {} | {:.1} | {:.2} | {:.1} | {:.2} | {} | {:.2} | {:.1} | {:.2} | {:.2} | {:.1} | {:.2} |",
+                r.levels, r.tiles, r.finest_tiles, r.face_chunks, r.tile_rss_mib, r.mip_wall_s,
+                r.mip_rss_mib, rm, r.horizon_level, r.horizon_wall_s, r.horizon_rss_mib, rh,
+                r.fixed_wall_s, r.fixed_rss_mib, rf
+            );
+        } else {
+            println!(
+                "{:>2} levels, {:>5} tiles ({:>4} finest), {:>2} chunks: mip {:>6.2} s {:>6.1} MiB (×{:.2}); horizon L{} {:>6.2} s {:>6.1} MiB (×{:.2}); horizon L{} {:>5.2} s {:>6.1} MiB (×{:.2})",
+                r.levels, r.tiles, r.finest_tiles, r.face_chunks, r.mip_wall_s, r.mip_rss_mib,
+                rm, r.horizon_level, r.horizon_wall_s, r.horizon_rss_mib, rh, r.fixed_level,
+                r.fixed_wall_s, r.fixed_rss_mib, rf
+            );
+        }
+    }
+    if markdown {
+        println!();
+        println!(
+            "{threads} threads, {tile_size}-px tiles, {azimuths} azimuths; wall and peak RSS from \
+             GNU time around each whole process; ratios against the {}-level run.",
+            base.levels
+        );
+    }
+    Ok(())
+}
+
+/// Files below `dir` (recursively) whose path satisfies `keep`.
+fn walk_count(dir: &Path, keep: &dyn Fn(&Path) -> bool) -> u64 {
+    let Ok(rd) = std::fs::read_dir(dir) else {
+        return 0;
+    };
+    rd.flatten()
+        .map(|e| {
+            let p = e.path();
+            if p.is_dir() {
+                walk_count(&p, keep)
+            } else {
+                u64::from(keep(&p))
+            }
+        })
+        .sum()
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -176,6 +176,7 @@ impl MipFlags {
         MipOptions {
             precision: self.precision,
             compression,
+            ..Default::default()
         }
     }
 }
