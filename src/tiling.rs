@@ -291,7 +291,7 @@ pub fn tile_dem(
         return Err(Error::param(
             "max_output_gib",
             format!(
-                "is {}, but {} levels of {}-px tiles over this DEM would write up to {gib:.1} GiB \
+                "is {}, but {} levels of {}-px tiles over this DEM would write up to {gib:.3} GiB \
                  before compression ({} tiles): use fewer levels or raise the cap",
                 opts.max_output_gib,
                 levels,

@@ -564,3 +564,32 @@ fn a_manifest_that_is_a_device_is_not_read_to_the_end() {
         assert!(String::from_utf8_lossy(&o.stderr).contains("too large"));
     }
 }
+
+#[test]
+fn output_caps_refuse_nan_negative_and_oversized_runs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("t");
+    let o = out.to_str().unwrap();
+    // Before anything exists: the estimate refuses, nothing is made.
+    for cap in ["NaN", "-1", "0", "0.00001"] {
+        let r = run(&[BAKE, &["--out", o, "--max-output-gib", cap]].concat());
+        assert_eq!(r.status.code(), Some(2), "cap {cap}");
+        let e = String::from_utf8_lossy(&r.stderr);
+        assert!(e.contains("--max-output-gib"), "cap {cap}: {e}");
+        assert!(!out.exists(), "cap {cap} left the output folder behind");
+    }
+    ok(&[BAKE, &["--out", o]].concat());
+    let want = snapshot(&out);
+    for cmd in [
+        vec!["mip", o, "--precision", "f16", "--max-output-gib"],
+        vec!["horizon", o, "--levels", "2", "--max-output-gib"],
+    ] {
+        for cap in ["NaN", "-3", "0.0000001"] {
+            let r = run(&[cmd.as_slice(), &[cap]].concat());
+            assert_eq!(r.status.code(), Some(2), "{cmd:?} {cap}");
+            let e = String::from_utf8_lossy(&r.stderr);
+            assert!(e.contains("--max-output-gib"), "{cmd:?} {cap}: {e}");
+            assert_eq!(snapshot(&out), want, "{cmd:?} {cap} changed the tileset");
+        }
+    }
+}

@@ -507,12 +507,15 @@ fn check_output_size(opts: &HorizonOptions, levels: &[u8], tiles: usize, n: usiz
     };
     let gib = tiles as f64 * (n * n * opts.azimuths) as f64 * bytes_per / (1u64 << 30) as f64;
     if gib > opts.max_output_gib {
-        return Err(Error::usage(format!(
-            "horizons for levels {levels:?} would write {gib:.1} GiB before compression ({tiles} \
-             tiles × {n}² pixels × {} azimuths × {bytes_per} bytes): choose fewer levels, fewer \
-             azimuths, or raise the output cap",
-            opts.azimuths
-        )));
+        return Err(Error::param(
+            "max_output_gib",
+            format!(
+                "is {}, but horizons for levels {levels:?} would write {gib:.3} GiB before \
+                 compression ({tiles} tiles × {n}² pixels × {} azimuths × {bytes_per} bytes): \
+                 choose fewer levels, fewer azimuths, or raise the cap",
+                opts.max_output_gib, opts.azimuths
+            ),
+        ));
     }
     Ok(())
 }

@@ -52,6 +52,10 @@ pub struct MipOptions {
     #[doc(hidden)]
     #[serde(skip)]
     pub face_chunk_tiles: u32,
+    /// Refuse a run whose pyramids would exceed this many GiB before compression (changes no
+    /// byte of the output, so not part of the run key).
+    #[serde(skip)]
+    pub max_output_gib: f64,
 }
 
 impl Default for MipOptions {
@@ -60,8 +64,33 @@ impl Default for MipOptions {
             precision: Precision::default(),
             compression: TileCompression::default(),
             face_chunk_tiles: FACE_CHUNK_TILES,
+            max_output_gib: crate::tiling::DEFAULT_MAX_OUTPUT_GIB,
         }
     }
+}
+
+/// Refuse a run whose tile pyramids (max, and min + max; 4/3 of the level-0 texels) would
+/// exceed the output cap before compression.
+fn check_output_size(opts: &MipOptions, ts: &Tileset) -> Result<()> {
+    crate::tiling::check_output_cap("max_output_gib", opts.max_output_gib)?;
+    let n = ts.layout.tile_size as f64;
+    let bytes = match opts.precision {
+        Precision::F32 => 4.0,
+        Precision::F16 => 2.0,
+    };
+    let tiles: u64 = ts.coverage.iter().map(|c| c.tiles).sum();
+    let gib = tiles as f64 * n * n * 4.0 / 3.0 * 3.0 * bytes / (1u64 << 30) as f64;
+    if gib > opts.max_output_gib {
+        return Err(Error::param(
+            "max_output_gib",
+            format!(
+                "is {}, but the mipmaps of {tiles} tiles would write {gib:.3} GiB before \
+                 compression: raise the cap",
+                opts.max_output_gib
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// What a run did.
@@ -138,7 +167,9 @@ pub fn build_mips(dir: &Path, opts: &MipOptions, progress: &dyn Progress) -> Res
             "face-pyramid chunks of {chunk} tiles per side: not a power of two of at least 2"
         )));
     }
-    check_tileset(dir, &Tileset::load(dir)?)?;
+    let before = Tileset::load(dir)?;
+    check_tileset(dir, &before)?;
+    check_output_size(opts, &before)?;
     let (writer, ts) = runner::lock_and_load(dir)?;
     check_tileset(dir, &ts)?;
     let store = Store::open_unlocked(dir)?;

@@ -59,7 +59,7 @@ enum Command {
         #[arg(long, default_value = "zip")]
         compression: TileCompression,
         /// Refuse a run whose maps would exceed this many GiB before compression.
-        #[arg(long, default_value_t = 8.0)]
+        #[arg(long, default_value_t = 8.0, allow_hyphen_values = true)]
         max_output_gib: f64,
         /// Print the report as JSON.
         #[arg(long)]
@@ -74,6 +74,9 @@ enum Command {
         /// EXR compression of the mipmaps: zip (lossless) or none (fastest).
         #[arg(long, default_value = "zip")]
         compression: TileCompression,
+        /// Refuse a run whose pyramids would exceed this many GiB before compression.
+        #[arg(long, default_value_t = penumbra::tiling::DEFAULT_MAX_OUTPUT_GIB, allow_hyphen_values = true)]
+        max_output_gib: f64,
         /// Print the report as JSON.
         #[arg(long)]
         json: bool,
@@ -172,10 +175,11 @@ struct MipFlags {
 }
 
 impl MipFlags {
-    fn options(&self, compression: TileCompression) -> MipOptions {
+    fn options(&self, compression: TileCompression, max_output_gib: f64) -> MipOptions {
         MipOptions {
             precision: self.precision,
             compression,
+            max_output_gib,
             ..Default::default()
         }
     }
@@ -224,7 +228,11 @@ struct TileFlags {
     albedo_west: f64,
     /// Refuse a tiling whose tiles would exceed this many GiB before compression (the estimate
     /// is made before anything is written).
-    #[arg(long = "max-output-gib", default_value_t = penumbra::tiling::DEFAULT_MAX_OUTPUT_GIB)]
+    #[arg(
+        long = "max-output-gib",
+        default_value_t = penumbra::tiling::DEFAULT_MAX_OUTPUT_GIB,
+        allow_hyphen_values = true
+    )]
     max_output_gib: f64,
     /// Print the report as JSON.
     #[arg(long)]
@@ -317,7 +325,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Bake(a) => {
             let mut plan = Plan {
                 tile: a.flags.options(),
-                mip: a.mip.options(a.flags.compression),
+                mip: a.mip.options(a.flags.compression, a.flags.max_output_gib),
                 ..Plan::default()
             };
             if let Some(levels) = &a.horizon_levels {
@@ -348,10 +356,12 @@ fn run(cli: Cli) -> Result<()> {
             dir,
             flags,
             compression,
+            max_output_gib,
             json,
         } => {
             let t0 = std::time::Instant::now();
-            let report = penumbra::mip::build_mips(&dir, &flags.options(compression), &progress)?;
+            let opts = flags.options(compression, max_output_gib);
+            let report = penumbra::mip::build_mips(&dir, &opts, &progress)?;
             output::print_mip(&report, t0.elapsed().as_secs_f64(), json)?;
         }
         Command::Horizon {
