@@ -12,6 +12,8 @@ use crate::dem::{GeoRef, Resampling};
 use crate::error::{Error, IoContext, Result};
 use crate::layout::{Layout, TileId};
 
+pub mod validate;
+
 pub const MANIFEST: &str = "tileset.json";
 pub const FORMAT: &str = "penumbra-tileset";
 pub const FORMAT_VERSION: u32 = 1;
@@ -211,7 +213,7 @@ pub struct Tileset {
 }
 
 impl Tileset {
-    /// Read and validate the manifest of the tileset in `dir` (see [`crate::tileset::validate`]).
+    /// Read and validate the manifest of the tileset in `dir` (see [`validate`]).
     pub fn load(dir: &Path) -> Result<Tileset> {
         let path = dir.join(MANIFEST);
         if !path.exists() {
@@ -220,9 +222,9 @@ impl Tileset {
                 "no tileset manifest here: point at a folder made by `penumbra tile` or `penumbra bake`",
             ));
         }
-        let bytes = crate::tileset::fsio::read_capped(
+        let bytes = crate::fsio::read_capped(
             &path,
-            crate::tileset::validate::MAX_MANIFEST_BYTES,
+            self::validate::MAX_MANIFEST_BYTES,
             "a tileset manifest",
         )?;
         let de = &mut serde_json::Deserializer::from_slice(&bytes);
@@ -246,7 +248,7 @@ impl Tileset {
                 ),
             ));
         }
-        crate::tileset::validate::check(&t, &path)?;
+        self::validate::check(&t, &path)?;
         Ok(t)
     }
 

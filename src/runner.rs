@@ -12,7 +12,7 @@
 
 use std::path::Path;
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::manifest::Tileset;
 use crate::tileset::writer::{Staging, Writer};
 use crate::tileset::Product;
@@ -126,4 +126,19 @@ impl Run {
         } = self;
         writer.commit(staging, spec.writes, manifest, changed)
     }
+}
+
+/// Default cap on a stage's output before compression (tiling, mipmaps).
+pub const DEFAULT_MAX_OUTPUT_GIB: f64 = 64.0;
+
+/// Check an output cap given in GiB: a positive number (NaN or a negative cap is refused, not
+/// read as "no cap").
+pub fn check_output_cap(param: &'static str, gib: f64) -> Result<()> {
+    if gib.is_nan() || gib <= 0.0 {
+        return Err(Error::param(
+            param,
+            format!("{gib} is not a size: give a positive number of GiB"),
+        ));
+    }
+    Ok(())
 }

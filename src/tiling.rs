@@ -97,29 +97,14 @@ impl Default for TileOptions {
             compression: tileio::TileCompression::Zip,
             max_fill_px: crate::dem::DEFAULT_MAX_FILL_PX,
             albedo: None,
-            max_output_gib: DEFAULT_MAX_OUTPUT_GIB,
+            max_output_gib: runner::DEFAULT_MAX_OUTPUT_GIB,
         }
     }
 }
 
-/// Default cap on a tiling run's output before compression.
-pub const DEFAULT_MAX_OUTPUT_GIB: f64 = 64.0;
-
-/// Check an output cap given in GiB: a positive number (NaN or a negative cap is refused, not
-/// read as "no cap").
-pub fn check_output_cap(param: &'static str, gib: f64) -> Result<()> {
-    if gib.is_nan() || gib <= 0.0 {
-        return Err(Error::param(
-            param,
-            format!("{gib} is not a size: give a positive number of GiB"),
-        ));
-    }
-    Ok(())
-}
-
 impl TileOptions {
     pub fn validate(&self) -> Result<()> {
-        check_output_cap("max_output_gib", self.max_output_gib)?;
+        runner::check_output_cap("max_output_gib", self.max_output_gib)?;
         if !(8..=8192).contains(&self.tile_size) || self.tile_size % 2 != 0 {
             return Err(Error::param(
                 "tile_size",

@@ -458,7 +458,7 @@ pub(crate) fn check_layout(dir: &Path, ts: &Tileset) -> Result<()> {
 }
 
 pub(crate) fn check_options(opts: &HorizonOptions) -> Result<()> {
-    crate::tiling::check_output_cap("max_output_gib", opts.max_output_gib)?;
+    runner::check_output_cap("max_output_gib", opts.max_output_gib)?;
     let a = opts.azimuths;
     if !(4..=4096).contains(&a) {
         return Err(Error::param("azimuths", format!("{a} is outside 4..=4096")));

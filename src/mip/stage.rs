@@ -64,7 +64,7 @@ impl Default for MipOptions {
             precision: Precision::default(),
             compression: TileCompression::default(),
             face_chunk_tiles: FACE_CHUNK_TILES,
-            max_output_gib: crate::tiling::DEFAULT_MAX_OUTPUT_GIB,
+            max_output_gib: runner::DEFAULT_MAX_OUTPUT_GIB,
         }
     }
 }
@@ -72,7 +72,7 @@ impl Default for MipOptions {
 /// Refuse a run whose tile pyramids (max, and min + max; 4/3 of the level-0 texels) would
 /// exceed the output cap before compression.
 fn check_output_size(opts: &MipOptions, ts: &Tileset) -> Result<()> {
-    crate::tiling::check_output_cap("max_output_gib", opts.max_output_gib)?;
+    runner::check_output_cap("max_output_gib", opts.max_output_gib)?;
     let n = ts.layout.tile_size as f64;
     let bytes = match opts.precision {
         Precision::F32 => 4.0,

@@ -7,14 +7,14 @@
 //! - [`Store`]: the read API (`open` validates the manifest; typed, size-checked tile reads).
 //! - [`writer::Writer`]: the writer lock, staging of a run's files beside the tileset, and the
 //!   commit that swaps them in (crash-safe, rolled forward by the next writer).
-//! - [`crate::fsio`]: atomic, durable file writes; [`lock`]: the advisory locks; [`validate`]: the
+//! - [`crate::fsio`]: atomic, durable file writes; [`lock`]: the advisory locks; [`crate::manifest::validate`]: the
 //!   manifest's limits.
 
 pub mod cache;
 pub use crate::fsio;
 
 pub mod lock;
-pub mod validate;
+
 pub mod writer;
 
 use std::path::{Path, PathBuf};

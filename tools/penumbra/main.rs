@@ -75,7 +75,7 @@ enum Command {
         #[arg(long, default_value = "zip")]
         compression: TileCompression,
         /// Refuse a run whose pyramids would exceed this many GiB before compression.
-        #[arg(long, default_value_t = penumbra::tiling::DEFAULT_MAX_OUTPUT_GIB, allow_hyphen_values = true)]
+        #[arg(long, default_value_t = penumbra::runner::DEFAULT_MAX_OUTPUT_GIB, allow_hyphen_values = true)]
         max_output_gib: f64,
         /// Print the report as JSON.
         #[arg(long)]
@@ -230,7 +230,7 @@ struct TileFlags {
     /// is made before anything is written).
     #[arg(
         long = "max-output-gib",
-        default_value_t = penumbra::tiling::DEFAULT_MAX_OUTPUT_GIB,
+        default_value_t = penumbra::runner::DEFAULT_MAX_OUTPUT_GIB,
         allow_hyphen_values = true
     )]
     max_output_gib: f64,
