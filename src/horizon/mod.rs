@@ -9,6 +9,7 @@
 //! a tileset and stores the raw maps (the point query is `crate::query::horizon`).
 
 mod geometry;
+pub mod io;
 mod method;
 mod near;
 mod reference;

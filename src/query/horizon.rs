@@ -7,7 +7,7 @@ use serde::Serialize;
 use crate::error::{Error, Result};
 use crate::horizon::stage::{
     check_layout, check_options, context_for, coverage_box, interior_max, margin_for, reach_rad,
-    read_horizon_exr, terrain_range, tile_path, HorizonOptions,
+    terrain_range, HorizonOptions,
 };
 use crate::horizon::{compass_azimuth_deg, horizons_with, plane_azimuth, Method, Rect};
 use crate::manifest;
@@ -90,14 +90,10 @@ pub fn horizon(
     });
     let (elev, source, margin, needed) = match stored {
         Some(_) => {
-            let (a, planes) = read_horizon_exr(&tile_path(dir, tile), n)?;
-            if a != azimuths {
-                return Err(Error::invalid(
-                    tile_path(dir, tile),
-                    format!("holds {a} azimuths, the manifest says {azimuths}"),
-                ));
-            }
-            let e: Vec<f32> = (0..a).map(|k| planes[k * n * n + j * n + i]).collect();
+            let planes = store.horizon(tile)?;
+            let e: Vec<f32> = (0..azimuths)
+                .map(|k| planes[k * n * n + j * n + i])
+                .collect();
             (e, "stored", 0, 0)
         }
         None => {

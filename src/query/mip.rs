@@ -87,13 +87,7 @@ pub fn mip(
             )));
         }
         let path = tileset::tile_path(dir, &mp.minmax_path, tile);
-        let f = read_mip_exr(&path)?;
-        if f.sizes[0] != n {
-            return Err(Error::invalid(
-                &path,
-                format!("mipmap is {}² but tiles are {n}²", f.sizes[0]),
-            ));
-        }
+        let f = store.mip(tile, false)?;
         let k = level as usize;
         let w = f.sizes[k];
         let (x, y) = (i0 >> level, j0 >> level);

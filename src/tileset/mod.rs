@@ -250,6 +250,47 @@ impl Store {
         })
     }
 
+    /// A tile's (min, max) mipmap, checked against the tile size (`max`: the one-channel
+    /// maximum pyramid instead).
+    pub fn mip(&self, id: TileId, max: bool) -> Result<crate::mip::MipFile> {
+        let m =
+            self.ts.products.mip.as_ref().ok_or_else(|| {
+                self.missing("tileset has no mipmaps: build them with the mip stage")
+            })?;
+        let p = tile_path(
+            &self.dir,
+            if max { &m.max_path } else { &m.minmax_path },
+            id,
+        );
+        let f = crate::mip::read_mip_exr(&p)?;
+        let n = self.ts.layout.tile_size as usize;
+        if f.sizes.first() != Some(&n) {
+            return Err(Error::invalid(
+                &p,
+                format!("mipmap is {:?}² but tiles are {n}²", f.sizes.first()),
+            ));
+        }
+        Ok(f)
+    }
+
+    /// A tile's raw horizon maps (`A` planes of n² elevations, degrees), checked against the
+    /// manifest's azimuth count.
+    pub fn horizon(&self, id: TileId) -> Result<Vec<f32>> {
+        let h = self.ts.products.horizon.as_ref().ok_or_else(|| {
+            self.missing("tileset has no horizon maps: compute them with the horizon stage")
+        })?;
+        let p = tile_path(&self.dir, &h.path, id);
+        let (a, planes) =
+            crate::horizon::io::read_horizon_exr(&p, self.ts.layout.tile_size as usize)?;
+        if a != h.azimuths {
+            return Err(Error::invalid(
+                &p,
+                format!("holds {a} azimuths, the manifest says {}", h.azimuths),
+            ));
+        }
+        Ok(planes)
+    }
+
     /// The shared height-tile cache (for stages that manage its budget).
     pub fn cache(&self) -> &TileCache {
         &self.cache
