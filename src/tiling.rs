@@ -345,12 +345,12 @@ pub fn tile_dem(
         }
     }
     if present.is_empty() {
-        let source = dem.sources().first().cloned().unwrap_or_default();
-        return Err(Error::invalid(
-            source,
-            "covers no tile: no tile pixel falls on its data; check its georeferencing \
-             (docs/formats.md)",
-        ));
+        let msg = "covers no tile: no tile pixel falls on its data; check its georeferencing \
+                   (docs/formats.md) or use more levels";
+        return Err(match dem.sources().first() {
+            Some(source) => Error::invalid(source, msg),
+            None => Error::usage(format!("the terrain {msg}")),
+        });
     }
     let (voids, voids_unfilled) = dem.void_counts();
     let tileset = Tileset {

@@ -495,6 +495,7 @@ fn damaged_manifests_are_refused_and_left_alone() {
 
     let mut refused = 0;
     let mut accepted = 0;
+    let mut field_named = 0;
     let dir = tmp.path().join("case");
     for (i, (what, bytes)) in cases.iter().enumerate() {
         // Copy the good tileset and damage its manifest.
@@ -529,6 +530,7 @@ fn damaged_manifests_are_refused_and_left_alone() {
             Some(2) => {
                 refused += 1;
                 assert!(e.contains("tileset.json"), "{what}: {cmd:?}: {e}");
+                field_named += e.contains("field `") as usize;
                 assert_eq!(
                     snapshot(&dir),
                     before,
@@ -544,10 +546,15 @@ fn damaged_manifests_are_refused_and_left_alone() {
         }
     }
     eprintln!(
-        "damaged manifests: {} cases, {refused} refused, {accepted} accepted",
+        "damaged manifests: {} cases, {refused} refused ({field_named} naming the field), \
+         {accepted} accepted",
         cases.len()
     );
     assert!(refused >= 90, "only {refused} of {} refused", cases.len());
+    assert!(
+        field_named >= 150,
+        "only {field_named} refusals name the damaged field"
+    );
 }
 
 #[test]
