@@ -62,7 +62,7 @@ pub enum Start {
 }
 
 /// Begin a stage on the tileset in `dir` (made if missing). `current` gives the manifest as
-/// the stage read it *under the writer lock* (None: no tileset yet); see [`lock_and_load`].
+/// the stage read it *under the writer lock* (None: no tileset yet).
 pub fn start(
     writer: Writer,
     spec: StageSpec,
@@ -90,14 +90,6 @@ pub fn start(
         staging,
         changed,
     }))
-}
-
-/// Take the writer lock of an existing tileset and read its manifest under it. Check the
-/// tileset (and the stage's options) before: a refused run must not write into the folder.
-pub fn lock_and_load(dir: &Path) -> Result<(Writer, Tileset)> {
-    let w = Writer::begin(dir)?;
-    let ts = Tileset::load(dir)?;
-    Ok((w, ts))
 }
 
 impl Run {

@@ -3,7 +3,7 @@
 //! crashed run never sees half a file.
 
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use exr::prelude::*;
 
@@ -199,17 +199,6 @@ pub fn write_albedo_tile(path: &Path, tile: &AlbedoTile) -> Result<()> {
             .map_err(|e| Error::invalid(path, format!("PNG encoding failed: {e}")))?;
         f.write_all(buf.get_ref()).at(path)
     })
-}
-
-/// Path of a tile file below a tileset root, from the manifest's pattern.
-pub fn tile_path(root: &Path, pattern: &str, level: u8, face: &str, x: u32, y: u32) -> PathBuf {
-    root.join(
-        pattern
-            .replace("{level}", &level.to_string())
-            .replace("{face}", face)
-            .replace("{x}", &x.to_string())
-            .replace("{y}", &y.to_string()),
-    )
 }
 
 #[cfg(test)]

@@ -696,9 +696,8 @@ fn make_tile(
     out: &Path,
     resume: bool,
 ) -> Result<Option<TileStats>> {
-    let face = id.face.name();
-    let hpath = tileio::tile_path(out, manifest::HEIGHT_PATTERN, id.level, face, id.x, id.y);
-    let apath = tileio::tile_path(out, manifest::ALBEDO_PATTERN, id.level, face, id.x, id.y);
+    let hpath = crate::tileset::tile_path(out, manifest::HEIGHT_PATTERN, id);
+    let apath = crate::tileset::tile_path(out, manifest::ALBEDO_PATTERN, id);
     if resume && hpath.exists() && (albedo.is_none() || apath.exists()) {
         if let Ok(t) = tileio::read_height_tile(&hpath) {
             if t.size == layout.stored_size() {

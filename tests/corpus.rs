@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 use penumbra::dem::Crs;
 use penumbra::manifest::Tileset;
 
-use crate::util::{penumbra_bin, shared_data, Rng};
+use crate::util::{copy_tree, geokeys, penumbra_bin, shared_data, Rng, LOLA_SOUTH_POLAR_KEYS};
 
 /// Parallel `penumbra` runs (each with `--threads 1`).
 const POOL: usize = 3;
@@ -600,29 +600,7 @@ fn geo_keys() -> Vec<u16> {
 }
 
 fn polar_keys() -> Vec<u16> {
-    let e: &[(u16, u16, u16, u16)] = &[
-        (1024, 0, 1, 1),
-        (1025, 0, 1, 1),
-        (2048, 0, 1, 32767),
-        (2054, 0, 1, 9102),
-        (2056, 0, 1, 32767),
-        (2057, 34736, 1, 5),
-        (2058, 34736, 1, 6),
-        (3072, 0, 1, 32767),
-        (3074, 0, 1, 32767),
-        (3075, 0, 1, 15),
-        (3076, 0, 1, 9001),
-        (3081, 34736, 1, 0),
-        (3082, 34736, 1, 3),
-        (3083, 34736, 1, 4),
-        (3092, 34736, 1, 2),
-        (3095, 34736, 1, 1),
-    ];
-    let mut v = vec![1, 1, 0, e.len() as u16];
-    for x in e {
-        v.extend([x.0, x.1, x.2, x.3]);
-    }
-    v
+    geokeys(LOLA_SOUTH_POLAR_KEYS)
 }
 
 /// Indices into the polar GeoDoubleParams, by meaning.
@@ -1219,19 +1197,6 @@ fn hashes(dir: &Path) -> BTreeMap<String, String> {
     out
 }
 
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(from).unwrap() {
-        let p = e.unwrap().path();
-        let dst = to.join(p.file_name().unwrap());
-        if p.is_dir() {
-            copy_dir(&p, &dst);
-        } else {
-            std::fs::copy(&p, &dst).unwrap();
-        }
-    }
-}
-
 /// Run `cmd` with stdout/stderr to files in `dir`; `None` when it ran past [`RUN_LIMIT`]
 /// (it is killed).
 fn run_limited(mut cmd: Command, dir: &Path) -> Option<(std::process::ExitStatus, String)> {
@@ -1278,7 +1243,7 @@ fn run_case(
         std::fs::write(dir.join(name), bytes).unwrap();
     }
     let out = dir.join("out");
-    copy_dir(base, &out);
+    copy_tree(base, &out);
     let mut cmd = penumbra_bin();
     cmd.args(TILE_ARGS)
         .arg(dir.join(&c.input))

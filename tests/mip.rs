@@ -307,14 +307,7 @@ fn check_tileset(dir: &Path, bounds: bool) {
     );
     let (mut gmin, mut gmax) = (f32::INFINITY, f32::NEG_INFINITY);
     for id in ts.tile_set() {
-        let hp = tileio::tile_path(
-            dir,
-            "height/{level}/{face}/{y}/{x}.exr",
-            id.level,
-            id.face.name(),
-            id.x,
-            id.y,
-        );
+        let hp = penumbra::tileset::tile_path(dir, "height/{level}/{face}/{y}/{x}.exr", id);
         let t = tileio::read_height_tile(&hp).unwrap();
         let (pmax, pmm) = mip::tile_paths(dir, id);
         let fmax = mip::read_mip_exr(&pmax).unwrap();
@@ -643,14 +636,7 @@ fn a_corrupt_height_tile_is_an_error_naming_it() {
         x: 1,
         y: 0,
     };
-    let p = tileio::tile_path(
-        dir.path(),
-        "height/{level}/{face}/{y}/{x}.exr",
-        id.level,
-        id.face.name(),
-        id.x,
-        id.y,
-    );
+    let p = penumbra::tileset::tile_path(dir.path(), "height/{level}/{face}/{y}/{x}.exr", id);
     std::fs::write(&p, b"\x76\x2f\x31\x01 truncated").unwrap();
     let e = mip::build_mips(dir.path(), &MipOptions::default(), &NoProgress)
         .unwrap_err()

@@ -506,13 +506,7 @@ mod tif {
     }
 
     /// GeoKeyDirectory from (key, location, count, value) entries.
-    pub fn keys(entries: &[(u16, u16, u16, u16)]) -> Vec<u16> {
-        let mut v = vec![1, 1, 0, entries.len() as u16];
-        for e in entries {
-            v.extend([e.0, e.1, e.2, e.3]);
-        }
-        v
-    }
+    pub use crate::util::geokeys as keys;
 
     pub fn geographic(x0: f64, y0: f64, d: f64, point: bool) -> Geo {
         Geo {
@@ -534,24 +528,7 @@ mod tif {
         Geo {
             scale: [d, d, 0.0],
             tie: [0.0, 0.0, 0.0, x0, y0, 0.0],
-            keys: keys(&[
-                (1024, 0, 1, 1),
-                (1025, 0, 1, 1),
-                (2048, 0, 1, 32767),
-                (2054, 0, 1, 9102),
-                (2056, 0, 1, 32767),
-                (2057, 34736, 1, 5),
-                (2058, 34736, 1, 6),
-                (3072, 0, 1, 32767),
-                (3074, 0, 1, 32767),
-                (3075, 0, 1, 15),
-                (3076, 0, 1, 9001),
-                (3081, 34736, 1, 0),
-                (3082, 34736, 1, 3),
-                (3083, 34736, 1, 4),
-                (3092, 34736, 1, 2),
-                (3095, 34736, 1, 1),
-            ]),
+            keys: keys(crate::util::LOLA_SOUTH_POLAR_KEYS),
             doubles: vec![-90.0, 0.0, 1.0, 0.0, 0.0, 1737400.0, 1737400.0, 0.0],
             nodata: Some("nan"),
         }

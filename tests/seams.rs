@@ -44,14 +44,7 @@ impl Tiles {
     fn tile(&mut self, id: TileId) -> &HeightTile {
         let root = self.dir.path().to_path_buf();
         self.cache.entry(id).or_insert_with(|| {
-            let p = tileio::tile_path(
-                &root,
-                penumbra::manifest::HEIGHT_PATTERN,
-                id.level,
-                id.face.name(),
-                id.x,
-                id.y,
-            );
+            let p = penumbra::tileset::tile_path(&root, penumbra::manifest::HEIGHT_PATTERN, id);
             tileio::read_height_tile(&p).unwrap()
         })
     }

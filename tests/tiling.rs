@@ -178,13 +178,10 @@ fn coverage_matches_brute_force_for_a_regional_dem() {
     let ts_h = ts.products.height.unwrap();
     assert!(ts_h.no_data_pixels > 0);
     let some = got.iter().next().unwrap();
-    let t = tileio::read_height_tile(&tileio::tile_path(
+    let t = tileio::read_height_tile(&penumbra::tileset::tile_path(
         dir.path(),
         manifest::HEIGHT_PATTERN,
-        some.level,
-        some.face.name(),
-        some.x,
-        some.y,
+        *some,
     ))
     .unwrap();
     for (hgt, m) in t.height.iter().zip(&t.mask) {
@@ -238,7 +235,7 @@ fn albedo_tiles_follow_the_height_layout() {
         x: 0,
         y: 1,
     };
-    let p = tileio::tile_path(&out, manifest::ALBEDO_PATTERN, 1, "px", 0, 1);
+    let p = penumbra::tileset::tile_path(&out, manifest::ALBEDO_PATTERN, id);
     let img = image::open(&p).unwrap().into_luma16();
     assert_eq!(img.width() as usize, ts.layout.stored_size());
     let (_, lo) = cube::dir_to_latlon(ts.layout.pixel_dir(id, 10, 20));

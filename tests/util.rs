@@ -135,6 +135,36 @@ pub fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     out
 }
 
+/// A GeoTIFF GeoKeyDirectory (version 1.1.0) from (key, location, count, value) entries.
+pub fn geokeys(entries: &[(u16, u16, u16, u16)]) -> Vec<u16> {
+    let mut v = vec![1, 1, 0, entries.len() as u16];
+    for e in entries {
+        v.extend([e.0, e.1, e.2, e.3]);
+    }
+    v
+}
+
+/// The GeoKeys of the LOLA Shoemaker product: user-defined south polar stereographic on the
+/// 1737400 m sphere (doubles and ASCII params referenced by location 34736/34737).
+pub const LOLA_SOUTH_POLAR_KEYS: &[(u16, u16, u16, u16)] = &[
+    (1024, 0, 1, 1),
+    (1025, 0, 1, 1),
+    (2048, 0, 1, 32767),
+    (2054, 0, 1, 9102),
+    (2056, 0, 1, 32767),
+    (2057, 34736, 1, 5),
+    (2058, 34736, 1, 6),
+    (3072, 0, 1, 32767),
+    (3074, 0, 1, 32767),
+    (3075, 0, 1, 15),
+    (3076, 0, 1, 9001),
+    (3081, 34736, 1, 0),
+    (3082, 34736, 1, 3),
+    (3083, 34736, 1, 4),
+    (3092, 34736, 1, 2),
+    (3095, 34736, 1, 1),
+];
+
 /// Copy a folder tree.
 pub fn copy_tree(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();

@@ -19,7 +19,8 @@ use crate::layout::TileId;
 use crate::manifest::{self, MipLevelRange, MipProduct, Tileset};
 use crate::progress::Progress;
 use crate::runner::{self, StageSpec, Start};
-use crate::tileio::{self, TileCompression};
+use crate::tileio::TileCompression;
+use crate::tileset::writer::Writer;
 use crate::tileset::{self, Product, Store};
 
 pub const MAX_PATTERN: &str = "maxmip/{level}/{face}/{y}/{x}.exr";
@@ -117,16 +118,15 @@ fn nan_to_none(v: f32) -> Option<f64> {
 
 /// Paths of a tile's two products.
 pub fn tile_paths(dir: &Path, id: TileId) -> (PathBuf, PathBuf) {
-    let f = id.face.name();
     (
-        tileio::tile_path(dir, MAX_PATTERN, id.level, f, id.x, id.y),
-        tileio::tile_path(dir, MINMAX_PATTERN, id.level, f, id.x, id.y),
+        tileset::tile_path(dir, MAX_PATTERN, id),
+        tileset::tile_path(dir, MINMAX_PATTERN, id),
     )
 }
 
 /// Path of a face pyramid.
 pub fn face_path(dir: &Path, level: u8, face: Face) -> PathBuf {
-    tileio::tile_path(dir, FACE_PATTERN, level, face.name(), 0, 0)
+    tileset::face_file_path(dir, FACE_PATTERN, level, face)
 }
 
 /// Path of chunk (cx, cy) of a face pyramid.
@@ -170,9 +170,10 @@ pub fn build_mips(dir: &Path, opts: &MipOptions, progress: &dyn Progress) -> Res
     let before = Tileset::load(dir)?;
     check_tileset(dir, &before)?;
     check_output_size(opts, &before)?;
-    let (writer, ts) = runner::lock_and_load(dir)?;
-    check_tileset(dir, &ts)?;
+    let writer = Writer::begin(dir)?;
     let store = Store::open_unlocked(dir)?;
+    let ts = store.manifest().clone();
+    check_tileset(dir, &ts)?;
     let manifest_path = dir.join(manifest::MANIFEST);
     let height = ts.products.height.clone().expect("checked");
     let lay = ts.layout;

@@ -846,8 +846,7 @@ fn run_mip(
         let ts_s = ts.layout.stored_size();
         let mut tiles = Vec::new();
         for id in ts.tile_set() {
-            let p =
-                penumbra::tileio::tile_path(&out, &pattern, id.level, id.face.name(), id.x, id.y);
+            let p = penumbra::tileset::tile_path(&out, &pattern, id);
             tiles.push(penumbra::tileio::read_height_tile(&p)?.height);
         }
         let total = (tiles.len() * ts_s * ts_s * 4) as f64;
