@@ -140,6 +140,73 @@ pub struct Products {
     /// Raw horizon maps (docs/horizons.md); absent unless the horizon stage ran.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub horizon: Option<HorizonProduct>,
+    /// Fourier-compressed horizon pyramids (docs/fourier.md); absent unless made.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fourier: Option<FourierProduct>,
+}
+
+/// One group of a Fourier pyramid: coefficients `first..first + count` at `resolution`² texels.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct FourierGroup {
+    pub first: usize,
+    pub count: usize,
+    pub resolution: usize,
+}
+
+/// Fourier-compressed horizon pyramids: per height tile one file of coefficient groups.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct FourierProduct {
+    /// Path pattern, one file per height tile of the levels listed.
+    pub path: String,
+    /// File format name and version (docs/fourier.md).
+    pub format: String,
+    /// Tile levels that have pyramids.
+    pub levels: Vec<u8>,
+    /// Azimuth samples the series come from (A); the series' variable is the plane azimuth.
+    pub azimuths: usize,
+    /// The azimuth convention in one line (the raw maps').
+    pub azimuth: String,
+    /// Coefficients kept per pixel (K; the most any tile keeps when `max_error_deg` is set).
+    pub coefficients: usize,
+    /// `multires` or `full`.
+    pub layout: String,
+    /// `f16` or `snorm16`.
+    pub encoding: String,
+    /// `none` or `lanczos`.
+    pub sigma: String,
+    /// The groups of a tile holding `coefficients`.
+    pub groups: Vec<FourierGroup>,
+    /// Bytes of a tile's file holding `coefficients`.
+    pub bytes_per_tile: u64,
+    /// What the stored series approximate: the raw horizon floored at the tangent to the sphere
+    /// of the lowest terrain (a body does not end where its DEM does).
+    pub floor: String,
+    /// Error budget that chose K per tile (degrees, 99th percentile of per-pixel RMS), if any,
+    /// and then each tile's K (`level/face/x/y` → K).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_error_deg: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tile_coefficients: Option<BTreeMap<String, usize>>,
+    /// Tiles marked fully lit for suns whose centre is at or above `min_sun_el_deg` (their
+    /// horizon never rises above `min_sun_el_deg − sun_radius_deg`): no coefficients stored.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min_sun_el_deg: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sun_radius_deg: Option<f64>,
+    pub tiles_fully_lit: u64,
+    /// `raw` (from the stored horizon maps) or `streamed` (compressed as the horizon stage
+    /// computed them).
+    pub source: String,
+    /// How the horizons were computed: `fast` or `reference`, the fast method's near field,
+    /// the terrain range bounding the search, and the per-level distances.
+    pub horizon_method: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub horizon_near_px: Option<f64>,
+    pub terrain_min_m: f64,
+    pub terrain_max_m: f64,
+    pub distances: Vec<HorizonLevelDistance>,
+    /// Hash of the tool version, the inputs' run keys and the options.
+    pub run_key: String,
 }
 
 /// Raw horizon maps: per height tile one EXR of `azimuths` stacked planes.

@@ -393,6 +393,7 @@ pub fn tile_dem(
                 }),
             mip: None,
             horizon: None,
+            fourier: None,
         },
         coverage: manifest::coverage_of(&present, levels),
         parameters,

@@ -40,14 +40,18 @@ pub enum Product {
     Mip,
     /// Raw horizon maps.
     Horizon,
+    /// Fourier-compressed horizon pyramids (from the raw maps, or streamed from the horizon
+    /// stage).
+    Fourier,
 }
 
 impl Product {
-    pub const ALL: [Product; 4] = [
+    pub const ALL: [Product; 5] = [
         Product::Height,
         Product::Albedo,
         Product::Mip,
         Product::Horizon,
+        Product::Fourier,
     ];
 
     pub fn name(self) -> &'static str {
@@ -56,6 +60,7 @@ impl Product {
             Product::Albedo => "albedo",
             Product::Mip => "mip",
             Product::Horizon => "horizon",
+            Product::Fourier => "fourier",
         }
     }
 
@@ -66,6 +71,7 @@ impl Product {
             Product::Albedo => &["albedo"],
             Product::Mip => &["maxmip", "minmax"],
             Product::Horizon => &["horizon"],
+            Product::Fourier => &["fourier"],
         }
     }
 
@@ -76,6 +82,9 @@ impl Product {
             Product::Mip => &[Product::Height],
             // The horizon's search distance uses the mipmaps' global extrema when present.
             Product::Horizon => &[Product::Height, Product::Mip],
+            // Streamed pyramids depend on what the horizons do; pyramids made from stored raw
+            // maps on those maps. Either way a new horizon run makes them stale.
+            Product::Fourier => &[Product::Height, Product::Mip, Product::Horizon],
         }
     }
 
@@ -109,6 +118,7 @@ impl Product {
             Product::Albedo => ts.products.albedo.as_ref().map(|_| ts.run_key.as_str()),
             Product::Mip => ts.products.mip.as_ref().map(|m| m.run_key.as_str()),
             Product::Horizon => ts.products.horizon.as_ref().map(|h| h.run_key.as_str()),
+            Product::Fourier => ts.products.fourier.as_ref().map(|f| f.run_key.as_str()),
         }
     }
 
@@ -119,6 +129,7 @@ impl Product {
             Product::Albedo => ts.products.albedo = None,
             Product::Mip => ts.products.mip = None,
             Product::Horizon => ts.products.horizon = None,
+            Product::Fourier => ts.products.fourier = None,
         }
     }
 }
@@ -271,6 +282,25 @@ impl Store {
             ));
         }
         Ok(f)
+    }
+
+    /// A tile's Fourier pyramid, checked against the manifest (tile size, azimuths) and its
+    /// checksum.
+    pub fn fourier(&self, id: TileId) -> Result<crate::fourier::Pyramid> {
+        let f = self.ts.products.fourier.as_ref().ok_or_else(|| {
+            self.missing(
+                "tileset has no Fourier pyramids: make them with `penumbra fourier` or \
+                 `penumbra horizon --fourier`",
+            )
+        })?;
+        let p = tile_path(&self.dir, &f.path, id);
+        let cap = crate::fourier::pyramid::file_bytes(
+            self.ts.layout.tile_size as usize,
+            crate::fourier::max_coefficients(f.azimuths),
+            crate::fourier::Layout::Full,
+        ) as u64;
+        let bytes = crate::fsio::read_capped(&p, cap, "a Fourier pyramid")?;
+        crate::fourier::Pyramid::decode(&bytes, &p, self.ts.layout.tile_size as usize, f.azimuths)
     }
 
     /// A tile's raw horizon maps (`A` planes of n² elevations, degrees), checked against the

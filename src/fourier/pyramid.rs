@@ -1,0 +1,628 @@
+//! One tile's coefficient pyramid: groups of four coefficients, each at its own resolution
+//! (`multires`: group g at n/2^g, the exact mean of the finer pixels' coefficients; `full`:
+//! every group at n), 16-bit encoded, and its file (docs/fourier.md, "File"): a small header,
+//! then the planes as a GPU uploads them (RGBA16F or RGBA16Snorm texels holding two
+//! coefficients as re, im, re, im), then a blake3 checksum.
+
+use std::path::Path;
+
+use half::f16;
+use serde::{Deserialize, Serialize};
+
+use super::series::{evaluate, Sigma};
+use crate::error::{Error, Result};
+
+/// Coefficients per group (one mip level of the multires pyramid).
+pub const GROUP: usize = 4;
+/// Magic bytes that open a pyramid file.
+pub const MAGIC: &[u8; 8] = b"PNBRFHM\0";
+/// Version of the file layout.
+pub const VERSION: u32 = 1;
+/// Bytes of the fixed header, then 16 per group.
+pub const HEADER_BYTES: usize = 64;
+const GROUP_BYTES: usize = 16;
+const CHECKSUM_BYTES: usize = 32;
+/// Bytes of one texel of a group: four coefficients × (re, im) × 16 bits, in two RGBA planes.
+const TEXEL_BYTES: usize = GROUP * 2 * 2;
+/// Most groups a file may declare (K ≤ 4·MAX_GROUPS = 2052 ≥ 4096/2 + 1).
+pub const MAX_GROUPS: usize = 513;
+/// Header flag: every pixel of the tile is lit for suns at or above `min_sun_el`; no planes.
+pub const FLAG_FULLY_LIT: u8 = 1;
+
+/// Spatial layout of the groups.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Layout {
+    /// Every group at the tile's resolution.
+    Full,
+    /// Group g at ⌊n/2^g⌋ (at least 1): the mip chain of a 2-layer texture array.
+    #[default]
+    Multires,
+}
+
+impl Layout {
+    pub fn name(self) -> &'static str {
+        match self {
+            Layout::Full => "full",
+            Layout::Multires => "multires",
+        }
+    }
+
+    /// Texels per side of group `g` for tiles of `n` pixels.
+    pub fn resolution(self, n: usize, g: usize) -> usize {
+        match self {
+            Layout::Full => n,
+            Layout::Multires => (n >> g.min(63)).max(1),
+        }
+    }
+
+    fn code(self) -> u8 {
+        match self {
+            Layout::Full => 0,
+            Layout::Multires => 1,
+        }
+    }
+}
+
+impl std::str::FromStr for Layout {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "full" => Ok(Layout::Full),
+            "multires" => Ok(Layout::Multires),
+            _ => Err(format!("unknown layout '{s}' (multires, full)")),
+        }
+    }
+}
+
+/// How each 16-bit value holds a coefficient.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Encoding {
+    /// IEEE half floats (11-bit mantissa), as in the paper.
+    #[default]
+    F16,
+    /// Signed normalised 16-bit integers times a per-tile, per-group scale.
+    Snorm16,
+}
+
+impl Encoding {
+    pub fn name(self) -> &'static str {
+        match self {
+            Encoding::F16 => "f16",
+            Encoding::Snorm16 => "snorm16",
+        }
+    }
+
+    fn code(self) -> u8 {
+        match self {
+            Encoding::F16 => 0,
+            Encoding::Snorm16 => 1,
+        }
+    }
+}
+
+impl std::str::FromStr for Encoding {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "f16" => Ok(Encoding::F16),
+            "snorm16" => Ok(Encoding::Snorm16),
+            _ => Err(format!("unknown encoding '{s}' (f16, snorm16)")),
+        }
+    }
+}
+
+/// Number of groups holding `k` coefficients.
+pub fn groups(k: usize) -> usize {
+    k.div_ceil(GROUP)
+}
+
+/// Bytes of a tile's file.
+pub fn file_bytes(n: usize, k: usize, layout: Layout) -> usize {
+    let g = groups(k);
+    HEADER_BYTES
+        + g * GROUP_BYTES
+        + (0..g)
+            .map(|i| layout.resolution(n, i).pow(2) * TEXEL_BYTES)
+            .sum::<usize>()
+        + CHECKSUM_BYTES
+}
+
+/// One group: `res`² texels of four coefficients, as decoded values.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Group {
+    pub res: usize,
+    /// snorm16: value = q/32767 · scale; f16: 1.
+    pub scale: f32,
+    /// Texel (x, y), coefficient slot c (0..4) at `[(y·res + x)·4 + c]`, (re, im).
+    pub coef: Vec<[f32; 2]>,
+}
+
+/// A tile's decoded pyramid.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Pyramid {
+    /// Pixels per tile side.
+    pub n: usize,
+    /// Azimuth samples the series came from.
+    pub azimuths: usize,
+    /// Coefficients kept (≤ 4 × groups; the last group's spare slots are zero).
+    pub k: usize,
+    pub layout: Layout,
+    pub encoding: Encoding,
+    pub sigma: Sigma,
+    /// Highest horizon of any pixel of the tile (degrees), after the floor.
+    pub max_horizon_deg: f32,
+    /// Marked fully lit for suns at or above the manifest's `min_sun_el_deg`: no groups.
+    pub fully_lit: bool,
+    pub groups: Vec<Group>,
+}
+
+/// Round `v` as `enc` stores it with `scale`.
+fn quantise(v: f32, enc: Encoding, scale: f32) -> f32 {
+    match enc {
+        Encoding::F16 => f16::from_f32(v).to_f32(),
+        Encoding::Snorm16 => snorm_value(snorm_code(v, scale), scale),
+    }
+}
+
+fn snorm_code(v: f32, scale: f32) -> i16 {
+    ((v / scale) * 32767.0).round().clamp(-32767.0, 32767.0) as i16
+}
+
+fn snorm_value(q: i16, scale: f32) -> f32 {
+    (q as f32 / 32767.0) * scale
+}
+
+impl Pyramid {
+    /// Build from full-resolution coefficients `coef` (pixel `j·n + i`, slot k at
+    /// `[(j·n + i)·k_full + k]`, of which the first `k` are kept); pixels with `valid` false
+    /// (no data) are left out of every mean and read as zero.
+    #[allow(clippy::too_many_arguments)]
+    pub fn build(
+        n: usize,
+        azimuths: usize,
+        coef: &[[f32; 2]],
+        k_full: usize,
+        k: usize,
+        valid: &[bool],
+        layout: Layout,
+        encoding: Encoding,
+        sigma: Sigma,
+        max_horizon_deg: f32,
+    ) -> Pyramid {
+        assert!(k >= 1 && k <= k_full);
+        assert_eq!(coef.len(), n * n * k_full);
+        assert_eq!(valid.len(), n * n);
+        let mut out = Vec::with_capacity(groups(k));
+        for g in 0..groups(k) {
+            let res = layout.resolution(n, g);
+            let mut sum = vec![[0.0f64; 2]; res * res * GROUP];
+            let mut count = vec![0u32; res * res];
+            for j in 0..n {
+                let ty = (2 * j + 1) * res / (2 * n);
+                for i in 0..n {
+                    if !valid[j * n + i] {
+                        continue;
+                    }
+                    let tx = (2 * i + 1) * res / (2 * n);
+                    let t = ty * res + tx;
+                    count[t] += 1;
+                    for c in 0..GROUP {
+                        let kk = g * GROUP + c;
+                        if kk < k {
+                            let v = coef[(j * n + i) * k_full + kk];
+                            sum[t * GROUP + c][0] += v[0] as f64;
+                            sum[t * GROUP + c][1] += v[1] as f64;
+                        }
+                    }
+                }
+            }
+            let mut vals: Vec<[f32; 2]> = sum
+                .iter()
+                .enumerate()
+                .map(|(s, v)| {
+                    let c = count[s / GROUP];
+                    if c == 0 {
+                        [0.0, 0.0]
+                    } else {
+                        [(v[0] / c as f64) as f32, (v[1] / c as f64) as f32]
+                    }
+                })
+                .collect();
+            let scale = match encoding {
+                Encoding::F16 => 1.0,
+                Encoding::Snorm16 => {
+                    let m = vals
+                        .iter()
+                        .flat_map(|v| [v[0].abs(), v[1].abs()])
+                        .fold(0.0f32, f32::max);
+                    if m > 0.0 && m.is_finite() {
+                        m
+                    } else {
+                        1.0
+                    }
+                }
+            };
+            for v in &mut vals {
+                *v = [
+                    quantise(v[0], encoding, scale),
+                    quantise(v[1], encoding, scale),
+                ];
+            }
+            out.push(Group {
+                res,
+                scale,
+                coef: vals,
+            });
+        }
+        Pyramid {
+            n,
+            azimuths,
+            k,
+            layout,
+            encoding,
+            sigma,
+            max_horizon_deg,
+            fully_lit: false,
+            groups: out,
+        }
+    }
+
+    /// A tile marked fully lit: no coefficients.
+    pub fn fully_lit(
+        n: usize,
+        azimuths: usize,
+        layout: Layout,
+        encoding: Encoding,
+        sigma: Sigma,
+        max_horizon_deg: f32,
+    ) -> Pyramid {
+        Pyramid {
+            n,
+            azimuths,
+            k: 0,
+            layout,
+            encoding,
+            sigma,
+            max_horizon_deg,
+            fully_lit: true,
+            groups: Vec::new(),
+        }
+    }
+
+    /// The file's bytes.
+    pub fn encode(&self) -> Vec<u8> {
+        let g = self.groups.len();
+        let header = HEADER_BYTES + g * GROUP_BYTES;
+        let payload: usize = self.groups.iter().map(|gr| gr.res * gr.res * TEXEL_BYTES).sum();
+        let mut b = Vec::with_capacity(header + payload + CHECKSUM_BYTES);
+        b.extend_from_slice(MAGIC);
+        b.extend_from_slice(&VERSION.to_le_bytes());
+        b.extend_from_slice(&(self.n as u32).to_le_bytes());
+        b.extend_from_slice(&(self.azimuths as u32).to_le_bytes());
+        b.extend_from_slice(&(self.k as u32).to_le_bytes());
+        b.push(self.layout.code());
+        b.push(self.encoding.code());
+        b.push(match self.sigma {
+            Sigma::None => 0,
+            Sigma::Lanczos => 1,
+        });
+        b.push(if self.fully_lit { FLAG_FULLY_LIT } else { 0 });
+        b.extend_from_slice(&(g as u32).to_le_bytes());
+        b.extend_from_slice(&self.max_horizon_deg.to_le_bytes());
+        b.extend_from_slice(&(header as u32).to_le_bytes());
+        b.extend_from_slice(&(payload as u64).to_le_bytes());
+        b.resize(HEADER_BYTES, 0);
+        for (i, gr) in self.groups.iter().enumerate() {
+            b.extend_from_slice(&(gr.res as u32).to_le_bytes());
+            b.extend_from_slice(&((i * GROUP) as u32).to_le_bytes());
+            b.extend_from_slice(&gr.scale.to_le_bytes());
+            b.extend_from_slice(&0u32.to_le_bytes());
+        }
+        for gr in &self.groups {
+            for plane in 0..2 {
+                for t in 0..gr.res * gr.res {
+                    for c in 0..2 {
+                        let v = gr.coef[t * GROUP + plane * 2 + c];
+                        for x in v {
+                            let bits: u16 = match self.encoding {
+                                Encoding::F16 => f16::from_f32(x).to_bits(),
+                                Encoding::Snorm16 => snorm_code(x, gr.scale) as u16,
+                            };
+                            b.extend_from_slice(&bits.to_le_bytes());
+                        }
+                    }
+                }
+            }
+        }
+        let h = blake3::hash(&b);
+        b.extend_from_slice(h.as_bytes());
+        b
+    }
+
+    /// Read a file's bytes back, checking everything against `expect` (tile size, azimuths)
+    /// and the checksum; errors name `path`.
+    pub fn decode(bytes: &[u8], path: &Path, n: usize, azimuths: usize) -> Result<Pyramid> {
+        let bad = |msg: String| {
+            Error::invalid(
+                path,
+                format!("{msg}; delete it and rerun `penumbra fourier` (or the horizon stage)"),
+            )
+        };
+        if bytes.len() < HEADER_BYTES + CHECKSUM_BYTES || &bytes[..8] != MAGIC {
+            return Err(bad("not a Penumbra Fourier pyramid (bad magic or too short)".into()));
+        }
+        let (body, sum) = bytes.split_at(bytes.len() - CHECKSUM_BYTES);
+        if blake3::hash(body).as_bytes() != sum {
+            return Err(bad(
+                "checksum mismatch: the file is damaged or truncated".into(),
+            ));
+        }
+        let u32_at = |o: usize| u32::from_le_bytes(body[o..o + 4].try_into().expect("4 bytes"));
+        let f32_at = |o: usize| f32::from_le_bytes(body[o..o + 4].try_into().expect("4 bytes"));
+        let version = u32_at(8);
+        if version != VERSION {
+            return Err(bad(format!(
+                "format version {version} (this penumbra reads {VERSION})"
+            )));
+        }
+        let (fn_, fa, k) = (u32_at(12) as usize, u32_at(16) as usize, u32_at(20) as usize);
+        if fn_ != n || fa != azimuths {
+            return Err(bad(format!(
+                "holds {fn_}-pixel tiles of {fa} azimuths, the manifest says {n} and {azimuths}"
+            )));
+        }
+        let layout = match body[24] {
+            0 => Layout::Full,
+            1 => Layout::Multires,
+            x => return Err(bad(format!("unknown layout code {x}"))),
+        };
+        let encoding = match body[25] {
+            0 => Encoding::F16,
+            1 => Encoding::Snorm16,
+            x => return Err(bad(format!("unknown encoding code {x}"))),
+        };
+        let sigma = match body[26] {
+            0 => Sigma::None,
+            1 => Sigma::Lanczos,
+            x => return Err(bad(format!("unknown sigma code {x}"))),
+        };
+        let flags = body[27];
+        if flags & !FLAG_FULLY_LIT != 0 {
+            return Err(bad(format!("unknown flags {flags:#x}")));
+        }
+        let fully_lit = flags & FLAG_FULLY_LIT != 0;
+        let g = u32_at(28) as usize;
+        let max_horizon_deg = f32_at(32);
+        if !(-90.0..=90.0).contains(&max_horizon_deg) {
+            return Err(bad(format!(
+                "highest horizon {max_horizon_deg} is not an angle"
+            )));
+        }
+        if g > MAX_GROUPS || (fully_lit && (g != 0 || k != 0)) || (!fully_lit && groups(k) != g)
+        {
+            return Err(bad(format!(
+                "{g} groups do not hold {k} coefficients (at most {MAX_GROUPS} groups)"
+            )));
+        }
+        if !fully_lit && (k == 0 || k > super::series::max_coefficients(azimuths)) {
+            return Err(bad(format!(
+                "{k} coefficients of {azimuths} azimuths (1..={})",
+                super::series::max_coefficients(azimuths)
+            )));
+        }
+        let header = u32_at(36) as usize;
+        let payload = u64::from_le_bytes(body[40..48].try_into().expect("8 bytes")) as usize;
+        if header != HEADER_BYTES + g * GROUP_BYTES {
+            return Err(bad(format!("header length {header} for {g} groups")));
+        }
+        let want: usize = (0..g).map(|i| layout.resolution(n, i).pow(2) * TEXEL_BYTES).sum();
+        if payload != want || body.len() != header + payload {
+            return Err(bad(format!(
+                "payload is {} bytes, {want} expected for {g} groups of {n}-pixel tiles ({})",
+                body.len().saturating_sub(header),
+                layout.name()
+            )));
+        }
+        let mut out = Vec::with_capacity(g);
+        let mut off = header;
+        for i in 0..g {
+            let o = HEADER_BYTES + i * GROUP_BYTES;
+            let (res, first, scale) = (u32_at(o) as usize, u32_at(o + 4) as usize, f32_at(o + 8));
+            if res != layout.resolution(n, i) || first != i * GROUP {
+                return Err(bad(format!(
+                    "group {i} is {res} texels from coefficient {first}, expected {} from {}",
+                    layout.resolution(n, i),
+                    i * GROUP
+                )));
+            }
+            if !(scale.is_finite() && scale > 0.0 && scale <= 1e6) {
+                return Err(bad(format!("group {i} has scale {scale}")));
+            }
+            let mut coef = vec![[0.0f32; 2]; res * res * GROUP];
+            for plane in 0..2 {
+                for t in 0..res * res {
+                    for c in 0..2 {
+                        let mut v = [0.0f32; 2];
+                        for x in &mut v {
+                            let bits = u16::from_le_bytes([body[off], body[off + 1]]);
+                            off += 2;
+                            *x = match encoding {
+                                Encoding::F16 => f16::from_bits(bits).to_f32(),
+                                Encoding::Snorm16 => snorm_value(bits as i16, scale),
+                            };
+                            if !x.is_finite() {
+                                return Err(bad(format!("group {i} holds a non-finite value")));
+                            }
+                        }
+                        coef[t * GROUP + plane * 2 + c] = v;
+                    }
+                }
+            }
+            out.push(Group { res, scale, coef });
+        }
+        Ok(Pyramid {
+            n,
+            azimuths,
+            k,
+            layout,
+            encoding,
+            sigma,
+            max_horizon_deg,
+            fully_lit,
+            groups: out,
+        })
+    }
+
+    /// The `k` coefficients at tile position (x, y) in pixels (pixel (i, j)'s centre is at
+    /// (i + ½, j + ½)), each group sampled bilinearly with clamp-to-edge at its own
+    /// resolution, as a GPU samples mip level g of the texture array. Empty when fully lit.
+    pub fn coefficients_at(&self, x: f64, y: f64, out: &mut Vec<[f64; 2]>) {
+        out.clear();
+        let n = self.n as f64;
+        for (g, gr) in self.groups.iter().enumerate() {
+            let r = gr.res as f64;
+            let (fx, fy) = (x / n * r - 0.5, y / n * r - 0.5);
+            let (x0, y0) = (fx.floor(), fy.floor());
+            let (ax, ay) = (fx - x0, fy - y0);
+            let last = gr.res as i64 - 1;
+            let cl = |v: i64| v.clamp(0, last) as usize;
+            let (xa, xb) = (cl(x0 as i64), cl(x0 as i64 + 1));
+            let (ya, yb) = (cl(y0 as i64), cl(y0 as i64 + 1));
+            for c in 0..GROUP {
+                if g * GROUP + c >= self.k {
+                    break;
+                }
+                let at = |tx: usize, ty: usize| gr.coef[(ty * gr.res + tx) * GROUP + c];
+                let mut v = [0.0f64; 2];
+                for (p, o) in v.iter_mut().enumerate() {
+                    let top = at(xa, ya)[p] as f64 * (1.0 - ax) + at(xb, ya)[p] as f64 * ax;
+                    let bot = at(xa, yb)[p] as f64 * (1.0 - ax) + at(xb, yb)[p] as f64 * ax;
+                    *o = top * (1.0 - ay) + bot * ay;
+                }
+                out.push(v);
+            }
+        }
+    }
+
+    /// The horizon (degrees) at pixel-centre position (x, y) in plane azimuth `theta`
+    /// (radians); None when the tile is marked fully lit.
+    pub fn horizon_at(&self, x: f64, y: f64, theta: f64) -> Option<f64> {
+        if self.fully_lit {
+            return None;
+        }
+        let mut c = Vec::with_capacity(self.k);
+        self.coefficients_at(x, y, &mut c);
+        Some(evaluate(&c, theta))
+    }
+
+    /// Bytes of this pyramid's file.
+    pub fn file_bytes(&self) -> usize {
+        if self.fully_lit {
+            HEADER_BYTES + CHECKSUM_BYTES
+        } else {
+            file_bytes(self.n, self.k, self.layout)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample(n: usize, k: usize, layout: Layout, enc: Encoding) -> Pyramid {
+        let mut coef = vec![[0.0f32; 2]; n * n * k];
+        for (i, c) in coef.iter_mut().enumerate() {
+            let x = i as f32 * 0.37;
+            *c = [x.sin() * 20.0, (x * 1.3).cos() * 3.0];
+        }
+        let valid: Vec<bool> = (0..n * n).map(|i| i % 17 != 3).collect();
+        Pyramid::build(
+            n,
+            360,
+            &coef,
+            k,
+            k,
+            &valid,
+            layout,
+            enc,
+            Sigma::None,
+            12.5,
+        )
+    }
+
+    #[test]
+    fn files_round_trip_exactly() {
+        for layout in [Layout::Full, Layout::Multires] {
+            for enc in [Encoding::F16, Encoding::Snorm16] {
+                for (n, k) in [(16usize, 16usize), (8, 5), (32, 1), (12, 32)] {
+                    let p = sample(n, k, layout, enc);
+                    let b = p.encode();
+                    assert_eq!(b.len(), p.file_bytes());
+                    let q = Pyramid::decode(&b, Path::new("t.fhm"), n, 360).unwrap();
+                    assert_eq!(p, q, "{layout:?} {enc:?} n {n} k {k}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn multires_levels_are_means_of_the_finer_pixels() {
+        let n = 8;
+        let k = 16;
+        let coef: Vec<[f32; 2]> = (0..n * n * k)
+            .map(|i| [(i / k) as f32, (i % k) as f32])
+            .collect();
+        let valid = vec![true; n * n];
+        let p = Pyramid::build(
+            n,
+            64,
+            &coef,
+            k,
+            k,
+            &valid,
+            Layout::Multires,
+            Encoding::F16,
+            Sigma::None,
+            0.0,
+        );
+        assert_eq!(
+            p.groups.iter().map(|g| g.res).collect::<Vec<_>>(),
+            [8, 4, 2, 1]
+        );
+        // Group 3 (1 texel): the mean pixel index 31.5 in re; im = the slot's own k.
+        assert_eq!(p.groups[3].coef[0], [31.5, 12.0]);
+        // Group 1, texel (1, 0): pixels (2..4) × (0..2): indices 2, 3, 10, 11 → 6.5.
+        assert_eq!(p.groups[1].coef[GROUP], [6.5, 4.0]);
+    }
+
+    #[test]
+    fn every_damaged_byte_is_refused() {
+        let p = sample(8, 6, Layout::Multires, Encoding::Snorm16);
+        let b = p.encode();
+        for i in 0..b.len() {
+            let mut d = b.clone();
+            d[i] ^= 0x5a;
+            assert!(Pyramid::decode(&d, Path::new("t"), 8, 360).is_err(), "byte {i}");
+        }
+        for len in [0, 10, 63, b.len() - 1] {
+            assert!(Pyramid::decode(&b[..len], Path::new("t"), 8, 360).is_err());
+        }
+        assert!(Pyramid::decode(&b, Path::new("t"), 16, 360).is_err());
+        assert!(Pyramid::decode(&b, Path::new("t"), 8, 36).is_err());
+    }
+
+    #[test]
+    fn bilinear_sampling_is_exact_at_texel_centres() {
+        let p = sample(16, 16, Layout::Multires, Encoding::F16);
+        let mut c = Vec::new();
+        // Group 2 has 4×4 texels of 4 pixels: texel (1, 2)'s centre is pixel position (6, 10).
+        p.coefficients_at(6.0, 10.0, &mut c);
+        let g = &p.groups[2];
+        for s in 0..GROUP {
+            let t = g.coef[(2 * 4 + 1) * GROUP + s];
+            assert_eq!(c[8 + s], [t[0] as f64, t[1] as f64]);
+        }
+    }
+}

@@ -1,0 +1,574 @@
+//! The Fourier stage: each tile's horizons → per-pixel truncated series → a coefficient
+//! pyramid file. Runs from the stored raw maps (`penumbra fourier`) or inside the horizon stage
+//! on each tile's maps as they are computed ([`Encoder`]), so that raw maps need never be
+//! written.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::pyramid::{self, Encoding, Layout, Pyramid, GROUP};
+use super::series::{max_coefficients, Scratch, Sigma, Transform};
+use crate::error::{Error, Result};
+use crate::layout::TileId;
+use crate::manifest::{self, FourierGroup, FourierProduct, HorizonLevelDistance, Tileset};
+use crate::progress::Progress;
+use crate::runner::{self, StageSpec, Start};
+use crate::tileio::HeightTile;
+use crate::tileset::writer::Writer;
+use crate::tileset::{self, Product, Store};
+
+pub const PATTERN: &str = "fourier/{level}/{face}/{y}/{x}.fhm";
+/// Name and version of the pyramid files (part of the run key).
+pub const FORMAT: &str = "penumbra-fourier-1";
+pub const FLOOR: &str = "horizons below the tangent to the sphere of the lowest terrain \
+     (radius + terrain_min_m) are raised to it, −90° (no terrain) included";
+
+/// What the user chose.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FourierOptions {
+    /// Tile levels (None: every level that has horizons).
+    pub levels: Option<Vec<u8>>,
+    /// Coefficients kept per pixel (K), 1..=A/2+1; the most when `max_error_deg` is set.
+    pub coefficients: usize,
+    pub layout: Layout,
+    pub encoding: Encoding,
+    pub sigma: Sigma,
+    /// Choose K per tile: the fewest whose truncation error (99th percentile over the tile's
+    /// pixels of the RMS over azimuths) is at most this many degrees.
+    pub max_error_deg: Option<f64>,
+    /// Mark tiles whose horizon never rises above this sun elevation minus the sun's radius
+    /// as fully lit instead of storing them.
+    pub min_sun_el_deg: Option<f64>,
+    /// The sun's apparent radius for `min_sun_el_deg` (degrees).
+    pub sun_radius_deg: f64,
+    /// Refuse a run whose files would exceed this many GiB.
+    pub max_output_gib: f64,
+}
+
+impl Default for FourierOptions {
+    fn default() -> Self {
+        FourierOptions {
+            levels: None,
+            coefficients: 16,
+            layout: Layout::Multires,
+            encoding: Encoding::F16,
+            sigma: Sigma::None,
+            max_error_deg: None,
+            min_sun_el_deg: None,
+            sun_radius_deg: 0.2666,
+            max_output_gib: runner::DEFAULT_MAX_OUTPUT_GIB,
+        }
+    }
+}
+
+/// Check options that do not depend on the tileset; `azimuths` is the horizons' A.
+pub fn check_options(opts: &FourierOptions, azimuths: usize) -> Result<()> {
+    runner::check_output_cap("max_output_gib", opts.max_output_gib)?;
+    let most = max_coefficients(azimuths);
+    if !(1..=most).contains(&opts.coefficients) {
+        return Err(Error::param(
+            "coefficients",
+            format!(
+                "{} is outside 1..={most} (A/2 + 1 for {azimuths} azimuths)",
+                opts.coefficients
+            ),
+        ));
+    }
+    if let Some(e) = opts.max_error_deg {
+        if !(e.is_finite() && e > 0.0 && e <= 90.0) {
+            return Err(Error::param(
+                "max_error_deg",
+                format!("{e} is not an angle in (0, 90] degrees"),
+            ));
+        }
+    }
+    if let Some(e) = opts.min_sun_el_deg {
+        if !(e.is_finite() && (-90.0..=90.0).contains(&e)) {
+            return Err(Error::param(
+                "min_sun_el_deg",
+                format!("{e} is not an elevation in −90..=90 degrees"),
+            ));
+        }
+    }
+    let r = opts.sun_radius_deg;
+    if !(r.is_finite() && (0.0..=45.0).contains(&r)) {
+        return Err(Error::param(
+            "sun_radius_deg",
+            format!("{r} is not a sun radius in 0..=45 degrees"),
+        ));
+    }
+    Ok(())
+}
+
+/// What one tile's compression found.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct TileStats {
+    /// Coefficients kept (0 when fully lit).
+    pub k: usize,
+    pub fully_lit: bool,
+    pub bytes: u64,
+}
+
+/// Compresses tiles' horizons with one set of options; shared by the stage and the horizon
+/// stage's streaming (one FFT plan per size, scratch per thread).
+pub struct Encoder {
+    opts: FourierOptions,
+    n: usize,
+    a: usize,
+    halo: usize,
+    radius_m: f64,
+    terrain_min_m: f64,
+    transform: Transform,
+}
+
+impl Encoder {
+    pub fn new(opts: &FourierOptions, ts: &Tileset, a: usize, terrain_min_m: f64) -> Encoder {
+        Encoder {
+            opts: opts.clone(),
+            n: ts.layout.tile_size as usize,
+            a,
+            halo: ts.layout.halo as usize,
+            radius_m: ts.body.radius_m,
+            terrain_min_m,
+            transform: Transform::new(a),
+        }
+    }
+
+    /// The floor (degrees) of an observer at height `h0`: the tangent to the lowest sphere.
+    fn floor_deg(&self, h0: f64) -> f64 {
+        let r = self.radius_m;
+        -((r + self.terrain_min_m) / (r + h0.max(self.terrain_min_m)))
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees()
+    }
+
+    /// The pyramid of one tile from its raw maps (`A` planes of n², degrees) and its height
+    /// tile (for the floor and the no-data pixels).
+    pub fn encode(&self, elev: &[f32], tile: &HeightTile) -> (Pyramid, TileStats) {
+        let (n, a) = (self.n, self.a);
+        assert_eq!(elev.len(), n * n * a);
+        let h0: Vec<f32> = (0..n * n)
+            .map(|p| tile.height[(p / n + self.halo) * tile.size + p % n + self.halo])
+            .collect();
+        let valid: Vec<bool> = (0..n * n)
+            .map(|p| h0[p].is_finite() && elev[p].is_finite())
+            .collect();
+        let floor: Vec<f64> = h0.iter().map(|&h| self.floor_deg(h as f64)).collect();
+        let value = |p: usize, s: usize| -> f64 {
+            let v = elev[s * n * n + p] as f64;
+            if v.is_finite() {
+                v.max(floor[p])
+            } else {
+                0.0
+            }
+        };
+        let max_h = (0..n * n)
+            .filter(|&p| valid[p])
+            .flat_map(|p| (0..a).map(move |s| (p, s)))
+            .map(|(p, s)| value(p, s))
+            .fold(f64::NEG_INFINITY, f64::max);
+        let max_h = if max_h.is_finite() { max_h } else { -90.0 };
+        let (layout, enc, sigma) = (self.opts.layout, self.opts.encoding, self.opts.sigma);
+        if let Some(e) = self.opts.min_sun_el_deg {
+            if max_h <= e - self.opts.sun_radius_deg {
+                let p = Pyramid::fully_lit(n, a, layout, enc, sigma, max_h as f32);
+                let bytes = p.file_bytes() as u64;
+                return (
+                    p,
+                    TileStats {
+                        k: 0,
+                        fully_lit: true,
+                        bytes,
+                    },
+                );
+            }
+        }
+        // With an error budget the whole spectrum is needed to measure each K's error.
+        let k_max = self.opts.coefficients;
+        let k_calc = if self.opts.max_error_deg.is_some() {
+            max_coefficients(a)
+        } else {
+            k_max
+        };
+        let mut coef = vec![[0.0f32; 2]; n * n * k_calc];
+        let tr = &self.transform;
+        let untapered = if self.opts.max_error_deg.is_some() {
+            Sigma::None
+        } else {
+            sigma
+        };
+        coef.par_chunks_mut(n * k_calc).enumerate().for_each_init(
+            Scratch::default,
+            |scratch, (j, row)| {
+                tr.forward(
+                    n,
+                    |i, s| value(j * n + i, s),
+                    k_calc,
+                    untapered,
+                    row,
+                    scratch,
+                )
+            },
+        );
+        let k = match self.opts.max_error_deg {
+            None => k_max,
+            Some(budget) => {
+                let k = choose_k(&coef, &valid, a, k_calc, k_max, budget);
+                if sigma != Sigma::None {
+                    for c in coef.chunks_mut(k_calc) {
+                        for (j, v) in c.iter_mut().take(k).enumerate() {
+                            let f = sigma.factor(j, k) as f32;
+                            *v = [v[0] * f, v[1] * f];
+                        }
+                    }
+                }
+                k
+            }
+        };
+        let p = Pyramid::build(
+            n,
+            a,
+            &coef,
+            k_calc,
+            k,
+            &valid,
+            layout,
+            enc,
+            sigma,
+            max_h as f32,
+        );
+        let bytes = p.file_bytes() as u64;
+        (
+            p,
+            TileStats {
+                k,
+                fully_lit: false,
+                bytes,
+            },
+        )
+    }
+}
+
+/// The fewest coefficients (≤ `k_max`) whose truncation error, the 99th percentile over the
+/// valid pixels of each pixel's RMS over azimuths (Parseval on the full spectrum), is within
+/// `budget` degrees.
+fn choose_k(
+    coef: &[[f32; 2]],
+    valid: &[bool],
+    a: usize,
+    k_full: usize,
+    k_max: usize,
+    budget: f64,
+) -> usize {
+    let pixels: Vec<&[[f32; 2]]> = coef
+        .chunks(k_full)
+        .zip(valid)
+        .filter(|(_, &v)| v)
+        .map(|(c, _)| c)
+        .collect();
+    if pixels.is_empty() {
+        return 1;
+    }
+    // Per pixel the tail energy for every K at once (suffix sums), then a percentile per K.
+    let tails: Vec<Vec<f64>> = pixels
+        .par_iter()
+        .map(|c| {
+            let mut t = vec![0.0; k_max + 1];
+            let mut acc = Transform::tail_energy(c, a, k_max);
+            t[k_max] = acc;
+            for k in (1..k_max).rev() {
+                acc += super::series::term_energy(c[k], k, a);
+                t[k] = acc;
+            }
+            t
+        })
+        .collect();
+    let mut e: Vec<f64> = Vec::with_capacity(tails.len());
+    for k in 1..=k_max {
+        e.clear();
+        e.extend(tails.iter().map(|t| t[k]));
+        let idx = ((e.len() as f64 * 0.99).ceil() as usize).clamp(1, e.len()) - 1;
+        let (_, p99, _) = e.select_nth_unstable_by(idx, |x, y| x.total_cmp(y));
+        if p99.sqrt() <= budget {
+            return k;
+        }
+    }
+    k_max
+}
+
+/// The groups of a pyramid holding `k` coefficients, for the manifest.
+pub fn group_list(n: usize, k: usize, layout: Layout) -> Vec<FourierGroup> {
+    (0..pyramid::groups(k))
+        .map(|g| FourierGroup {
+            first: g * GROUP,
+            count: (k - g * GROUP).min(GROUP),
+            resolution: layout.resolution(n, g),
+        })
+        .collect()
+}
+
+/// Key of a tile in `tile_coefficients`.
+pub fn tile_key(id: TileId) -> String {
+    format!("{}/{}/{}/{}", id.level, id.face.name(), id.x, id.y)
+}
+
+/// Collects per-tile results into the manifest's entry.
+#[derive(Default)]
+pub struct Tally {
+    pub tiles: u64,
+    pub fully_lit: u64,
+    pub bytes: u64,
+    pub k: BTreeMap<String, usize>,
+}
+
+impl Tally {
+    pub fn add(&mut self, id: TileId, s: TileStats) {
+        self.tiles += 1;
+        self.bytes += s.bytes;
+        if s.fully_lit {
+            self.fully_lit += 1;
+        }
+        self.k.insert(tile_key(id), s.k);
+    }
+}
+
+/// How the horizons a Fourier product compresses were made.
+pub struct Source<'a> {
+    pub kind: &'static str,
+    pub method: &'a str,
+    pub near_px: Option<f64>,
+    pub terrain: (f64, f64),
+    pub distances: Vec<HorizonLevelDistance>,
+}
+
+/// The manifest entry of a finished run.
+pub fn product(
+    ts: &Tileset,
+    opts: &FourierOptions,
+    levels: Vec<u8>,
+    a: usize,
+    tally: Tally,
+    source: Source,
+    run_key: String,
+) -> FourierProduct {
+    let n = ts.layout.tile_size as usize;
+    FourierProduct {
+        path: PATTERN.into(),
+        format: FORMAT.into(),
+        levels,
+        azimuths: a,
+        azimuth: crate::horizon::AZIMUTH_CONVENTION.into(),
+        coefficients: opts.coefficients,
+        layout: opts.layout.name().into(),
+        encoding: opts.encoding.name().into(),
+        sigma: opts.sigma.name().into(),
+        groups: group_list(n, opts.coefficients, opts.layout),
+        bytes_per_tile: pyramid::file_bytes(n, opts.coefficients, opts.layout) as u64,
+        floor: FLOOR.into(),
+        max_error_deg: opts.max_error_deg,
+        tile_coefficients: opts.max_error_deg.map(|_| tally.k),
+        min_sun_el_deg: opts.min_sun_el_deg,
+        sun_radius_deg: opts.min_sun_el_deg.map(|_| opts.sun_radius_deg),
+        tiles_fully_lit: tally.fully_lit,
+        source: source.kind.into(),
+        horizon_method: source.method.into(),
+        horizon_near_px: source.near_px,
+        terrain_min_m: source.terrain.0,
+        terrain_max_m: source.terrain.1,
+        distances: source.distances,
+        run_key,
+    }
+}
+
+/// Refuse a run whose pyramids would exceed the cap.
+pub fn check_output_size(opts: &FourierOptions, tiles: usize, n: usize) -> Result<()> {
+    let gib = tiles as f64 * pyramid::file_bytes(n, opts.coefficients, opts.layout) as f64
+        / (1u64 << 30) as f64;
+    if gib > opts.max_output_gib {
+        return Err(Error::param(
+            "max_output_gib",
+            format!(
+                "is {}, but the pyramids would take {gib:.3} GiB ({tiles} tiles): choose fewer \
+                 levels or coefficients, or raise the cap",
+                opts.max_output_gib
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// A resumed run keeps a file that decodes with this run's settings.
+pub fn keeps(path: &Path, n: usize, a: usize) -> bool {
+    std::fs::read(path)
+        .ok()
+        .and_then(|b| Pyramid::decode(&b, path, n, a).ok())
+        .is_some()
+}
+
+pub fn tile_path(dir: &Path, id: TileId) -> PathBuf {
+    tileset::tile_path(dir, PATTERN, id)
+}
+
+/// The stage from stored raw maps.
+pub const STAGE: StageSpec = StageSpec {
+    name: "fourier",
+    writes: &[Product::Fourier],
+    format: &[FORMAT],
+};
+
+#[derive(Clone, Debug, Serialize)]
+pub struct FourierReport {
+    pub out: PathBuf,
+    pub levels: Vec<u8>,
+    pub azimuths: usize,
+    pub coefficients: usize,
+    pub layout: Layout,
+    pub encoding: Encoding,
+    pub sigma: Sigma,
+    pub tiles: u64,
+    pub tiles_written: u64,
+    pub tiles_kept: u64,
+    pub tiles_fully_lit: u64,
+    /// Bytes of the files written in this run.
+    pub bytes_written: u64,
+    /// Bytes a tile's raw maps take in f16 (A·n²·2), for comparison.
+    pub raw_bytes_per_tile: u64,
+    pub bytes_per_tile: u64,
+    pub up_to_date: bool,
+}
+
+/// Compress the stored raw horizon maps of the levels asked into pyramids.
+pub fn build_fourier(
+    dir: &Path,
+    opts: &FourierOptions,
+    progress: &dyn Progress,
+) -> Result<FourierReport> {
+    type Plan = (Vec<u8>, Vec<TileId>, usize);
+    let check = |ts: &Tileset| -> Result<Plan> {
+        let mpath = dir.join(manifest::MANIFEST);
+        let h = ts.products.horizon.as_ref().ok_or_else(|| {
+            Error::invalid(
+                &mpath,
+                "tileset has no raw horizon maps to compress: run `penumbra horizon` first, or \
+                 `penumbra horizon --fourier` to compress them as they are computed",
+            )
+        })?;
+        check_options(opts, h.azimuths)?;
+        let levels = match &opts.levels {
+            None => h.levels.clone(),
+            Some(l) => {
+                let mut l = l.clone();
+                l.sort_unstable();
+                l.dedup();
+                if let Some(bad) = l.iter().find(|x| !h.levels.contains(x)) {
+                    return Err(Error::usage(format!(
+                        "level {bad} has no horizon maps in {} (levels {:?}): compute them \
+                         first with `penumbra horizon --levels {bad}`",
+                        dir.display(),
+                        h.levels
+                    )));
+                }
+                l
+            }
+        };
+        let tiles: Vec<TileId> = ts
+            .tile_set()
+            .into_iter()
+            .filter(|t| levels.contains(&t.level))
+            .collect();
+        check_output_size(opts, tiles.len(), ts.layout.tile_size as usize)?;
+        Ok((levels, tiles, h.azimuths))
+    };
+    check(&Tileset::load(dir)?)?;
+    let writer = Writer::begin(dir)?;
+    let store = Store::open_unlocked(dir)?;
+    let ts = store.manifest();
+    let (levels, tiles, a) = check(ts)?;
+    let h = ts.products.horizon.as_ref().expect("checked");
+    let n = ts.layout.tile_size as usize;
+    let key = runner::run_key(
+        &STAGE,
+        &[&h.run_key],
+        &[serde_json::to_string(opts).unwrap_or_default().as_bytes()],
+    );
+    let mut report = FourierReport {
+        out: dir.to_path_buf(),
+        levels: levels.clone(),
+        azimuths: a,
+        coefficients: opts.coefficients,
+        layout: opts.layout,
+        encoding: opts.encoding,
+        sigma: opts.sigma,
+        tiles: tiles.len() as u64,
+        tiles_written: 0,
+        tiles_kept: 0,
+        tiles_fully_lit: 0,
+        bytes_written: 0,
+        raw_bytes_per_tile: (a * n * n * 2) as u64,
+        bytes_per_tile: pyramid::file_bytes(n, opts.coefficients, opts.layout) as u64,
+        up_to_date: false,
+    };
+    let run = match runner::start(writer, STAGE, &key, Some(ts))? {
+        Start::UpToDate => {
+            report.up_to_date = true;
+            report.tiles_kept = report.tiles;
+            report.tiles_fully_lit = ts.products.fourier.as_ref().map_or(0, |f| f.tiles_fully_lit);
+            return Ok(report);
+        }
+        Start::Run(r) => r,
+    };
+    let enc = Encoder::new(opts, ts, a, h.terrain_min_m);
+    let mut tally = Tally::default();
+    progress.start("fourier", tiles.len() as u64);
+    for &id in &tiles {
+        let out = tile_path(run.out(), id);
+        if run.resume() && keeps(&out, n, a) {
+            // The kept file's own header has what the manifest needs.
+            let b = std::fs::read(&out).map_err(|e| Error::io(&out, e))?;
+            let p = Pyramid::decode(&b, &out, n, a)?;
+            tally.add(
+                id,
+                TileStats {
+                    k: p.k,
+                    fully_lit: p.fully_lit,
+                    bytes: b.len() as u64,
+                },
+            );
+            report.tiles_kept += 1;
+            progress.inc(1);
+            continue;
+        }
+        let tile = store.height(id)?.expect("listed tiles exist");
+        let elev = store.horizon(id)?;
+        let (p, stats) = enc.encode(&elev, &tile);
+        crate::fsio::write_atomic_bytes(&out, &p.encode())?;
+        tally.add(id, stats);
+        report.tiles_written += 1;
+        report.bytes_written += stats.bytes;
+        progress.inc(1);
+    }
+    progress.finish();
+    report.tiles_fully_lit = tally.fully_lit;
+    let mut manifest = ts.clone();
+    manifest.products.fourier = Some(product(
+        ts,
+        opts,
+        levels,
+        a,
+        tally,
+        Source {
+            kind: "raw",
+            method: &h.method,
+            near_px: h.near_px,
+            terrain: (h.terrain_min_m, h.terrain_max_m),
+            distances: h.distances.clone(),
+        },
+        key,
+    ));
+    run.commit(manifest)?;
+    Ok(report)
+}
