@@ -176,7 +176,9 @@ impl FromStr for Model {
             .iter()
             .copied()
             .find(|m| m.name() == s)
-            .ok_or_else(|| format!("unknown sun model '{s}': use constant, segment, slices or exact"))
+            .ok_or_else(|| {
+                format!("unknown sun model '{s}': use constant, segment, slices or exact")
+            })
     }
 }
 
@@ -376,8 +378,12 @@ fn half_chord_integral(x: f64) -> f64 {
     0.5 * (x * (1.0 - x * x).max(0.0).sqrt() + x.asin())
 }
 
-/// Exact area of the part of the unit disc with a ≤ x ≤ b (−1 ≤ a ≤ b ≤ 1) and y ≥ c.
+/// Exact area of the part of the unit disc with a ≤ x ≤ b (−1 ≤ a ≤ b ≤ 1) and y ≥ c; NaN
+/// when c is NaN.
 pub fn strip_area_above(a: f64, b: f64, c: f64) -> f64 {
+    if c.is_nan() {
+        return c;
+    }
     let (a, b) = (a.clamp(-1.0, 1.0), b.clamp(-1.0, 1.0));
     if b <= a {
         return 0.0;
@@ -477,4 +483,383 @@ fn cross(a: Vec3, b: Vec3) -> Vec3 {
         a[2] * b[0] - a[0] * b[2],
         a[0] * b[1] - a[1] * b[0],
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::horizon::compass_azimuth_deg;
+
+    /// The Sun's angular radius from the Moon (1 AU), degrees.
+    const R_MOON: f64 = 0.2666;
+
+    /// Observer points: equator, both poles, a cube corner, an edge, extended planes.
+    fn points() -> Vec<(Face, f64, f64)> {
+        vec![
+            (Face::Px, 0.0, 0.0),
+            (Face::Pz, 0.0, 0.0),
+            (Face::Nz, 0.0, 0.0),
+            (Face::Px, 1.0, 1.0),
+            (Face::Ny, -1.0, -1.0),
+            (Face::Py, 0.3, -0.7),
+            (Face::Nx, 2.5, -0.3),
+            (Face::Pz, -3.0, 3.0),
+        ]
+    }
+
+    /// A xorshift stream in [0, 1).
+    fn rng(seed: u64) -> impl FnMut() -> f64 {
+        let mut st = seed;
+        move || {
+            st ^= st << 13;
+            st ^= st >> 7;
+            st ^= st << 17;
+            (st >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    /// Signed difference a − b wrapped to [−π, π).
+    fn wrap_pi(d: f64) -> f64 {
+        (d + PI).rem_euclid(TAU) - PI
+    }
+
+    fn sun_at(frame: &Frame, az: f64, el: f64, r: f64) -> Sun {
+        Sun {
+            dir: frame.direction(az, el),
+            radius_deg: r,
+        }
+    }
+
+    #[test]
+    fn segment_fraction_values_symmetry_and_area() {
+        assert!((segment_fraction(0.0) - 0.5).abs() < 1e-15);
+        assert_eq!(segment_fraction(-1.0), 1.0);
+        assert_eq!(segment_fraction(1.0), 0.0);
+        assert_eq!(segment_fraction(-7.0), 1.0);
+        assert_eq!(segment_fraction(3.0), 0.0);
+        assert_eq!(segment_fraction(f64::INFINITY), 0.0);
+        assert_eq!(segment_fraction(f64::NEG_INFINITY), 1.0);
+        for i in 0..=200 {
+            let d = -1.2 + 2.4 * i as f64 / 200.0;
+            let (f, g) = (segment_fraction(d), segment_fraction(-d));
+            assert!((f + g - 1.0).abs() < 1e-14, "d {d}: {f} + {g}");
+            assert!(segment_fraction(d + 1e-3) <= f, "not decreasing at {d}");
+        }
+        // Brute force: cell centres of an n×n grid over the disc's bounding square.
+        let n = 1500;
+        for &d in &[-0.9, -0.5, -0.1, 0.0, 0.3, 0.77, 0.95] {
+            let (mut inside, mut above) = (0u64, 0u64);
+            for j in 0..n {
+                let y = -1.0 + 2.0 * (j as f64 + 0.5) / n as f64;
+                for i in 0..n {
+                    let x = -1.0 + 2.0 * (i as f64 + 0.5) / n as f64;
+                    if x * x + y * y <= 1.0 {
+                        inside += 1;
+                        if y > d {
+                            above += 1;
+                        }
+                    }
+                }
+            }
+            let brute = above as f64 / inside as f64;
+            assert!(
+                (brute - segment_fraction(d)).abs() < 1e-3,
+                "d {d}: brute {brute}, formula {}",
+                segment_fraction(d)
+            );
+        }
+    }
+
+    #[test]
+    fn strip_areas_sum_to_the_disc_and_to_segments() {
+        for &n in &[1usize, 8, 256] {
+            for &c in &[-1.5, -0.6, 0.0, 0.25, 0.9, 1.0] {
+                let s: f64 = (0..n)
+                    .map(|i| {
+                        let (a, b) = strip_bounds(i, n);
+                        strip_area_above(a, b, c)
+                    })
+                    .sum();
+                assert!(
+                    (s / PI - segment_fraction(c)).abs() < 1e-13,
+                    "{n} strips, c {c}: {} vs {}",
+                    s / PI,
+                    segment_fraction(c)
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn flat_horizon_all_models_match_the_segment_formula() {
+        for (face, u, v) in points() {
+            let frame = Frame::at(face, u, v);
+            for &az in &[0.0, 73.0, 180.0, 291.0] {
+                for &a0 in &[-3.0, 0.0, 10.0] {
+                    let hor = move |_: f64| a0;
+                    for k in 0..=30 {
+                        let el = a0 + R_MOON * (-1.5 + 3.0 * k as f64 / 30.0);
+                        let want = segment_fraction((a0 - el) / R_MOON);
+                        let sun = sun_at(&frame, az, el, R_MOON);
+                        for m in Model::ALL {
+                            let got = lit_fraction(&frame, &sun, m, &hor);
+                            assert!(
+                                (got - want).abs() < 1e-3,
+                                "{m} at {face} ({u}, {v}), az {az}, α {a0}, el {el}: {got} vs {want}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The horizontal tangent direction at plane azimuth φ.
+    fn tangent(f: &Frame, phi: f64) -> Vec3 {
+        let w = add(scale(f.ua, phi.cos()), scale(f.va, phi.sin()));
+        add(w, scale(f.up, -dot(w, f.up)))
+    }
+
+    #[test]
+    fn linear_horizon_segment_matches_exact_and_constant_does_not() {
+        for (face, u, v) in points() {
+            let frame = Frame::at(face, u, v);
+            for &(az, el) in &[(40.0, 20.0), (200.0, 5.0), (310.0, 35.0)] {
+                let sun = sun_at(&frame, az, el, R_MOON);
+                let disc = Disc::new(&frame, &sun);
+                let hs = disc.horizontal(&frame);
+                // A horizon linear across the disc: at the horizontal angle β from the sun's
+                // azimuth (towards e_h) the disc's horizontal diameter is at
+                // x = tan β·cos(el)/tan r, and there the horizon is 0.5 + k·x radii above the
+                // centre. (Linear in the plane azimuth instead, the gnomonic distortion at cube
+                // corners bends it across the disc by ≈ 1e-3.)
+                let k = 2.0;
+                let hor = move |phi: f64| {
+                    let t = tangent(&frame, phi);
+                    let beta = dot(t, disc.e_h).atan2(dot(t, hs));
+                    let x = beta.tan() * el.to_radians().cos() / R_MOON.to_radians().tan();
+                    el + R_MOON * (0.5 + k * x)
+                };
+                let (seg, ex, con, sl) = (
+                    lit_fraction(&frame, &sun, Model::Segment, &hor),
+                    lit_fraction(&frame, &sun, Model::Exact, &hor),
+                    lit_fraction(&frame, &sun, Model::Constant, &hor),
+                    lit_fraction(&frame, &sun, Model::Slices, &hor),
+                );
+                let want = segment_fraction(0.5 / (1.0f64 + k * k).sqrt());
+                let at = format!("{face} ({u}, {v}) az {az} el {el}");
+                assert!(
+                    (seg - want).abs() < 1e-3,
+                    "{at}: segment {seg}, want {want}"
+                );
+                assert!((seg - ex).abs() < 1e-3, "{at}: segment {seg}, exact {ex}");
+                assert!((sl - ex).abs() < 1e-2, "{at}: slices {sl}, exact {ex}");
+                assert!(
+                    (con - segment_fraction(0.5)).abs() < 1e-2 && (con - ex).abs() > 0.1,
+                    "{at}: constant {con}, exact {ex}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn step_horizon_exact_and_slices() {
+        // Sun at 10°; horizon 10° on the side of larger plane azimuth, −5° on the other. The
+        // −5° half of the disc is all lit; on the other the 10° horizon runs through the disc's
+        // centre (to O(r·tan el) ≈ 1e-3 radii of curvature), so half of that half is lit:
+        // 1/2 + 1/4 = 0.75.
+        for (face, u, v) in points() {
+            let frame = Frame::at(face, u, v);
+            for &az in &[15.0, 100.0, 260.0] {
+                let sun = sun_at(&frame, az, 10.0, R_MOON);
+                let phi_s = frame.plane_azimuth(sun.dir);
+                let hor = move |phi: f64| {
+                    if wrap_pi(phi - phi_s) >= 0.0 {
+                        10.0
+                    } else {
+                        -5.0
+                    }
+                };
+                let ex = lit_fraction(&frame, &sun, Model::Exact, &hor);
+                let sl = lit_fraction(&frame, &sun, Model::Slices, &hor);
+                let at = format!("{face} ({u}, {v}) az {az}");
+                assert!((ex - 0.75).abs() < 2e-3, "{at}: exact {ex}");
+                assert!((sl - 0.75).abs() < 0.07, "{at}: slices {sl}");
+            }
+        }
+    }
+
+    #[test]
+    fn lit_fraction_never_decreases_as_the_sun_rises() {
+        for (face, u, v) in points() {
+            let frame = Frame::at(face, u, v);
+            let hor = |phi: f64| 3.0 + 2.0 * (phi - 0.4).sin() + 0.5 * (3.0 * phi).cos();
+            for &az in &[30.0, 222.0] {
+                for &r in &[R_MOON, 2.0] {
+                    let a_s = hor(frame.plane_azimuth(frame.direction(az, 0.0)));
+                    // Finely through the transition, then coarsely over the whole sky.
+                    let fine = (0..=300).map(|i| a_s + r * (-3.0 + 6.0 * i as f64 / 300.0));
+                    let coarse = (0..=180).map(|i| -90.0 + i as f64);
+                    for els in [fine.collect::<Vec<_>>(), coarse.collect()] {
+                        for m in Model::ALL {
+                            let mut prev = -1.0;
+                            for &el in &els {
+                                let f = lit_fraction(&frame, &sun_at(&frame, az, el, r), m, &hor);
+                                assert!(
+                                    f >= prev - 1e-9,
+                                    "{m} at {face} ({u}, {v}) az {az} r {r}: {prev} then {f} at el {el}"
+                                );
+                                prev = f;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn frame_round_trips_and_matches_compass_azimuth() {
+        let mut rnd = rng(7);
+        for (face, u, v) in points() {
+            let f = Frame::at(face, u, v);
+            // Orthonormal, right-handed as documented.
+            for (a, b) in [(f.up, f.north), (f.up, f.east), (f.north, f.east)] {
+                assert!(dot(a, b).abs() < 1e-12);
+            }
+            for a in [f.up, f.north, f.east] {
+                assert!((dot(a, a) - 1.0).abs() < 1e-12);
+            }
+            let c = cross(f.north, f.up);
+            assert!((dot(c, f.east) - 1.0).abs() < 1e-12);
+            for _ in 0..200 {
+                let az = 360.0 * rnd();
+                let el = -89.0 + 178.0 * rnd();
+                let d = f.direction(az, el);
+                let daz = (f.compass_deg(d) - az + 180.0).rem_euclid(360.0) - 180.0;
+                assert!(
+                    daz.abs() < 1e-9,
+                    "{face} ({u}, {v}): az {az} → {}",
+                    f.compass_deg(d)
+                );
+                assert!((f.elevation_deg(d) - el).abs() < 1e-9, "el {el}");
+                // The sun's plane azimuth and compass azimuth describe the same bearing.
+                let phi = f.plane_azimuth(d);
+                let caz = compass_azimuth_deg(face, u, v, phi);
+                let dz = (caz - az + 180.0).rem_euclid(360.0) - 180.0;
+                assert!(dz.abs() < 1e-8, "{face} ({u}, {v}): az {az}, via φ {caz}");
+            }
+            for _ in 0..200 {
+                let phi = TAU * rnd();
+                let t = tangent(&f, phi);
+                let dphi = wrap_pi(f.plane_azimuth(t) - phi);
+                assert!(dphi.abs() < 1e-10, "{face} ({u}, {v}): φ {phi} → {dphi}");
+                let want = compass_azimuth_deg(face, u, v, phi);
+                let dz = (f.compass_deg(t) - want + 180.0).rem_euclid(360.0) - 180.0;
+                assert!(
+                    dz.abs() < 1e-9,
+                    "{face} ({u}, {v}): φ {phi}: {want} vs {}",
+                    f.compass_deg(t)
+                );
+            }
+            let p = f.plane_azimuth(f.up);
+            assert!((0.0..TAU).contains(&p));
+        }
+        // North at the poles is the 0° meridian's limit.
+        assert_eq!(Frame::at(Face::Pz, 0.0, 0.0).north, [-1.0, 0.0, 0.0]);
+        assert_eq!(Frame::at(Face::Nz, 0.0, 0.0).north, [1.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn stiff_cases_stay_in_range() {
+        let horizons = [-90.0, 0.0, 89.99, 90.0];
+        let mut pts = points();
+        pts.extend([(Face::Px, -1.0, 1.0), (Face::Nz, 1.0, -1.0)]);
+        for (face, u, v) in pts {
+            let frame = Frame::at(face, u, v);
+            for &el in &[-90.0, -1.0, 0.0, 0.1, 45.0, 89.9, 90.0] {
+                for &r in &[0.0, 0.27, 5.0] {
+                    for &a in &horizons {
+                        let hor = move |_: f64| a;
+                        for m in Model::ALL {
+                            for az in [0.0, 135.0] {
+                                let f = lit_fraction(&frame, &sun_at(&frame, az, el, r), m, &hor);
+                                assert!(
+                                    (0.0..=1.0).contains(&f),
+                                    "{m} at {face} ({u}, {v}) el {el} r {r} α {a}: {f}"
+                                );
+                            }
+                        }
+                    }
+                }
+            }
+            // Straight up and down, exactly.
+            for dir in [frame.up, scale(frame.up, -1.0)] {
+                for m in Model::ALL {
+                    let f = lit_fraction(
+                        &frame,
+                        &Sun {
+                            dir,
+                            radius_deg: 0.27,
+                        },
+                        m,
+                        &|_| 10.0,
+                    );
+                    assert!((0.0..=1.0).contains(&f), "{m} at ±up: {f}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn point_sun_and_missing_horizon() {
+        let frame = Frame::at(Face::Py, 0.2, 0.1);
+        for m in Model::ALL {
+            let at = |el: f64| lit_fraction(&frame, &sun_at(&frame, 50.0, el, 0.0), m, &|_| 5.0);
+            assert_eq!(at(5.001), 1.0, "{m}");
+            assert_eq!(at(4.999), 0.0, "{m}");
+            let el = frame.elevation_deg(frame.direction(50.0, 5.0));
+            let f = lit_fraction(&frame, &sun_at(&frame, 50.0, 5.0, 0.0), m, &|_| el);
+            assert_eq!(f, 0.5, "{m}");
+            let sun = sun_at(&frame, 50.0, 5.0, R_MOON);
+            assert!(lit_fraction(&frame, &sun, m, &|_| f64::NAN).is_nan(), "{m}");
+            assert!(
+                lit_fraction(&frame, &sun_at(&frame, 50.0, 5.0, 0.0), m, &|_| f64::NAN).is_nan()
+            );
+            // No data only far from the sun does not matter to the models (none looks there).
+            let phi_s = frame.plane_azimuth(sun.dir);
+            let hor = move |phi: f64| {
+                if wrap_pi(phi - phi_s).abs() > 1.0 {
+                    f64::NAN
+                } else {
+                    0.0
+                }
+            };
+            assert!(
+                (lit_fraction(&frame, &sun, m, &hor) - 1.0).abs() < 1e-12,
+                "{m}"
+            );
+        }
+    }
+
+    #[test]
+    fn sun_radius_and_distances() {
+        assert!(
+            (sun_radius_deg(1.0) - 0.2666).abs() < 1e-3,
+            "{}",
+            sun_radius_deg(1.0)
+        );
+        let mars = sun_radius_deg(sun_distance_au("mars").unwrap());
+        assert!((mars - 0.175).abs() < 1e-3, "{mars}");
+        assert_eq!(sun_distance_au("moon"), Some(1.0));
+        assert_eq!(sun_distance_au("custom"), None);
+        for m in Model::ALL {
+            assert_eq!(m.name().parse::<Model>(), Ok(m));
+            assert_eq!(
+                serde_json::to_string(&m).unwrap(),
+                format!("\"{}\"", m.name())
+            );
+        }
+        assert!("hard".parse::<Model>().is_err());
+    }
 }
