@@ -126,12 +126,32 @@ pub struct Encoder {
 
 impl Encoder {
     pub fn new(opts: &FourierOptions, ts: &Tileset, a: usize, terrain_min_m: f64) -> Encoder {
+        Encoder::for_tiles(
+            opts,
+            ts.layout.tile_size as usize,
+            ts.layout.halo as usize,
+            a,
+            ts.body.radius_m,
+            terrain_min_m,
+        )
+    }
+
+    /// An encoder for tiles of `n` pixels with `halo` (height tiles of `(n + 2·halo)²`), `a`
+    /// azimuths, on a body of `radius_m` whose lowest terrain is `terrain_min_m`.
+    pub fn for_tiles(
+        opts: &FourierOptions,
+        n: usize,
+        halo: usize,
+        a: usize,
+        radius_m: f64,
+        terrain_min_m: f64,
+    ) -> Encoder {
         Encoder {
             opts: opts.clone(),
-            n: ts.layout.tile_size as usize,
+            n,
             a,
-            halo: ts.layout.halo as usize,
-            radius_m: ts.body.radius_m,
+            halo,
+            radius_m,
             terrain_min_m,
             transform: Transform::new(a),
         }
