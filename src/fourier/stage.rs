@@ -158,7 +158,7 @@ impl Encoder {
     }
 
     /// The floor (degrees) of an observer at height `h0`: the tangent to the lowest sphere.
-    fn floor_deg(&self, h0: f64) -> f64 {
+    pub fn floor_deg(&self, h0: f64) -> f64 {
         let r = self.radius_m;
         -((r + self.terrain_min_m) / (r + h0.max(self.terrain_min_m)))
             .clamp(-1.0, 1.0)
