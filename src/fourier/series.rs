@@ -117,10 +117,11 @@ impl Transform {
         assert!(k >= 1 && k <= max_coefficients(a));
         assert_eq!(out.len(), m * k);
         scratch.buf.clear();
-        scratch.buf.reserve(m * a);
-        for i in 0..m {
-            for s in 0..a {
-                scratch.buf.push(Complex::new(sample(i, s), 0.0));
+        scratch.buf.resize(m * a, Complex::new(0.0, 0.0));
+        // Azimuth outer: raw maps are plane-major, so this reads them row by row.
+        for s in 0..a {
+            for i in 0..m {
+                scratch.buf[i * a + s].re = sample(i, s);
             }
         }
         let need = self.fft.get_inplace_scratch_len();

@@ -42,8 +42,9 @@ pub struct FourierOptions {
     /// Mark tiles whose horizon never rises above this sun elevation minus the sun's radius
     /// as fully lit instead of storing them.
     pub min_sun_el_deg: Option<f64>,
-    /// The sun's apparent radius for `min_sun_el_deg` (degrees).
-    pub sun_radius_deg: f64,
+    /// The body's distance from the Sun (AU), for the sun's apparent radius; None: the body
+    /// preset's (`sun::sun_distance_au`).
+    pub sun_distance_au: Option<f64>,
     /// Refuse a run whose files would exceed this many GiB.
     pub max_output_gib: f64,
 }
@@ -58,7 +59,7 @@ impl Default for FourierOptions {
             sigma: Sigma::None,
             max_error_deg: None,
             min_sun_el_deg: None,
-            sun_radius_deg: 0.2666,
+            sun_distance_au: None,
             max_output_gib: runner::DEFAULT_MAX_OUTPUT_GIB,
         }
     }
@@ -88,19 +89,45 @@ pub fn check_options(opts: &FourierOptions, azimuths: usize) -> Result<()> {
     if let Some(e) = opts.min_sun_el_deg {
         if !(e.is_finite() && (-90.0..=90.0).contains(&e)) {
             return Err(Error::param(
-                "min_sun_el_deg",
+                "min_sun_el",
                 format!("{e} is not an elevation in −90..=90 degrees"),
             ));
         }
     }
-    let r = opts.sun_radius_deg;
-    if !(r.is_finite() && (0.0..=45.0).contains(&r)) {
-        return Err(Error::param(
-            "sun_radius_deg",
-            format!("{r} is not a sun radius in 0..=45 degrees"),
-        ));
+    if let Some(d) = opts.sun_distance_au {
+        if !(d.is_finite() && (0.01..=1.0e4).contains(&d)) {
+            return Err(Error::param(
+                "sun_distance_au",
+                format!("{d} is outside 0.01..=10000 AU"),
+            ));
+        }
     }
     Ok(())
+}
+
+/// Checks of the options against a tileset: a sun radius must be known for `min_sun_el_deg`.
+pub fn check_tileset(opts: &FourierOptions, ts: &Tileset) -> Result<()> {
+    if opts.min_sun_el_deg.is_some() {
+        sun_radius_deg(opts.sun_distance_au, &ts.body.name)?;
+    }
+    Ok(())
+}
+
+/// The sun's apparent radius (degrees) seen from `body`: from the distance given, else the
+/// body preset's; an error naming the option when neither is known.
+pub fn sun_radius_deg(distance_au: Option<f64>, body: &str) -> Result<f64> {
+    let d = distance_au
+        .or_else(|| super::sun::sun_distance_au(body))
+        .ok_or_else(|| {
+            Error::param(
+                "sun_distance_au",
+                format!(
+                    "is needed: the body '{body}' has no distance from the Sun on record; give \
+                     it in AU"
+                ),
+            )
+        })?;
+    Ok(super::sun::sun_radius_deg(d))
 }
 
 /// What one tile's compression found.
@@ -121,19 +148,27 @@ pub struct Encoder {
     halo: usize,
     radius_m: f64,
     terrain_min_m: f64,
+    /// For `min_sun_el_deg` (0 unless a distance is set; [`Encoder::new`] takes the body's).
+    sun_radius_deg: f64,
     transform: Transform,
 }
 
 impl Encoder {
+    /// An encoder for the tiles of `ts`; the sun radius for `min_sun_el_deg` is resolved by
+    /// [`check_tileset`] before a run starts.
     pub fn new(opts: &FourierOptions, ts: &Tileset, a: usize, terrain_min_m: f64) -> Encoder {
-        Encoder::for_tiles(
+        let mut e = Encoder::for_tiles(
             opts,
             ts.layout.tile_size as usize,
             ts.layout.halo as usize,
             a,
             ts.body.radius_m,
             terrain_min_m,
-        )
+        );
+        if opts.min_sun_el_deg.is_some() {
+            e.sun_radius_deg = sun_radius_deg(opts.sun_distance_au, &ts.body.name).unwrap_or(0.0);
+        }
+        e
     }
 
     /// An encoder for tiles of `n` pixels with `halo` (height tiles of `(n + 2·halo)²`), `a`
@@ -153,6 +188,9 @@ impl Encoder {
             halo,
             radius_m,
             terrain_min_m,
+            sun_radius_deg: opts
+                .sun_distance_au
+                .map_or(0.0, super::sun::sun_radius_deg),
             transform: Transform::new(a),
         }
     }
@@ -194,7 +232,7 @@ impl Encoder {
         let max_h = if max_h.is_finite() { max_h } else { -90.0 };
         let (layout, enc, sigma) = (self.opts.layout, self.opts.encoding, self.opts.sigma);
         if let Some(e) = self.opts.min_sun_el_deg {
-            if max_h <= e - self.opts.sun_radius_deg {
+            if max_h <= e - self.sun_radius_deg {
                 let p = Pyramid::fully_lit(n, a, layout, enc, sigma, max_h as f32);
                 let bytes = p.file_bytes() as u64;
                 return (
@@ -341,14 +379,35 @@ pub fn tile_key(id: TileId) -> String {
 pub struct Tally {
     pub tiles: u64,
     pub fully_lit: u64,
-    pub bytes: u64,
+    /// Bytes of the files written in this run (not those kept).
+    pub bytes_written: u64,
     pub k: BTreeMap<String, usize>,
 }
 
 impl Tally {
+    /// A tile this run wrote.
     pub fn add(&mut self, id: TileId, s: TileStats) {
+        self.bytes_written += s.bytes;
+        self.count(id, s);
+    }
+
+    /// A tile an interrupted run wrote: its own header says what the manifest needs.
+    pub fn add_kept(&mut self, id: TileId, path: &Path, n: usize, a: usize) -> Result<()> {
+        let b = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let p = Pyramid::decode(&b, path, n, a)?;
+        self.count(
+            id,
+            TileStats {
+                k: p.k,
+                fully_lit: p.fully_lit,
+                bytes: b.len() as u64,
+            },
+        );
+        Ok(())
+    }
+
+    fn count(&mut self, id: TileId, s: TileStats) {
         self.tiles += 1;
-        self.bytes += s.bytes;
         if s.fully_lit {
             self.fully_lit += 1;
         }
@@ -392,7 +451,9 @@ pub fn product(
         max_error_deg: opts.max_error_deg,
         tile_coefficients: opts.max_error_deg.map(|_| tally.k),
         min_sun_el_deg: opts.min_sun_el_deg,
-        sun_radius_deg: opts.min_sun_el_deg.map(|_| opts.sun_radius_deg),
+        sun_radius_deg: opts
+            .min_sun_el_deg
+            .and_then(|_| sun_radius_deg(opts.sun_distance_au, &ts.body.name).ok()),
         tiles_fully_lit: tally.fully_lit,
         source: source.kind.into(),
         horizon_method: source.method.into(),
@@ -478,6 +539,7 @@ pub fn build_fourier(
             )
         })?;
         check_options(opts, h.azimuths)?;
+        check_tileset(opts, ts)?;
         let levels = match &opts.levels {
             None => h.levels.clone(),
             Some(l) => {
@@ -547,17 +609,7 @@ pub fn build_fourier(
     for &id in &tiles {
         let out = tile_path(run.out(), id);
         if run.resume() && keeps(&out, n, a) {
-            // The kept file's own header has what the manifest needs.
-            let b = std::fs::read(&out).map_err(|e| Error::io(&out, e))?;
-            let p = Pyramid::decode(&b, &out, n, a)?;
-            tally.add(
-                id,
-                TileStats {
-                    k: p.k,
-                    fully_lit: p.fully_lit,
-                    bytes: b.len() as u64,
-                },
-            );
+            tally.add_kept(id, &out, n, a)?;
             report.tiles_kept += 1;
             progress.inc(1);
             continue;

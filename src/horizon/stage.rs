@@ -54,6 +54,12 @@ pub struct HorizonOptions {
     pub max_output_gib: f64,
     /// The fast method's exact near field, plane pixels (0..=MAX_NEAR_PX).
     pub near_px: f64,
+    /// Compress each tile's horizons into Fourier pyramids as they are computed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fourier: Option<crate::fourier::FourierOptions>,
+    /// With `fourier`: also write the raw maps.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub keep_raw: bool,
 }
 
 impl Default for HorizonOptions {
@@ -67,6 +73,24 @@ impl Default for HorizonOptions {
             max_margin_px: 4096,
             max_output_gib: 8.0,
             near_px: DEFAULT_NEAR_PX,
+            fourier: None,
+            keep_raw: false,
+        }
+    }
+}
+
+impl HorizonOptions {
+    /// Whether this run writes the raw maps.
+    pub fn writes_raw(&self) -> bool {
+        self.fourier.is_none() || self.keep_raw
+    }
+
+    /// The stage spec of this run: raw maps, pyramids, or both.
+    pub fn stage(&self) -> StageSpec {
+        match (&self.fourier, self.keep_raw) {
+            (None, _) => STAGE,
+            (Some(_), false) => STAGE_FOURIER,
+            (Some(_), true) => STAGE_BOTH,
         }
     }
 }
@@ -84,6 +108,25 @@ pub struct HorizonReport {
     pub pixel_azimuths: u64,
     pub distances: Vec<HorizonLevelDistance>,
     pub up_to_date: bool,
+    /// Whether raw maps were written, and the pyramids' summary when compressed.
+    pub raw: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fourier: Option<StreamedFourier>,
+    /// Seconds spent computing horizons and compressing them (this run's tiles).
+    pub horizon_s: f64,
+    pub compress_s: f64,
+}
+
+/// What the streamed compression made.
+#[derive(Clone, Debug, Serialize)]
+pub struct StreamedFourier {
+    pub coefficients: usize,
+    pub layout: crate::fourier::Layout,
+    pub encoding: crate::fourier::Encoding,
+    pub sigma: crate::fourier::Sigma,
+    pub tiles_fully_lit: u64,
+    pub bytes_written: u64,
+    pub bytes_per_tile: u64,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -354,6 +397,15 @@ pub(crate) fn check_layout(dir: &Path, ts: &Tileset) -> Result<()> {
 }
 
 pub(crate) fn check_options(opts: &HorizonOptions) -> Result<()> {
+    if let Some(f) = &opts.fourier {
+        crate::fourier::stage::check_options(f, opts.azimuths)?;
+    } else if opts.keep_raw {
+        return Err(Error::param(
+            "keep_raw",
+            "only means something with Fourier compression (--fourier): raw maps are what the \
+             horizon stage writes otherwise",
+        ));
+    }
     runner::check_output_cap("max_output_gib", opts.max_output_gib)?;
     let a = opts.azimuths;
     if !(4..=4096).contains(&a) {
@@ -373,6 +425,20 @@ pub const STAGE: StageSpec = StageSpec {
     name: "horizon",
     writes: &[Product::Horizon],
     format: &[FORMAT, ALGORITHM],
+};
+
+/// The horizon stage compressing each tile into Fourier pyramids as it goes (no raw maps).
+pub const STAGE_FOURIER: StageSpec = StageSpec {
+    name: "horizon",
+    writes: &[Product::Fourier],
+    format: &[FORMAT, ALGORITHM, crate::fourier::stage::FORMAT],
+};
+
+/// Both: pyramids and the raw maps (`--keep-raw`).
+pub const STAGE_BOTH: StageSpec = StageSpec {
+    name: "horizon",
+    writes: &[Product::Fourier, Product::Horizon],
+    format: &[FORMAT, ALGORITHM, crate::fourier::stage::FORMAT],
 };
 
 /// The levels a run computes, checked against the tileset.
@@ -445,7 +511,13 @@ pub fn build_horizons(
             .into_iter()
             .filter(|t| levels.contains(&t.level))
             .collect();
-        check_output_size(opts, &levels, tiles.len(), ts.layout.tile_size as usize)?;
+        if opts.writes_raw() {
+            check_output_size(opts, &levels, tiles.len(), ts.layout.tile_size as usize)?;
+        }
+        if let Some(f) = &opts.fourier {
+            crate::fourier::stage::check_tileset(f, ts)?;
+            crate::fourier::stage::check_output_size(f, tiles.len(), ts.layout.tile_size as usize)?;
+        }
         Ok((levels, tiles, range))
     };
     check(&Tileset::load(dir)?)?;
@@ -456,8 +528,9 @@ pub fn build_horizons(
     let lay = ts.layout;
     let n = lay.tile_size as usize;
     let height_path = &ts.products.height.as_ref().expect("checked").path;
+    let spec = opts.stage();
     let run_key = runner::run_key(
-        &STAGE,
+        &spec,
         &[&ts.run_key],
         &[
             height_path.as_bytes(),
@@ -465,9 +538,25 @@ pub fn build_horizons(
             format!("{tmin} {tmax}").as_bytes(),
         ],
     );
-    let run = match runner::start(writer, STAGE, &run_key, Some(ts))? {
+    let streamed = |f: &crate::fourier::FourierOptions, fully_lit: u64, bytes: u64| {
+        StreamedFourier {
+            coefficients: f.coefficients,
+            layout: f.layout,
+            encoding: f.encoding,
+            sigma: f.sigma,
+            tiles_fully_lit: fully_lit,
+            bytes_written: bytes,
+            bytes_per_tile: crate::fourier::pyramid::file_bytes(n, f.coefficients, f.layout) as u64,
+        }
+    };
+    let run = match runner::start(writer, spec, &run_key, Some(ts))? {
         Start::UpToDate => {
-            let p = ts.products.horizon.as_ref().expect("up to date");
+            let distances = match (&ts.products.fourier, &ts.products.horizon) {
+                (Some(f), _) if opts.fourier.is_some() => f.distances.clone(),
+                (_, Some(h)) => h.distances.clone(),
+                _ => Vec::new(),
+            };
+            let lit = ts.products.fourier.as_ref().map_or(0, |f| f.tiles_fully_lit);
             return Ok(HorizonReport {
                 out: dir.to_path_buf(),
                 levels,
@@ -477,8 +566,12 @@ pub fn build_horizons(
                 tiles_written: 0,
                 tiles_kept: tiles.len() as u64,
                 pixel_azimuths: 0,
-                distances: p.distances.clone(),
+                distances,
                 up_to_date: true,
+                raw: opts.writes_raw(),
+                fourier: opts.fourier.as_ref().map(|f| streamed(f, lit, 0)),
+                horizon_s: 0.0,
+                compress_s: 0.0,
             });
         }
         Start::Run(run) => run,
@@ -495,9 +588,16 @@ pub fn build_horizons(
         })
         .collect();
     let (mut written, mut kept, mut pixaz) = (0u64, 0u64, 0u64);
+    let encoder = opts
+        .fourier
+        .as_ref()
+        .map(|f| crate::fourier::Encoder::new(f, ts, opts.azimuths, tmin));
+    let mut tally = crate::fourier::stage::Tally::default();
+    let (mut horizon_s, mut compress_s) = (0.0f64, 0.0f64);
     progress.start("horizons", tiles.len() as u64);
     for &id in &tiles {
         let out = tile_path(run.out(), id);
+        let fout = crate::fourier::stage::tile_path(run.out(), id);
         let tile = store.height(id)?.expect("listed tiles exist");
         let top = interior_max(&tile, lay.halo as usize, n);
         // The distances are recorded for every tile, kept ones too, so that a resumed run's
@@ -514,13 +614,18 @@ pub fn build_horizons(
             reach
         });
         if run.resume()
-            && out.exists()
-            && read_horizon_exr(&out, n).is_ok_and(|(a, _)| a == opts.azimuths)
+            && (!opts.writes_raw()
+                || out.exists() && read_horizon_exr(&out, n).is_ok_and(|(a, _)| a == opts.azimuths))
+            && (encoder.is_none() || crate::fourier::stage::keeps(&fout, n, opts.azimuths))
         {
+            if encoder.is_some() {
+                tally.add_kept(id, &fout, n, opts.azimuths)?;
+            }
             kept += 1;
             progress.inc(1);
             continue;
         }
+        let t0 = std::time::Instant::now();
         let elev = if let Some(reach) = reach {
             let cover = *covers
                 .entry((id.level, id.face))
@@ -531,20 +636,51 @@ pub fn build_horizons(
         } else {
             vec![f32::NAN; n * n * opts.azimuths]
         };
-        write_horizon_exr(
-            &out,
-            n,
-            opts.azimuths,
-            &elev,
-            opts.precision,
-            opts.compression,
-        )?;
+        horizon_s += t0.elapsed().as_secs_f64();
+        if opts.writes_raw() {
+            write_horizon_exr(
+                &out,
+                n,
+                opts.azimuths,
+                &elev,
+                opts.precision,
+                opts.compression,
+            )?;
+        }
+        if let Some(enc) = &encoder {
+            let t1 = std::time::Instant::now();
+            let (p, stats) = enc.encode(&elev, &tile);
+            crate::fsio::write_atomic_bytes(&fout, &p.encode())?;
+            compress_s += t1.elapsed().as_secs_f64();
+            tally.add(id, stats);
+        }
         written += 1;
         progress.inc(1);
     }
     progress.finish();
     let mut manifest = ts.clone();
-    manifest.products.horizon = Some(HorizonProduct {
+    let fourier_summary = opts
+        .fourier
+        .as_ref()
+        .map(|f| streamed(f, tally.fully_lit, tally.bytes_written));
+    if let Some(f) = &opts.fourier {
+        manifest.products.fourier = Some(crate::fourier::stage::product(
+            ts,
+            f,
+            levels.clone(),
+            opts.azimuths,
+            tally,
+            crate::fourier::stage::Source {
+                kind: "streamed",
+                method: opts.method.name(),
+                near_px: (opts.method == Method::Fast).then_some(opts.near_px),
+                terrain: (tmin, tmax),
+                distances: dist.clone(),
+            },
+            run_key.clone(),
+        ));
+    }
+    let raw_product = HorizonProduct {
         path: PATTERN.into(),
         channel: "elevation".into(),
         precision: opts.precision.name().into(),
@@ -558,7 +694,10 @@ pub fn build_horizons(
         terrain_max_m: tmax,
         distances: dist.clone(),
         run_key,
-    });
+    };
+    if opts.writes_raw() {
+        manifest.products.horizon = Some(raw_product);
+    }
     run.commit(manifest)?;
     Ok(HorizonReport {
         out: dir.to_path_buf(),
@@ -571,6 +710,10 @@ pub fn build_horizons(
         pixel_azimuths: pixaz,
         distances: dist,
         up_to_date: false,
+        raw: opts.writes_raw(),
+        fourier: fourier_summary,
+        horizon_s,
+        compress_s,
     })
 }
 

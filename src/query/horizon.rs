@@ -1,17 +1,51 @@
-//! The horizon of the pixel over a point: read from the stored maps, or computed on demand.
+//! The horizon of the pixel over a point: read from the stored raw maps, reconstructed from the
+//! Fourier pyramids, or computed on demand; and the sun's visibility there.
 
 use std::path::Path;
 
 use serde::Serialize;
 
 use crate::error::{Error, Result};
+use crate::fourier::sun::{self, Frame, Model, Sun};
+use crate::fourier::Pyramid;
 use crate::horizon::stage::{
     check_layout, check_options, context_for, coverage_box, interior_max, margin_for, reach_rad,
     terrain_range, HorizonOptions,
 };
 use crate::horizon::{compass_azimuth_deg, horizons_with, plane_azimuth, Method, Rect};
+use crate::layout::TileId;
 use crate::manifest;
 use crate::tileset::Store;
+
+/// Where a queried horizon comes from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum HorizonFrom {
+    /// Stored raw maps of the method and azimuths asked when there are, else computed.
+    #[default]
+    Auto,
+    /// The stored raw maps (an error when there are none for this level).
+    Raw,
+    /// The Fourier pyramids, evaluated at the pixel centre.
+    Fourier,
+    /// Computed on demand by the reference method (exact search of every ray).
+    Reference,
+}
+
+impl std::str::FromStr for HorizonFrom {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "auto" => Ok(HorizonFrom::Auto),
+            "raw" => Ok(HorizonFrom::Raw),
+            "fourier" => Ok(HorizonFrom::Fourier),
+            "reference" => Ok(HorizonFrom::Reference),
+            _ => Err(format!(
+                "unknown horizon source '{s}' (auto, raw, fourier, reference)"
+            )),
+        }
+    }
+}
 
 /// The horizon of the pixel that contains a point.
 #[derive(Clone, Debug, Serialize)]
@@ -29,7 +63,8 @@ pub struct HorizonAnswer {
     /// Interior pixel (column, row) of the tile.
     pub pixel: [u32; 2],
     pub method: Method,
-    /// `stored` (read from the horizon maps) or `computed` (on demand).
+    /// `stored` (read from the raw maps), `computed` (on demand) or `fourier` (reconstructed
+    /// from the pyramids).
     pub source: String,
     pub azimuths: usize,
     /// Compass azimuth of each sample, degrees clockwise from local north, ascending.
@@ -38,22 +73,48 @@ pub struct HorizonAnswer {
     pub elevation_deg: Vec<f64>,
     /// The same samples' plane azimuths (the stored convention), degrees.
     pub plane_azimuth_deg: Vec<f64>,
-    /// Context searched around the pixel's tile when computed (pixels; 0 when stored).
+    /// Context searched around the pixel's tile when computed (pixels; 0 otherwise).
     pub margin_px: u64,
     pub needed_margin_px: u64,
 }
 
-pub fn horizon(
-    dir: &Path,
-    lat: f64,
-    lon: f64,
-    level: Option<u8>,
-    opts: &HorizonOptions,
-) -> Result<HorizonAnswer> {
-    let (method, azimuths) = (opts.method, opts.azimuths);
+/// A pixel's horizon as a function of plane azimuth.
+enum Profile {
+    /// `A` samples at plane azimuths 2πk/A, linearly interpolated between.
+    Samples(Vec<f32>),
+    /// The series' coefficients.
+    Series(Vec<[f64; 2]>),
+}
+
+impl Profile {
+    /// Elevation (degrees) at plane azimuth `phi` (radians).
+    fn at(&self, phi: f64) -> f64 {
+        match self {
+            Profile::Samples(s) => {
+                let a = s.len();
+                let x = phi.rem_euclid(std::f64::consts::TAU) / std::f64::consts::TAU * a as f64;
+                let k = (x.floor() as usize).min(a - 1);
+                let f = x - k as f64;
+                s[k] as f64 * (1.0 - f) + s[(k + 1) % a] as f64 * f
+            }
+            Profile::Series(c) => crate::fourier::evaluate(c, phi),
+        }
+    }
+}
+
+/// The located pixel of a query.
+struct Pixel {
+    level: u8,
+    tile: TileId,
+    i: usize,
+    j: usize,
+    height: f32,
+    /// Face coordinates (s, t) of its centre.
+    st: (f64, f64),
+}
+
+fn locate_pixel(store: &Store, dir: &Path, lat: f64, lon: f64, level: Option<u8>) -> Result<Pixel> {
     super::check_latlon(lat, lon)?;
-    check_options(opts)?;
-    let store = Store::open(dir)?;
     let ts = store.manifest();
     check_layout(dir, ts)?;
     let level = super::pick_level(ts, level)?;
@@ -80,6 +141,67 @@ pub fn horizon(
              it has no horizon"
         )));
     }
+    Ok(Pixel {
+        level,
+        tile,
+        i,
+        j,
+        height,
+        st: lay.pixel_st(tile, i as i64, j as i64),
+    })
+}
+
+/// The pixel's horizon from `from`: its profile, source name, the samples' count and, when
+/// computed, the context margins.
+fn profile(
+    store: &Store,
+    dir: &Path,
+    px: &Pixel,
+    from: HorizonFrom,
+    opts: &HorizonOptions,
+) -> Result<(Profile, &'static str, Method, u64, u64)> {
+    let ts = store.manifest();
+    let n = ts.layout.tile_size as usize;
+    let (i, j, level) = (px.i, px.j, px.level);
+    if from == HorizonFrom::Fourier {
+        let f = ts.products.fourier.as_ref().ok_or_else(|| {
+            store.missing(
+                "tileset has no Fourier pyramids: make them with `penumbra fourier` or \
+                 `penumbra horizon --fourier`",
+            )
+        })?;
+        if !f.levels.contains(&level) {
+            return Err(Error::usage(format!(
+                "level {level} has no Fourier pyramids in {} (levels {:?}); ask --level {}",
+                dir.display(),
+                f.levels,
+                f.levels.last().copied().unwrap_or(0)
+            )));
+        }
+        let p: Pyramid = store.fourier(px.tile)?;
+        if p.fully_lit {
+            return Err(Error::usage(format!(
+                "tile {} is stored as fully lit (its horizon never rises above {:.3}°, below \
+                 --min-sun-el {} minus the sun's radius): it keeps no horizon; rebuild the \
+                 pyramids without --min-sun-el to query it",
+                px.tile,
+                p.max_horizon_deg,
+                f.min_sun_el_deg.unwrap_or(f64::NAN)
+            )));
+        }
+        let mut c = Vec::new();
+        p.coefficients_at(i as f64 + 0.5, j as f64 + 0.5, &mut c);
+        let method = if f.horizon_method == "reference" {
+            Method::Reference
+        } else {
+            Method::Fast
+        };
+        return Ok((Profile::Series(c), "fourier", method, 0, 0));
+    }
+    let (method, azimuths) = match from {
+        HorizonFrom::Reference => (Method::Reference, opts.azimuths),
+        _ => (opts.method, opts.azimuths),
+    };
     // Stored maps of the same method, azimuth count and (fast) near field.
     let near = (method == Method::Fast).then_some(opts.near_px);
     let stored = ts.products.horizon.as_ref().filter(|p| {
@@ -88,51 +210,97 @@ pub fn horizon(
             && p.near_px == near
             && p.levels.contains(&level)
     });
-    let (elev, source, margin, needed) = match stored {
-        Some(_) => {
-            let planes = store.horizon(tile)?;
-            let e: Vec<f32> = (0..azimuths)
-                .map(|k| planes[k * n * n + j * n + i])
-                .collect();
-            (e, "stored", 0, 0)
-        }
-        None => {
-            let (tmin, tmax) = terrain_range(ts).ok_or_else(|| {
-                Error::invalid(
-                    dir.join(manifest::MANIFEST),
-                    "tileset records no height range",
-                )
+    let stored = match from {
+        HorizonFrom::Raw => {
+            let h = ts.products.horizon.as_ref().ok_or_else(|| {
+                store.missing("tileset has no raw horizon maps: compute them with `penumbra horizon` (or `--keep-raw`)")
             })?;
-            let top = interior_max(&t, h, n).unwrap_or(height);
-            let rad = reach_rad(ts.body.radius_m, tmin, tmax, top as f64);
-            let reach = margin_for(ts, tile, rad, opts.max_margin_px);
-            let cover = coverage_box(ts, level, tile.face);
-            let (ctx, rect) = context_for(&store, tile, reach.margin_px, cover)?;
-            let one = Rect {
-                x0: rect.x0 + i,
-                y0: rect.y0 + j,
-                w: 1,
-                h: 1,
-            };
-            (
-                horizons_with(&ctx, one, azimuths, method, opts.near_px),
-                "computed",
-                reach.margin_px,
-                reach.needed_px,
-            )
+            if !h.levels.contains(&level) {
+                return Err(Error::usage(format!(
+                    "level {level} has no raw horizon maps in {} (levels {:?})",
+                    dir.display(),
+                    h.levels
+                )));
+            }
+            Some(h)
         }
+        HorizonFrom::Reference => stored.filter(|h| h.method == "reference"),
+        _ => stored,
     };
-    let (s, tt) = lay.pixel_st(tile, i as i64, j as i64);
-    let d = lay.st_to_dir(tile.face, s, tt);
+    if let Some(h) = stored {
+        let planes = store.horizon(px.tile)?;
+        let e: Vec<f32> = (0..h.azimuths)
+            .map(|k| planes[k * n * n + j * n + i])
+            .collect();
+        let m = if h.method == "reference" {
+            Method::Reference
+        } else {
+            Method::Fast
+        };
+        return Ok((Profile::Samples(e), "stored", m, 0, 0));
+    }
+    let (tmin, tmax) = terrain_range(ts).ok_or_else(|| {
+        Error::invalid(
+            dir.join(manifest::MANIFEST),
+            "tileset records no height range",
+        )
+    })?;
+    let lay = ts.layout;
+    let t = store.height(px.tile)?.expect("covered");
+    let top = interior_max(&t, lay.halo as usize, n).unwrap_or(px.height);
+    let rad = reach_rad(ts.body.radius_m, tmin, tmax, top as f64);
+    let reach = margin_for(ts, px.tile, rad, opts.max_margin_px);
+    let cover = coverage_box(ts, level, px.tile.face);
+    let (ctx, rect) = context_for(store, px.tile, reach.margin_px, cover)?;
+    let one = Rect {
+        x0: rect.x0 + i,
+        y0: rect.y0 + j,
+        w: 1,
+        h: 1,
+    };
+    Ok((
+        Profile::Samples(horizons_with(&ctx, one, azimuths, method, opts.near_px)),
+        "computed",
+        method,
+        reach.margin_px,
+        reach.needed_px,
+    ))
+}
+
+pub fn horizon(
+    dir: &Path,
+    lat: f64,
+    lon: f64,
+    level: Option<u8>,
+    opts: &HorizonOptions,
+    from: HorizonFrom,
+) -> Result<HorizonAnswer> {
+    check_options(opts)?;
+    let store = Store::open(dir)?;
+    let px = locate_pixel(&store, dir, lat, lon, level)?;
+    let (prof, source, method, margin, needed) = profile(&store, dir, &px, from, opts)?;
+    let ts = store.manifest();
+    let lay = ts.layout;
+    let (s, tt) = px.st;
+    let d = lay.st_to_dir(px.tile.face, s, tt);
     let (plat, plon) = crate::cube::dir_to_latlon(d);
+    let azimuths = match (&prof, ts.products.fourier.as_ref()) {
+        (Profile::Samples(e), _) => e.len(),
+        (Profile::Series(_), Some(f)) => f.azimuths,
+        (Profile::Series(_), None) => opts.azimuths,
+    };
+    let (u, v) = (
+        lay.projection.s_to_u(s),
+        lay.projection.s_to_u(tt),
+    );
     let mut rows: Vec<(f64, f64, f64)> = (0..azimuths)
         .map(|k| {
             let phi = plane_azimuth(k, azimuths);
-            (
-                compass_azimuth_deg(tile.face, s, tt, phi),
-                elev[k] as f64,
-                phi.to_degrees(),
-            )
+            let e = match &prof {
+                Profile::Samples(e) => e[k] as f64,
+                Profile::Series(_) => prof.at(phi),
+            };
+            (compass_azimuth_deg(px.tile.face, u, v, phi), e, phi.to_degrees())
         })
         .collect();
     rows.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -141,11 +309,11 @@ pub fn horizon(
         query_lon_deg: lon,
         lat_deg: plat.to_degrees(),
         lon_deg: plon.to_degrees(),
-        height_m: height as f64,
-        level,
-        face: tile.face.name().into(),
-        tile: [tile.x, tile.y],
-        pixel: [i as u32, j as u32],
+        height_m: px.height as f64,
+        level: px.level,
+        face: px.tile.face.name().into(),
+        tile: [px.tile.x, px.tile.y],
+        pixel: [px.i as u32, px.j as u32],
         method,
         source: source.into(),
         azimuths,
@@ -154,5 +322,156 @@ pub fn horizon(
         plane_azimuth_deg: rows.iter().map(|r| r.2).collect(),
         margin_px: margin,
         needed_margin_px: needed,
+    })
+}
+
+/// The sun's visibility at the pixel over a point.
+#[derive(Clone, Debug, Serialize)]
+pub struct ShadowAnswer {
+    pub query_lat_deg: f64,
+    pub query_lon_deg: f64,
+    /// Centre of the pixel the answer is for.
+    pub lat_deg: f64,
+    pub lon_deg: f64,
+    pub height_m: f64,
+    pub level: u8,
+    pub face: String,
+    pub tile: [u32; 2],
+    pub pixel: [u32; 2],
+    /// The sun's centre: compass azimuth (clockwise from local north) and elevation above the
+    /// local horizontal of the sphere at the pixel, degrees; and its plane azimuth.
+    pub sun_azimuth_deg: f64,
+    pub sun_elevation_deg: f64,
+    pub sun_plane_azimuth_deg: f64,
+    /// The sun's apparent radius (degrees) and the distance it comes from (AU).
+    pub sun_radius_deg: f64,
+    pub sun_distance_au: f64,
+    /// The horizon's elevation at the sun's azimuth, degrees.
+    pub horizon_deg: f64,
+    /// Fraction of the sun's disc above the horizon, in [0, 1].
+    pub lit_fraction: f64,
+    pub model: Model,
+    /// `stored`, `computed` or `fourier` (as for the horizon query).
+    pub source: String,
+    pub method: Method,
+}
+
+/// The lit fraction of the sun's disc at the pixel over (lat, lon) for a sun at compass
+/// azimuth `sun_az` and elevation `sun_el` (degrees).
+#[allow(clippy::too_many_arguments)]
+pub fn shadow(
+    dir: &Path,
+    lat: f64,
+    lon: f64,
+    level: Option<u8>,
+    sun_az: f64,
+    sun_el: f64,
+    sun_distance_au: Option<f64>,
+    model: Model,
+    from: HorizonFrom,
+    opts: &HorizonOptions,
+) -> Result<ShadowAnswer> {
+    if !(sun_az.is_finite() && (-360.0..=720.0).contains(&sun_az)) {
+        return Err(Error::param(
+            "sun_az",
+            format!("{sun_az} is not an azimuth in degrees (−360..720)"),
+        ));
+    }
+    if !(sun_el.is_finite() && (-90.0..=90.0).contains(&sun_el)) {
+        return Err(Error::param(
+            "sun_el",
+            format!("{sun_el} is not an elevation in −90..=90 degrees"),
+        ));
+    }
+    if let Some(d) = sun_distance_au {
+        if !(d.is_finite() && (0.01..=1.0e4).contains(&d)) {
+            return Err(Error::param(
+                "sun_distance_au",
+                format!("{d} is outside 0.01..=10000 AU"),
+            ));
+        }
+    }
+    check_options(opts)?;
+    let store = Store::open(dir)?;
+    let ts = store.manifest();
+    let dist = sun_distance_au
+        .or_else(|| sun::sun_distance_au(&ts.body.name))
+        .ok_or_else(|| {
+            Error::param(
+                "sun_distance_au",
+                format!(
+                    "is needed: the body '{}' has no distance from the Sun on record; give it in AU",
+                    ts.body.name
+                ),
+            )
+        })?;
+    let px = locate_pixel(&store, dir, lat, lon, level)?;
+    let (s, t) = px.st;
+    let lay = ts.layout;
+    let (u, v) = (lay.projection.s_to_u(s), lay.projection.s_to_u(t));
+    let frame = Frame::at(px.tile.face, u, v);
+    let sun = Sun {
+        dir: frame.direction(sun_az, sun_el),
+        radius_deg: sun::sun_radius_deg(dist),
+    };
+    let phi = frame.plane_azimuth(sun.dir);
+    // A tile stored as fully lit answers for suns at or above its threshold without a horizon.
+    if from == HorizonFrom::Fourier {
+        if let Some(f) = &ts.products.fourier {
+            if f.levels.contains(&px.level) {
+                let p = store.fourier(px.tile)?;
+                if p.fully_lit && f.min_sun_el_deg.is_some_and(|m| sun_el >= m) {
+                    let d = lay.st_to_dir(px.tile.face, s, t);
+                    let (plat, plon) = crate::cube::dir_to_latlon(d);
+                    return Ok(ShadowAnswer {
+                        query_lat_deg: lat,
+                        query_lon_deg: lon,
+                        lat_deg: plat.to_degrees(),
+                        lon_deg: plon.to_degrees(),
+                        height_m: px.height as f64,
+                        level: px.level,
+                        face: px.tile.face.name().into(),
+                        tile: [px.tile.x, px.tile.y],
+                        pixel: [px.i as u32, px.j as u32],
+                        sun_azimuth_deg: sun_az.rem_euclid(360.0),
+                        sun_elevation_deg: sun_el,
+                        sun_plane_azimuth_deg: phi.to_degrees(),
+                        sun_radius_deg: sun.radius_deg,
+                        sun_distance_au: dist,
+                        horizon_deg: p.max_horizon_deg as f64,
+                        lit_fraction: 1.0,
+                        model,
+                        source: "fourier (tile stored fully lit)".into(),
+                        method: Method::Fast,
+                    });
+                }
+            }
+        }
+    }
+    let (prof, source, method, _, _) = profile(&store, dir, &px, from, opts)?;
+    let horizon = |p: f64| prof.at(p);
+    let lit = sun::lit_fraction(&frame, &sun, model, &horizon);
+    let d = lay.st_to_dir(px.tile.face, s, t);
+    let (plat, plon) = crate::cube::dir_to_latlon(d);
+    Ok(ShadowAnswer {
+        query_lat_deg: lat,
+        query_lon_deg: lon,
+        lat_deg: plat.to_degrees(),
+        lon_deg: plon.to_degrees(),
+        height_m: px.height as f64,
+        level: px.level,
+        face: px.tile.face.name().into(),
+        tile: [px.tile.x, px.tile.y],
+        pixel: [px.i as u32, px.j as u32],
+        sun_azimuth_deg: sun_az.rem_euclid(360.0),
+        sun_elevation_deg: sun_el,
+        sun_plane_azimuth_deg: phi.to_degrees(),
+        sun_radius_deg: sun.radius_deg,
+        sun_distance_au: dist,
+        horizon_deg: prof.at(phi),
+        lit_fraction: lit,
+        model,
+        source: source.into(),
+        method,
     })
 }

@@ -4,7 +4,7 @@
 mod horizon;
 mod mip;
 
-pub use self::horizon::{horizon, HorizonAnswer};
+pub use self::horizon::{horizon, shadow, HorizonAnswer, HorizonFrom, ShadowAnswer};
 pub use self::mip::{face_texel, mip, FaceTexel, MipAnswer};
 
 use std::path::Path;

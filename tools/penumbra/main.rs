@@ -11,7 +11,10 @@ use penumbra::bake::{self, BodyChoice, Input, Plan, Stage};
 use penumbra::body::Body;
 use penumbra::cube::Projection;
 use penumbra::dem::Resampling;
+use penumbra::fourier::sun::Model;
+use penumbra::fourier::{Encoding, FourierOptions, Layout, Sigma};
 use penumbra::horizon::{HorizonOptions, HorizonPrecision, Method};
+use penumbra::query::HorizonFrom;
 use penumbra::mip::{MipOptions, Precision};
 use penumbra::scene::SceneSpec;
 use penumbra::tileio::TileCompression;
@@ -40,7 +43,8 @@ enum Command {
     /// Cut a DEM into cube-face tiles.
     Tile(TileArgs),
     /// Run every stage a scene needs (the embedded default scene when no --dem is given):
-    /// tiling, then mipmaps, then horizon maps for --horizon-levels.
+    /// tiling, then mipmaps, then horizons compressed into Fourier pyramids for
+    /// --horizon-levels (the embedded scene: level 6 unless told).
     Bake(BakeArgs),
     /// Compute the raw horizon maps of a tileset: per pixel the horizon elevation in A azimuths,
     /// seeing across tiles and faces as far as any terrain could rise above it.
@@ -60,6 +64,32 @@ enum Command {
         compression: TileCompression,
         /// Refuse a run whose maps would exceed this many GiB before compression.
         #[arg(long, default_value_t = 8.0, allow_hyphen_values = true)]
+        max_output_gib: f64,
+        /// Compress each tile's horizons into Fourier pyramids as they are computed (raw maps
+        /// are then written only with --keep-raw).
+        #[arg(long)]
+        fourier: bool,
+        /// With --fourier: also write the raw maps.
+        #[arg(long)]
+        keep_raw: bool,
+        #[command(flatten)]
+        fourier_flags: FourierFlags,
+        /// Print the report as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Compress a tileset's raw horizon maps into 16-bit truncated-Fourier pyramids
+    /// (docs/fourier.md).
+    Fourier {
+        /// Tileset folder.
+        dir: PathBuf,
+        /// Tile levels to compress, comma-separated (default: every level with horizon maps).
+        #[arg(long, value_delimiter = ',')]
+        levels: Option<Vec<u8>>,
+        #[command(flatten)]
+        flags: FourierFlags,
+        /// Refuse a run whose pyramids would exceed this many GiB.
+        #[arg(long, default_value_t = penumbra::runner::DEFAULT_MAX_OUTPUT_GIB, allow_hyphen_values = true)]
         max_output_gib: f64,
         /// Print the report as JSON.
         #[arg(long)]
@@ -143,9 +173,89 @@ enum QueryCommand {
         level: Option<u8>,
         #[command(flatten)]
         flags: HorizonFlags,
+        /// auto (stored raw maps of this method and azimuth count, else computed), raw,
+        /// fourier (reconstructed from the pyramids) or reference (computed exactly).
+        #[arg(long, default_value = "auto")]
+        from: HorizonFrom,
         #[arg(long)]
         json: bool,
     },
+    /// The lit fraction of the sun's disc at the pixel that contains a latitude/longitude.
+    Shadow {
+        dir: PathBuf,
+        /// Planetocentric latitude, degrees.
+        #[arg(long, allow_hyphen_values = true)]
+        lat: f64,
+        /// East longitude, degrees (−180..360).
+        #[arg(long, allow_hyphen_values = true)]
+        lon: f64,
+        /// Tile level (0 = coarsest; default the finest).
+        #[arg(long)]
+        level: Option<u8>,
+        /// Sun azimuth, degrees clockwise from local north.
+        #[arg(long, allow_hyphen_values = true)]
+        sun_az: f64,
+        /// Sun elevation above the local horizontal of the sphere, degrees.
+        #[arg(long, allow_hyphen_values = true)]
+        sun_el: f64,
+        /// The body's distance from the Sun (AU; default: the body preset's), which sets the
+        /// sun's apparent radius.
+        #[arg(long)]
+        sun_distance_au: Option<f64>,
+        /// Horizon source: fourier, raw, reference or auto (as for `query horizon`).
+        #[arg(long, default_value = "fourier")]
+        from: HorizonFrom,
+        /// Disc model: constant, segment, slices (Fritsch et al.) or exact.
+        #[arg(long, default_value = "exact")]
+        model: Model,
+        #[command(flatten)]
+        flags: HorizonFlags,
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+#[derive(Args, Clone)]
+struct FourierFlags {
+    /// Complex coefficients kept per pixel (K), 1..=A/2+1.
+    #[arg(long, default_value_t = 16)]
+    coefficients: usize,
+    /// multires (groups of 4 coefficients at 1, 1/2, 1/4, … resolution) or full.
+    #[arg(long, default_value = "multires")]
+    layout: Layout,
+    /// f16 (as in the paper) or snorm16 (per-tile, per-group scale).
+    #[arg(long, default_value = "f16")]
+    encoding: Encoding,
+    /// none, or lanczos σ-factors against Gibbs ringing.
+    #[arg(long, default_value = "none")]
+    sigma: Sigma,
+    /// Choose K per tile: the fewest coefficients (up to --coefficients) whose truncation
+    /// error (99th percentile of per-pixel RMS) is within this many degrees.
+    #[arg(long)]
+    max_error_deg: Option<f64>,
+    /// Store tiles whose horizon never rises above this sun elevation (minus the sun's radius)
+    /// as fully lit, without coefficients.
+    #[arg(long, allow_hyphen_values = true)]
+    min_sun_el: Option<f64>,
+    /// The body's distance from the Sun in AU for --min-sun-el (default: the body preset's).
+    #[arg(long)]
+    sun_distance_au: Option<f64>,
+}
+
+impl FourierFlags {
+    fn options(&self, levels: Option<Vec<u8>>, max_output_gib: f64) -> FourierOptions {
+        FourierOptions {
+            levels,
+            coefficients: self.coefficients,
+            layout: self.layout,
+            encoding: self.encoding,
+            sigma: self.sigma,
+            max_error_deg: self.max_error_deg,
+            min_sun_el_deg: self.min_sun_el,
+            sun_distance_au: self.sun_distance_au,
+            max_output_gib,
+        }
+    }
 }
 
 #[derive(Args, Clone)]
@@ -165,6 +275,18 @@ struct HorizonFlags {
     /// measures the trade).
     #[arg(long, default_value_t = penumbra::horizon::DEFAULT_NEAR_PX)]
     near_px: f64,
+}
+
+impl HorizonFlags {
+    fn options(&self) -> HorizonOptions {
+        HorizonOptions {
+            azimuths: self.azimuths,
+            method: self.method,
+            max_margin_px: self.max_margin_px,
+            near_px: self.near_px,
+            ..Default::default()
+        }
+    }
 }
 
 #[derive(Args, Clone)]
@@ -286,11 +408,27 @@ struct BakeArgs {
     flags: TileFlags,
     #[command(flatten)]
     mip: MipFlags,
-    /// Also compute raw horizon maps for these tile levels (comma-separated), 360 azimuths,
-    /// fast method, f16.
+    /// Compute horizons for these tile levels (comma-separated; 360 azimuths, fast method)
+    /// and compress them into Fourier pyramids. Default: level 6 of the embedded scene, none
+    /// for a --dem (give levels to get horizons).
     #[arg(long, value_delimiter = ',')]
     horizon_levels: Option<Vec<u8>>,
+    /// No horizons at all (tiles and mipmaps only).
+    #[arg(long, conflicts_with = "horizon_levels")]
+    no_horizons: bool,
+    /// Write raw horizon maps instead of Fourier pyramids.
+    #[arg(long)]
+    no_fourier: bool,
+    /// Write raw horizon maps beside the Fourier pyramids.
+    #[arg(long, conflicts_with = "no_fourier")]
+    keep_raw: bool,
+    #[command(flatten)]
+    fourier: FourierFlags,
 }
+
+/// Horizon level of the embedded scene's default bake: 4 tiles of 512² at 106 m/px, about
+/// 1.5 minutes of horizons on 2 cores.
+const EMBEDDED_HORIZON_LEVEL: u8 = 6;
 
 fn body_arg(b: &BodyArgs) -> Result<BodyChoice> {
     // An unknown name or a bad radius is refused before any file is read.
@@ -328,10 +466,21 @@ fn run(cli: Cli) -> Result<()> {
                 mip: a.mip.options(a.flags.compression, a.flags.max_output_gib),
                 ..Plan::default()
             };
-            if let Some(levels) = &a.horizon_levels {
+            let levels = match (&a.horizon_levels, &a.dem) {
+                _ if a.no_horizons => None,
+                (Some(l), _) => Some(l.clone()),
+                (None, None) => Some(vec![EMBEDDED_HORIZON_LEVEL]),
+                (None, Some(_)) => None,
+            };
+            if let Some(levels) = levels {
                 plan.stages.push(Stage::Horizon);
-                plan.horizon.levels = Some(levels.clone());
+                plan.horizon.levels = Some(levels);
                 plan.horizon.compression = a.flags.compression;
+                if !a.no_fourier {
+                    plan.horizon.fourier =
+                        Some(a.fourier.options(None, a.flags.max_output_gib));
+                    plan.horizon.keep_raw = a.keep_raw;
+                }
             }
             let input = match &a.dem {
                 Some(p) => Input::Dem {
@@ -371,6 +520,9 @@ fn run(cli: Cli) -> Result<()> {
             precision,
             compression,
             max_output_gib,
+            fourier,
+            keep_raw,
+            fourier_flags,
             json,
         } => {
             let opts = HorizonOptions {
@@ -382,10 +534,26 @@ fn run(cli: Cli) -> Result<()> {
                 max_margin_px: flags.max_margin_px,
                 max_output_gib,
                 near_px: flags.near_px,
+                fourier: fourier.then(|| {
+                    fourier_flags.options(None, penumbra::runner::DEFAULT_MAX_OUTPUT_GIB)
+                }),
+                keep_raw,
             };
             let t0 = std::time::Instant::now();
             let report = penumbra::horizon::build_horizons(&dir, &opts, &progress)?;
             output::print_horizon(&report, t0.elapsed().as_secs_f64(), json)?;
+        }
+        Command::Fourier {
+            dir,
+            levels,
+            flags,
+            max_output_gib,
+            json,
+        } => {
+            let t0 = std::time::Instant::now();
+            let opts = flags.options(levels, max_output_gib);
+            let report = penumbra::fourier::build_fourier(&dir, &opts, &progress)?;
+            output::print_fourier(&report, t0.elapsed().as_secs_f64(), json)?;
         }
         Command::Info { dir, json } => output::print_info(&dir, json)?,
         Command::Query(QueryCommand::Height {
@@ -415,17 +583,40 @@ fn run(cli: Cli) -> Result<()> {
             lon,
             level,
             flags,
+            from,
             json,
         }) => {
-            let opts = HorizonOptions {
-                azimuths: flags.azimuths,
-                method: flags.method,
-                max_margin_px: flags.max_margin_px,
-                near_px: flags.near_px,
-                ..Default::default()
-            };
-            let ans = penumbra::query::horizon(&dir, lat, lon, level, &opts)?;
+            let opts = flags.options();
+            let ans = penumbra::query::horizon(&dir, lat, lon, level, &opts, from)?;
             output::print_horizon_answer(&ans, json)?;
+        }
+        Command::Query(QueryCommand::Shadow {
+            dir,
+            lat,
+            lon,
+            level,
+            sun_az,
+            sun_el,
+            sun_distance_au,
+            from,
+            model,
+            flags,
+            json,
+        }) => {
+            let opts = flags.options();
+            let ans = penumbra::query::shadow(
+                &dir,
+                lat,
+                lon,
+                level,
+                sun_az,
+                sun_el,
+                sun_distance_au,
+                model,
+                from,
+                &opts,
+            )?;
+            output::print_shadow_answer(&ans, json)?;
         }
     }
     Ok(())

@@ -12,7 +12,8 @@ use penumbra::horizon::HorizonReport;
 use penumbra::manifest::Tileset;
 use penumbra::mip::MipReport;
 use penumbra::query::HeightAnswer;
-use penumbra::query::{HorizonAnswer, MipAnswer};
+use penumbra::fourier::FourierReport;
+use penumbra::query::{HorizonAnswer, MipAnswer, ShadowAnswer};
 
 /// indicatif bars on stderr; nothing when quiet or when stderr is not a terminal.
 pub struct Bars {
@@ -129,6 +130,32 @@ fn write_horizon_line(out: &mut impl Write, h: &HorizonReport) -> Result<()> {
         h.azimuths,
         h.method.name()
     )?;
+    if let Some(f) = &h.fourier {
+        writeln!(
+            out,
+            "  Fourier pyramids: K = {} {} {} (sigma {}), {} written{}; {} per tile ({}), raw maps {}",
+            f.coefficients,
+            f.layout.name(),
+            f.encoding.name(),
+            f.sigma.name(),
+            mib(f.bytes_written),
+            if f.tiles_fully_lit > 0 {
+                format!(", {} tiles fully lit", f.tiles_fully_lit)
+            } else {
+                String::new()
+            },
+            mib(f.bytes_per_tile),
+            if h.horizon_s > 0.0 {
+                format!(
+                    "compression {:.1} % of the horizon time",
+                    100.0 * h.compress_s / h.horizon_s
+                )
+            } else {
+                "nothing compressed in this run".into()
+            },
+            if h.raw { "kept" } else { "not written (--keep-raw keeps them)" }
+        )?;
+    }
     for d in &h.distances {
         let capped = if d.tiles_capped > 0 {
             format!(", {} tiles capped by --max-margin-px", d.tiles_capped)
@@ -162,6 +189,85 @@ pub fn print_horizon(r: &HorizonReport, wall_s: f64, json: bool) -> Result<()> {
     } else {
         writeln!(out, "{wall_s:.2} s")?;
     }
+    Ok(())
+}
+
+fn mib(b: u64) -> String {
+    format!("{:.2} MiB", b as f64 / (1u64 << 20) as f64)
+}
+
+pub fn print_fourier(r: &FourierReport, wall_s: f64, json: bool) -> Result<()> {
+    if json {
+        let mut v = serde_json::to_value(r)?;
+        v["wall_s"] = serde_json::json!(wall_s);
+        v["peak_rss_mib"] = serde_json::json!(peak_rss_mib());
+        return print_json(&v);
+    }
+    let mut out = std::io::stdout().lock();
+    if r.up_to_date {
+        writeln!(
+            out,
+            "{}: Fourier pyramids up to date ({} tiles)",
+            r.out.display(),
+            r.tiles
+        )?;
+        return Ok(());
+    }
+    writeln!(
+        out,
+        "{}: Fourier pyramids of {} tiles at levels {:?} ({} written, {} kept{}), K = {} of {} \
+         azimuths, {} {} (sigma {})",
+        r.out.display(),
+        r.tiles,
+        r.levels,
+        r.tiles_written,
+        r.tiles_kept,
+        if r.tiles_fully_lit > 0 {
+            format!(", {} fully lit", r.tiles_fully_lit)
+        } else {
+            String::new()
+        },
+        r.coefficients,
+        r.azimuths,
+        r.layout.name(),
+        r.encoding.name(),
+        r.sigma.name()
+    )?;
+    writeln!(
+        out,
+        "  {} per tile against {} of raw f16 maps ({:.1}×); {} written; {wall_s:.2} s",
+        mib(r.bytes_per_tile),
+        mib(r.raw_bytes_per_tile),
+        r.raw_bytes_per_tile as f64 / r.bytes_per_tile.max(1) as f64,
+        mib(r.bytes_written)
+    )?;
+    Ok(())
+}
+
+pub fn print_shadow_answer(a: &ShadowAnswer, json: bool) -> Result<()> {
+    if json {
+        return print_json(a);
+    }
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "pixel centre {:.6}°, {:.6}° (level {}, face {}, tile {}/{}, pixel {},{}), height {:.1} m",
+        a.lat_deg, a.lon_deg, a.level, a.face, a.tile[0], a.tile[1], a.pixel[0], a.pixel[1],
+        a.height_m
+    )?;
+    writeln!(
+        out,
+        "sun at azimuth {:.3}°, elevation {:.3}° (radius {:.4}° at {} AU); horizon there {:.3}° ({} {}, {} model)",
+        a.sun_azimuth_deg,
+        a.sun_elevation_deg,
+        a.sun_radius_deg,
+        a.sun_distance_au,
+        a.horizon_deg,
+        a.source,
+        a.method.name(),
+        a.model.name()
+    )?;
+    writeln!(out, "lit fraction {:.6}", a.lit_fraction)?;
     Ok(())
 }
 
@@ -309,6 +415,29 @@ pub fn print_info(dir: &Path, json: bool) -> Result<()> {
             m.max_path,
             m.minmax_path,
             m.face_path
+        )?;
+    }
+    if let Some(h) = &ts.products.horizon {
+        writeln!(
+            o,
+            "horizons     levels {:?}, {} azimuths, {} method, {}; {}",
+            h.levels, h.azimuths, h.method, h.precision, h.path
+        )?;
+    }
+    if let Some(f) = &ts.products.fourier {
+        writeln!(
+            o,
+            "fourier      levels {:?}, K = {} of {} azimuths, {} {} (sigma {}), {} per tile, {} fully lit tiles, from {} horizons; {}",
+            f.levels,
+            f.coefficients,
+            f.azimuths,
+            f.layout,
+            f.encoding,
+            f.sigma,
+            mib(f.bytes_per_tile),
+            f.tiles_fully_lit,
+            f.source,
+            f.path
         )?;
     }
     if let Some(a) = &ts.products.albedo {
