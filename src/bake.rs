@@ -53,6 +53,9 @@ pub struct Plan {
     pub tile: TileOptions,
     pub mip: MipOptions,
     pub horizon: HorizonOptions,
+    /// Horizons at this level, or the finest when the tileset has fewer (the embedded scene's
+    /// default), instead of `horizon.levels`.
+    pub horizon_level_at_most: Option<u8>,
 }
 
 impl Default for Plan {
@@ -62,6 +65,7 @@ impl Default for Plan {
             tile: TileOptions::default(),
             mip: MipOptions::default(),
             horizon: HorizonOptions::default(),
+            horizon_level_at_most: None,
         }
     }
 }
@@ -112,7 +116,12 @@ pub fn bake(input: &Input, out: &Path, plan: &Plan, progress: &dyn Progress) -> 
             }
             Stage::Mip => report.mip = Some(mip::build_mips(out, &plan.mip, progress)?),
             Stage::Horizon => {
-                report.horizon = Some(horizon::build_horizons(out, &plan.horizon, progress)?)
+                let mut opts = plan.horizon.clone();
+                if let Some(l) = plan.horizon_level_at_most {
+                    let levels = crate::manifest::Tileset::load(out)?.layout.levels;
+                    opts.levels = Some(vec![l.min(levels - 1)]);
+                }
+                report.horizon = Some(horizon::build_horizons(out, &opts, progress)?)
             }
         }
     }

@@ -42,6 +42,7 @@ fn bake_info_and_query_on_the_embedded_scene() {
         "1024",
         "--levels",
         "4",
+        "--no-horizons",
         "--json",
     ]));
     assert_eq!(r["tile"]["levels"], 4);
@@ -76,6 +77,7 @@ fn bake_info_and_query_on_the_embedded_scene() {
         "1024",
         "--levels",
         "4",
+        "--no-horizons",
         "--json",
     ]));
     assert_eq!(r["tile"]["up_to_date"], true);

@@ -478,6 +478,7 @@ fn bake_runs_the_horizon_stage_when_asked() {
                 "3",
                 "--horizon-levels",
                 "0",
+                "--no-fourier",
                 "--json",
             ])
             .output()

@@ -705,6 +705,7 @@ fn cli_mip_and_query_mip() {
         "1024",
         "--levels",
         "3",
+        "--no-horizons",
         "--json",
     ]));
     assert_eq!(r["stages"], serde_json::json!(["tile", "mip"]));

@@ -22,7 +22,8 @@ fn ok(args: &[&str]) {
     );
 }
 
-/// A small tileset of the embedded scene with every product: tiles, mipmaps, horizons.
+/// A small tileset of the embedded scene with every product: tiles, mipmaps, raw horizon maps
+/// and Fourier pyramids.
 const BAKE: &[&str] = &[
     "bake",
     "--scene-size",
@@ -33,6 +34,7 @@ const BAKE: &[&str] = &[
     "32",
     "--horizon-levels",
     "3",
+    "--keep-raw",
 ];
 
 fn bake(out: &Path, extra: &[&str]) -> Command {
@@ -90,6 +92,7 @@ const DEEP: &[&str] = &[
     "11",
     "--tile-size",
     "32",
+    "--no-horizons",
 ];
 
 /// Ten `kill -9` at random moments of `cmd` (each on a fresh copy of `start`, or from nothing),
@@ -375,6 +378,10 @@ fn damages() -> Vec<(String, Option<serde_json::Value>)> {
         "products.horizon.near_px",
         "products.horizon.terrain_min_m",
         "products.mip.global_max_m",
+        "products.fourier.coefficients",
+        "products.fourier.azimuths",
+        "products.fourier.bytes_per_tile",
+        "products.fourier.terrain_max_m",
         "source.pixel_size_m",
         "format_version",
     ];
@@ -399,6 +406,7 @@ fn damages() -> Vec<(String, Option<serde_json::Value>)> {
         "products.mip.minmax_path",
         "products.mip.face_path",
         "products.horizon.path",
+        "products.fourier.path",
     ] {
         for v in [
             "../outside/{level}/{face}/{y}/{x}.exr",
@@ -433,6 +441,13 @@ fn damages() -> Vec<(String, Option<serde_json::Value>)> {
     d.push(("products.horizon.method".into(), Some(json!("magic"))));
     d.push(("products.horizon.levels".into(), Some(json!([200]))));
     d.push(("products.mip.precision".into(), Some(json!("f64"))));
+    d.push(("products.fourier.layout".into(), Some(json!("pyramid"))));
+    d.push(("products.fourier.encoding".into(), Some(json!("f8"))));
+    d.push(("products.fourier.sigma".into(), Some(json!("gauss"))));
+    d.push(("products.fourier.source".into(), Some(json!("magic"))));
+    d.push(("products.fourier.levels".into(), Some(json!([200]))));
+    d.push(("products.fourier.groups".into(), Some(json!([]))));
+    d.push(("products.fourier.max_error_deg".into(), Some(json!(-1))));
     // Chunked face pyramids: the pattern and the chunk size come together.
     d.push((
         "products.mip.face_chunk_path".into(),
@@ -505,7 +520,11 @@ fn damaged_manifests_are_refused_and_left_alone() {
         let before = snapshot(&dir);
         let d = dir.to_str().unwrap();
         // Reading and writing commands, one per case in turn.
-        let cmd: Vec<&str> = match i % 5 {
+        let cmd: Vec<&str> = match i % 6 {
+            5 => vec![
+                "query", "shadow", d, "--lat", "-89.9", "--lon", "0", "--level", "3", "--sun-az",
+                "10", "--sun-el", "3",
+            ],
             0 => vec!["info", d, "--json"],
             1 => vec!["query", "height", d, "--lat", "-89.9", "--lon", "0"],
             2 => vec![

@@ -28,3 +28,6 @@ mod store;
 
 // Horizon stiff and extreme cases: spikes, cones, cliffs, corner, pole, voids, seam, threads.
 mod horizon_cases;
+
+// Fourier pyramids: streamed and from raw maps, reconstruction, sun visibility, bad input.
+mod fourier;

@@ -295,7 +295,11 @@ impl Pyramid {
     pub fn encode(&self) -> Vec<u8> {
         let g = self.groups.len();
         let header = HEADER_BYTES + g * GROUP_BYTES;
-        let payload: usize = self.groups.iter().map(|gr| gr.res * gr.res * TEXEL_BYTES).sum();
+        let payload: usize = self
+            .groups
+            .iter()
+            .map(|gr| gr.res * gr.res * TEXEL_BYTES)
+            .sum();
         let mut b = Vec::with_capacity(header + payload + CHECKSUM_BYTES);
         b.extend_from_slice(MAGIC);
         b.extend_from_slice(&VERSION.to_le_bytes());
@@ -351,12 +355,14 @@ impl Pyramid {
             )
         };
         if bytes.len() < HEADER_BYTES + CHECKSUM_BYTES || &bytes[..8] != MAGIC {
-            return Err(bad("not a Penumbra Fourier pyramid (bad magic or too short)".into()));
+            return Err(bad(
+                "not a Penumbra Fourier pyramid (bad magic or too short)".into(),
+            ));
         }
         let (body, sum) = bytes.split_at(bytes.len() - CHECKSUM_BYTES);
         if blake3::hash(body).as_bytes() != sum {
             return Err(bad(
-                "checksum mismatch: the file is damaged or truncated".into(),
+                "checksum mismatch: the file is damaged or truncated".into()
             ));
         }
         let u32_at = |o: usize| u32::from_le_bytes(body[o..o + 4].try_into().expect("4 bytes"));
@@ -367,7 +373,11 @@ impl Pyramid {
                 "format version {version} (this penumbra reads {VERSION})"
             )));
         }
-        let (fn_, fa, k) = (u32_at(12) as usize, u32_at(16) as usize, u32_at(20) as usize);
+        let (fn_, fa, k) = (
+            u32_at(12) as usize,
+            u32_at(16) as usize,
+            u32_at(20) as usize,
+        );
         if fn_ != n || fa != azimuths {
             return Err(bad(format!(
                 "holds {fn_}-pixel tiles of {fa} azimuths, the manifest says {n} and {azimuths}"
@@ -400,8 +410,7 @@ impl Pyramid {
                 "highest horizon {max_horizon_deg} is not an angle"
             )));
         }
-        if g > MAX_GROUPS || (fully_lit && (g != 0 || k != 0)) || (!fully_lit && groups(k) != g)
-        {
+        if g > MAX_GROUPS || (fully_lit && (g != 0 || k != 0)) || (!fully_lit && groups(k) != g) {
             return Err(bad(format!(
                 "{g} groups do not hold {k} coefficients (at most {MAX_GROUPS} groups)"
             )));
@@ -417,7 +426,9 @@ impl Pyramid {
         if header != HEADER_BYTES + g * GROUP_BYTES {
             return Err(bad(format!("header length {header} for {g} groups")));
         }
-        let want: usize = (0..g).map(|i| layout.resolution(n, i).pow(2) * TEXEL_BYTES).sum();
+        let want: usize = (0..g)
+            .map(|i| layout.resolution(n, i).pow(2) * TEXEL_BYTES)
+            .sum();
         if payload != want || body.len() != header + payload {
             return Err(bad(format!(
                 "payload is {} bytes, {want} expected for {g} groups of {n}-pixel tiles ({})",
@@ -538,18 +549,7 @@ mod tests {
             *c = [x.sin() * 20.0, (x * 1.3).cos() * 3.0];
         }
         let valid: Vec<bool> = (0..n * n).map(|i| i % 17 != 3).collect();
-        Pyramid::build(
-            n,
-            360,
-            &coef,
-            k,
-            k,
-            &valid,
-            layout,
-            enc,
-            Sigma::None,
-            12.5,
-        )
+        Pyramid::build(n, 360, &coef, k, k, &valid, layout, enc, Sigma::None, 12.5)
     }
 
     #[test]
@@ -604,7 +604,10 @@ mod tests {
         for i in 0..b.len() {
             let mut d = b.clone();
             d[i] ^= 0x5a;
-            assert!(Pyramid::decode(&d, Path::new("t"), 8, 360).is_err(), "byte {i}");
+            assert!(
+                Pyramid::decode(&d, Path::new("t"), 8, 360).is_err(),
+                "byte {i}"
+            );
         }
         for len in [0, 10, 63, b.len() - 1] {
             assert!(Pyramid::decode(&b[..len], Path::new("t"), 8, 360).is_err());

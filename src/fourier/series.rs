@@ -132,9 +132,7 @@ impl Transform {
             self.fft
                 .process_with_scratch(&mut scratch.buf, &mut scratch.scratch[..need]);
         }
-        let factors: Vec<f64> = (0..k)
-            .map(|j| weight(j, a) * sigma.factor(j, k))
-            .collect();
+        let factors: Vec<f64> = (0..k).map(|j| weight(j, a) * sigma.factor(j, k)).collect();
         for i in 0..m {
             let bins = &scratch.buf[i * a..(i + 1) * a];
             for (j, o) in out[i * k..(i + 1) * k].iter_mut().enumerate() {

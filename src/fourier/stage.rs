@@ -188,9 +188,7 @@ impl Encoder {
             halo,
             radius_m,
             terrain_min_m,
-            sun_radius_deg: opts
-                .sun_distance_au
-                .map_or(0.0, super::sun::sun_radius_deg),
+            sun_radius_deg: opts.sun_distance_au.map_or(0.0, super::sun::sun_radius_deg),
             transform: Transform::new(a),
         }
     }
@@ -598,7 +596,11 @@ pub fn build_fourier(
         Start::UpToDate => {
             report.up_to_date = true;
             report.tiles_kept = report.tiles;
-            report.tiles_fully_lit = ts.products.fourier.as_ref().map_or(0, |f| f.tiles_fully_lit);
+            report.tiles_fully_lit = ts
+                .products
+                .fourier
+                .as_ref()
+                .map_or(0, |f| f.tiles_fully_lit);
             return Ok(report);
         }
         Start::Run(r) => r,

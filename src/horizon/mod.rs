@@ -20,7 +20,7 @@ pub use self::geometry::{compass_azimuth_deg, plane_azimuth, Context, Rect};
 pub use self::method::{horizons, horizons_reference_step, horizons_with, Method};
 pub use self::near::{DEFAULT_NEAR_PX, MAX_NEAR_PX};
 pub use self::stage::{
-    build_horizons, context_for, reach_rad, read_horizon_exr, terrain_range, tile_path, StreamedFourier, STAGE_BOTH, STAGE_FOURIER,
-    write_horizon_exr, HorizonOptions, HorizonPrecision, HorizonReport, Reach, AZIMUTH_CONVENTION,
-    PATTERN, STAGE,
+    build_horizons, context_for, reach_rad, read_horizon_exr, terrain_range, tile_path,
+    write_horizon_exr, HorizonOptions, HorizonPrecision, HorizonReport, Reach, StreamedFourier,
+    AZIMUTH_CONVENTION, PATTERN, STAGE, STAGE_BOTH, STAGE_FOURIER,
 };

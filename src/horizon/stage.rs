@@ -538,8 +538,8 @@ pub fn build_horizons(
             format!("{tmin} {tmax}").as_bytes(),
         ],
     );
-    let streamed = |f: &crate::fourier::FourierOptions, fully_lit: u64, bytes: u64| {
-        StreamedFourier {
+    let streamed =
+        |f: &crate::fourier::FourierOptions, fully_lit: u64, bytes: u64| StreamedFourier {
             coefficients: f.coefficients,
             layout: f.layout,
             encoding: f.encoding,
@@ -547,8 +547,7 @@ pub fn build_horizons(
             tiles_fully_lit: fully_lit,
             bytes_written: bytes,
             bytes_per_tile: crate::fourier::pyramid::file_bytes(n, f.coefficients, f.layout) as u64,
-        }
-    };
+        };
     let run = match runner::start(writer, spec, &run_key, Some(ts))? {
         Start::UpToDate => {
             let distances = match (&ts.products.fourier, &ts.products.horizon) {
@@ -556,7 +555,11 @@ pub fn build_horizons(
                 (_, Some(h)) => h.distances.clone(),
                 _ => Vec::new(),
             };
-            let lit = ts.products.fourier.as_ref().map_or(0, |f| f.tiles_fully_lit);
+            let lit = ts
+                .products
+                .fourier
+                .as_ref()
+                .map_or(0, |f| f.tiles_fully_lit);
             return Ok(HorizonReport {
                 out: dir.to_path_buf(),
                 levels,

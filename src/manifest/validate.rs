@@ -342,5 +342,125 @@ pub fn check(ts: &Tileset, path: &Path) -> Result<()> {
             b.radius_m,
         )?;
     }
+    if let Some(f) = &p.fourier {
+        fourier(path, ts, f)?;
+    }
+    Ok(())
+}
+
+fn fourier(path: &Path, ts: &Tileset, f: &crate::manifest::FourierProduct) -> Result<()> {
+    use crate::fourier::{pyramid, stage, Layout};
+    let (lay, b) = (&ts.layout, &ts.body);
+    pattern(
+        path,
+        "products.fourier.path",
+        &f.path,
+        &["fourier"],
+        TILE,
+        ".fhm",
+    )?;
+    if !(4..=4096).contains(&f.azimuths) {
+        return Err(bad(
+            path,
+            "products.fourier.azimuths",
+            format!("{} is outside 4..=4096", f.azimuths),
+        ));
+    }
+    let most = crate::fourier::max_coefficients(f.azimuths);
+    if !(1..=most).contains(&f.coefficients) {
+        return Err(bad(
+            path,
+            "products.fourier.coefficients",
+            format!("{} is outside 1..={most}", f.coefficients),
+        ));
+    }
+    let layout: Layout = f
+        .layout
+        .parse()
+        .map_err(|e: String| bad(path, "products.fourier.layout", e))?;
+    f.encoding
+        .parse::<crate::fourier::Encoding>()
+        .map_err(|e| bad(path, "products.fourier.encoding", e))?;
+    f.sigma
+        .parse::<crate::fourier::Sigma>()
+        .map_err(|e| bad(path, "products.fourier.sigma", e))?;
+    if let Some(&l) = f.levels.iter().find(|&&l| l >= lay.levels) {
+        return Err(bad(
+            path,
+            "products.fourier.levels",
+            format!("{l} is not a level of this tileset"),
+        ));
+    }
+    let n = lay.tile_size as usize;
+    if f.groups != stage::group_list(n, f.coefficients, layout) {
+        return Err(bad(
+            path,
+            "products.fourier.groups",
+            format!(
+                "do not describe {} coefficients of {n}-pixel tiles ({})",
+                f.coefficients, f.layout
+            ),
+        ));
+    }
+    let bytes = pyramid::file_bytes(n, f.coefficients, layout) as u64;
+    if f.bytes_per_tile != bytes {
+        return Err(bad(
+            path,
+            "products.fourier.bytes_per_tile",
+            format!("{} is not {bytes}", f.bytes_per_tile),
+        ));
+    }
+    if let Some(e) = f.max_error_deg {
+        within(path, "products.fourier.max_error_deg", e, 1e-9, 90.0)?;
+    }
+    if let Some(e) = f.min_sun_el_deg {
+        within(path, "products.fourier.min_sun_el_deg", e, -90.0, 90.0)?;
+    }
+    if let Some(r) = f.sun_radius_deg {
+        within(path, "products.fourier.sun_radius_deg", r, 0.0, 45.0)?;
+    }
+    if let Some(m) = &f.tile_coefficients {
+        if let Some((t, k)) = m.iter().find(|(_, &k)| k > f.coefficients) {
+            return Err(bad(
+                path,
+                "products.fourier.tile_coefficients",
+                format!(
+                    "tile {t} keeps {k} coefficients, more than {}",
+                    f.coefficients
+                ),
+            ));
+        }
+    }
+    if !matches!(f.source.as_str(), "raw" | "streamed") {
+        return Err(bad(
+            path,
+            "products.fourier.source",
+            format!("'{}' is not raw or streamed", f.source),
+        ));
+    }
+    if !matches!(f.horizon_method.as_str(), "fast" | "reference") {
+        return Err(bad(
+            path,
+            "products.fourier.horizon_method",
+            format!("'{}' is not fast or reference", f.horizon_method),
+        ));
+    }
+    if let Some(n) = f.horizon_near_px {
+        within(path, "products.fourier.horizon_near_px", n, 0.0, 1024.0)?;
+    }
+    within(
+        path,
+        "products.fourier.terrain_min_m",
+        f.terrain_min_m,
+        -b.radius_m,
+        b.radius_m,
+    )?;
+    within(
+        path,
+        "products.fourier.terrain_max_m",
+        f.terrain_max_m,
+        -b.radius_m,
+        b.radius_m,
+    )?;
     Ok(())
 }

@@ -289,10 +289,7 @@ pub fn horizon(
         (Profile::Series(_), Some(f)) => f.azimuths,
         (Profile::Series(_), None) => opts.azimuths,
     };
-    let (u, v) = (
-        lay.projection.s_to_u(s),
-        lay.projection.s_to_u(tt),
-    );
+    let (u, v) = (lay.projection.s_to_u(s), lay.projection.s_to_u(tt));
     let mut rows: Vec<(f64, f64, f64)> = (0..azimuths)
         .map(|k| {
             let phi = plane_azimuth(k, azimuths);
@@ -300,7 +297,11 @@ pub fn horizon(
                 Profile::Samples(e) => e[k] as f64,
                 Profile::Series(_) => prof.at(phi),
             };
-            (compass_azimuth_deg(px.tile.face, u, v, phi), e, phi.to_degrees())
+            (
+                compass_azimuth_deg(px.tile.face, u, v, phi),
+                e,
+                phi.to_degrees(),
+            )
         })
         .collect();
     rows.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -346,7 +347,9 @@ pub struct ShadowAnswer {
     /// The sun's apparent radius (degrees) and the distance it comes from (AU).
     pub sun_radius_deg: f64,
     pub sun_distance_au: f64,
-    /// The horizon's elevation at the sun's azimuth, degrees.
+    /// The horizon's elevation at the sun's azimuth, degrees, floored at the tangent to the
+    /// sphere of the lowest terrain (as the pyramids store it: the body is there, mapped or
+    /// not).
     pub horizon_deg: f64,
     /// Fraction of the sun's disc above the horizon, in [0, 1].
     pub lit_fraction: f64,
@@ -448,7 +451,19 @@ pub fn shadow(
             }
         }
     }
-    let (prof, source, method, _, _) = profile(&store, dir, &px, from, opts)?;
+    let (mut prof, source, method, _, _) = profile(&store, dir, &px, from, opts)?;
+    // Raw and computed horizons are floored as the pyramids are: below the tangent to the
+    // sphere of the lowest terrain lies the body, mapped or not (−90° means no mapped terrain).
+    if let (Profile::Samples(e), Some((tmin, _))) = (&mut prof, terrain_range(ts)) {
+        let r = ts.body.radius_m;
+        let floor = -((r + tmin) / (r + (px.height as f64).max(tmin)))
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees();
+        for v in e.iter_mut() {
+            *v = v.max(floor as f32);
+        }
+    }
     let horizon = |p: f64| prof.at(p);
     let lit = sun::lit_fraction(&frame, &sun, model, &horizon);
     let d = lay.st_to_dir(px.tile.face, s, t);

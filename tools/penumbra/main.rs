@@ -14,8 +14,8 @@ use penumbra::dem::Resampling;
 use penumbra::fourier::sun::Model;
 use penumbra::fourier::{Encoding, FourierOptions, Layout, Sigma};
 use penumbra::horizon::{HorizonOptions, HorizonPrecision, Method};
-use penumbra::query::HorizonFrom;
 use penumbra::mip::{MipOptions, Precision};
+use penumbra::query::HorizonFrom;
 use penumbra::scene::SceneSpec;
 use penumbra::tileio::TileCompression;
 use penumbra::tiling::{Prefilter, TileOptions};
@@ -200,7 +200,7 @@ enum QueryCommand {
         sun_el: f64,
         /// The body's distance from the Sun (AU; default: the body preset's), which sets the
         /// sun's apparent radius.
-        #[arg(long)]
+        #[arg(long, allow_hyphen_values = true)]
         sun_distance_au: Option<f64>,
         /// Horizon source: fourier, raw, reference or auto (as for `query horizon`).
         #[arg(long, default_value = "fourier")]
@@ -231,14 +231,14 @@ struct FourierFlags {
     sigma: Sigma,
     /// Choose K per tile: the fewest coefficients (up to --coefficients) whose truncation
     /// error (99th percentile of per-pixel RMS) is within this many degrees.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     max_error_deg: Option<f64>,
     /// Store tiles whose horizon never rises above this sun elevation (minus the sun's radius)
     /// as fully lit, without coefficients.
     #[arg(long, allow_hyphen_values = true)]
     min_sun_el: Option<f64>,
     /// The body's distance from the Sun in AU for --min-sun-el (default: the body preset's).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     sun_distance_au: Option<f64>,
 }
 
@@ -426,8 +426,8 @@ struct BakeArgs {
     fourier: FourierFlags,
 }
 
-/// Horizon level of the embedded scene's default bake: 4 tiles of 512² at 106 m/px, about
-/// 1.5 minutes of horizons on 2 cores.
+/// Horizon level of the embedded scene's default bake (or its finest level when it has fewer):
+/// 4 tiles of 512² at 106 m/px, about 1.5 minutes of horizons on 2 cores.
 const EMBEDDED_HORIZON_LEVEL: u8 = 6;
 
 fn body_arg(b: &BodyArgs) -> Result<BodyChoice> {
@@ -451,6 +451,7 @@ fn run(cli: Cli) -> Result<()> {
                 tile: a.flags.options(),
                 mip: MipOptions::default(),
                 horizon: HorizonOptions::default(),
+                horizon_level_at_most: None,
             };
             let input = Input::Dem {
                 path: a.dem.clone(),
@@ -469,7 +470,10 @@ fn run(cli: Cli) -> Result<()> {
             let levels = match (&a.horizon_levels, &a.dem) {
                 _ if a.no_horizons => None,
                 (Some(l), _) => Some(l.clone()),
-                (None, None) => Some(vec![EMBEDDED_HORIZON_LEVEL]),
+                (None, None) => {
+                    plan.horizon_level_at_most = Some(EMBEDDED_HORIZON_LEVEL);
+                    Some(Vec::new())
+                }
                 (None, Some(_)) => None,
             };
             if let Some(levels) = levels {
@@ -477,8 +481,7 @@ fn run(cli: Cli) -> Result<()> {
                 plan.horizon.levels = Some(levels);
                 plan.horizon.compression = a.flags.compression;
                 if !a.no_fourier {
-                    plan.horizon.fourier =
-                        Some(a.fourier.options(None, a.flags.max_output_gib));
+                    plan.horizon.fourier = Some(a.fourier.options(None, a.flags.max_output_gib));
                     plan.horizon.keep_raw = a.keep_raw;
                 }
             }
@@ -534,9 +537,8 @@ fn run(cli: Cli) -> Result<()> {
                 max_margin_px: flags.max_margin_px,
                 max_output_gib,
                 near_px: flags.near_px,
-                fourier: fourier.then(|| {
-                    fourier_flags.options(None, penumbra::runner::DEFAULT_MAX_OUTPUT_GIB)
-                }),
+                fourier: fourier
+                    .then(|| fourier_flags.options(None, penumbra::runner::DEFAULT_MAX_OUTPUT_GIB)),
                 keep_raw,
             };
             let t0 = std::time::Instant::now();

@@ -8,11 +8,11 @@ use anyhow::Result;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use penumbra::bake::BakeReport;
+use penumbra::fourier::FourierReport;
 use penumbra::horizon::HorizonReport;
 use penumbra::manifest::Tileset;
 use penumbra::mip::MipReport;
 use penumbra::query::HeightAnswer;
-use penumbra::fourier::FourierReport;
 use penumbra::query::{HorizonAnswer, MipAnswer, ShadowAnswer};
 
 /// indicatif bars on stderr; nothing when quiet or when stderr is not a terminal.
@@ -252,7 +252,14 @@ pub fn print_shadow_answer(a: &ShadowAnswer, json: bool) -> Result<()> {
     writeln!(
         out,
         "pixel centre {:.6}°, {:.6}° (level {}, face {}, tile {}/{}, pixel {},{}), height {:.1} m",
-        a.lat_deg, a.lon_deg, a.level, a.face, a.tile[0], a.tile[1], a.pixel[0], a.pixel[1],
+        a.lat_deg,
+        a.lon_deg,
+        a.level,
+        a.face,
+        a.tile[0],
+        a.tile[1],
+        a.pixel[0],
+        a.pixel[1],
         a.height_m
     )?;
     writeln!(
