@@ -347,6 +347,9 @@ fn up_to_date_only_when_the_files_are_there() {
         "360",
         "--compression",
         "zip",
+        // As the bake ran it: streamed pyramids and the raw maps.
+        "--fourier",
+        "--keep-raw",
         "--json",
     ]);
     let j: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
