@@ -222,6 +222,35 @@ fn killed_horizon_resumes_to_the_uninterrupted_bytes() {
 }
 
 #[test]
+fn killed_streamed_fourier_resumes_to_the_uninterrupted_bytes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let base = tmp.path().join("base");
+    deep_tileset(&base);
+    // Both products at once, and a per-tile K that a resumed run reads back from kept files.
+    kill_trials(
+        "horizon --fourier",
+        Some(&base),
+        &|out| {
+            let mut c = penumbra_bin();
+            c.args([
+                "horizon",
+                out.to_str().unwrap(),
+                "--levels",
+                "9",
+                "--azimuths",
+                "64",
+                "--fourier",
+                "--keep-raw",
+                "--max-error-deg",
+                "0.5",
+            ]);
+            c
+        },
+        0x0f0e_0d0c_0b0a_0908,
+    );
+}
+
+#[test]
 fn a_second_writer_is_refused_at_once_and_the_first_wins() {
     let tmp = tempfile::tempdir().unwrap();
     let reference = tmp.path().join("reference");
