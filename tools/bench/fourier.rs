@@ -193,7 +193,11 @@ fn sun_dir(f: &Frame, phi: f64, el_deg: f64) -> Vec3 {
         c * f.ua[2] + s * f.va[2],
     ];
     let wu = w[0] * f.up[0] + w[1] * f.up[1] + w[2] * f.up[2];
-    let t = [w[0] - wu * f.up[0], w[1] - wu * f.up[1], w[2] - wu * f.up[2]];
+    let t = [
+        w[0] - wu * f.up[0],
+        w[1] - wu * f.up[1],
+        w[2] - wu * f.up[2],
+    ];
     let tn = (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt();
     let (se, ce) = el_deg.to_radians().sin_cos();
     [
@@ -210,7 +214,10 @@ fn sun_dir(f: &Frame, phi: f64, el_deg: f64) -> Vec3 {
 /// hidden (0) — what Exact returns there up to rounding (~1e-16) — at a fraction of the cost.
 fn lit_exact(f: &Frame, phi: f64, el: f64, r: f64, hor: &dyn Fn(f64) -> f64) -> f64 {
     let s = sun_dir(f, phi, el);
-    let sun = Sun { dir: s, radius_deg: r };
+    let sun = Sun {
+        dir: s,
+        radius_deg: r,
+    };
     if r > 0.0 && el.abs() < 80.0 && std::env::var_os("PENUMBRA_BENCH_EXACT_ALWAYS").is_none() {
         let cr = |a: Vec3, b: Vec3| -> Vec3 {
             [
@@ -294,7 +301,11 @@ fn real_cases(data: &Path, block: usize, say: &dyn Fn(String)) -> Result<(Vec<Ca
     let dems: [(&str, &str, &'static str); 6] = [
         ("LDEM_4 (Moon)", "lola_ldem4/LDEM_4.LBL", "moon"),
         ("MEGDR (Mars)", "mola_megt90n000cb/megt90n000cb.lbl", "mars"),
-        ("Gale (MOLA 463 m)", "mola_gale_128ppd_crop/gale-mola.bin", "mars"),
+        (
+            "Gale (MOLA 463 m)",
+            "mola_gale_128ppd_crop/gale-mola.bin",
+            "mars",
+        ),
         (
             "Shoemaker (LOLA 5 m)",
             "lola_shoemaker_1k/Shoemaker_final_adj_5mpp_surf_1k.tif",
@@ -470,7 +481,10 @@ fn stiff_cases(block: usize) -> Vec<Case> {
         s,
         o,
         grid(&|x, _| if x >= edge { 1000.0 } else { 0.0 }),
-        (0..n).step_by(8).flat_map(|j| [(mid - 1, j), (mid, j)]).collect(),
+        (0..n)
+            .step_by(8)
+            .flat_map(|j| [(mid - 1, j), (mid, j)])
+            .collect(),
         "a 1 km step across the block at its centre column, flat on both sides, 20 m/px".into(),
     ));
     // Spike: one pixel 2 km high on flat ground at the block's centre.
@@ -506,7 +520,11 @@ fn stiff_cases(block: usize) -> Vec<Case> {
                 300.0 / (r * r * r)
             }) as f32
         }),
-        vec![(mid, mid), (mid + (rr as usize), mid), (mid, mid - (rr as usize))],
+        vec![
+            (mid, mid),
+            (mid + (rr as usize), mid),
+            (mid, mid - (rr as usize)),
+        ],
         format!(
             "a bowl of radius {:.1} km, 1 km deep, with a 300 m rim (parabolic inside, (R/r)³ \
              outside), 50 m/px",
@@ -804,7 +822,8 @@ fn measure(t: &Truth, hz: &Horizon, constant_too: bool) -> Measured {
                             rec.fill(0.0);
                             for (k, c) in buf.iter().enumerate() {
                                 let (cr, ci) = (c[0] as f32, c[1] as f32);
-                                let (cs, sn) = (&cos_t[k * a..(k + 1) * a], &sin_t[k * a..(k + 1) * a]);
+                                let (cs, sn) =
+                                    (&cos_t[k * a..(k + 1) * a], &sin_t[k * a..(k + 1) * a]);
                                 for m in 0..a {
                                     rec[m] += cr * cs[m] - ci * sn[m];
                                 }
@@ -887,9 +906,8 @@ fn classic(t: &Truth, m: usize) -> Vec<f32> {
     t.floored
         .par_chunks(a)
         .flat_map_iter(|row| {
-            (0..m).map(move |q| {
-                half::f16::from_f64(interp(row, TAU * q as f64 / m as f64)).to_f32()
-            })
+            (0..m)
+                .map(move |q| half::f16::from_f64(interp(row, TAU * q as f64 / m as f64)).to_f32())
         })
         .collect()
 }
@@ -981,8 +999,7 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
             size: n,
             height: (0..n * n)
                 .map(|p| {
-                    case.ctx.heights
-                        [(case.rect.y0 + p / n) * case.ctx.width + case.rect.x0 + p % n]
+                    case.ctx.heights[(case.rect.y0 + p / n) * case.ctx.width + case.rect.x0 + p % n]
                 })
                 .collect(),
             mask: vec![0; n * n],
@@ -1131,7 +1148,10 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
                 .max_by(|x, y| x.share_pct.total_cmp(&y.share_pct))
                 .expect("variants");
             checks.push(Check {
-                check: format!("compression time share ≤ 10 % of the horizon time, {}", c.name),
+                check: format!(
+                    "compression time share ≤ 10 % of the horizon time, {}",
+                    c.name
+                ),
                 value: format!(
                     "{paper}: {:.2} % (worst variant {}: {:.2} %)",
                     f.share_pct, worst.variant, worst.share_pct
@@ -1189,7 +1209,11 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
     notes.push(format!("Whole run: {wall:.0} s on {threads} threads."));
 
     // Averages over the real DEMs.
-    let real_names: Vec<&str> = cases.iter().filter(|c| c.real).map(|c| c.name.as_str()).collect();
+    let real_names: Vec<&str> = cases
+        .iter()
+        .filter(|c| c.real)
+        .map(|c| c.name.as_str())
+        .collect();
     let summary: Vec<Row> = variants
         .iter()
         .map(|v| {
@@ -1243,7 +1267,15 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
             "notes": notes,
         }));
     }
-    print_tables(&case_rows, &summary, &rows, &checks, &notes, &paper, args.markdown);
+    print_tables(
+        &case_rows,
+        &summary,
+        &rows,
+        &checks,
+        &notes,
+        &paper,
+        args.markdown,
+    );
     Ok(())
 }
 
@@ -1380,6 +1412,9 @@ fn print_tables(
     }
 }
 
+/// The x value of a row in one panel.
+type XOf = Box<dyn Fn(&Row) -> f64>;
+
 /// Two panels by hand: RMS error (log) against bytes per tile (log) and against compression
 /// time per tile (log), one marker per variant (means over the real DEMs).
 fn svg(summary: &[Row], dems: &[&str]) -> String {
@@ -1394,7 +1429,11 @@ fn svg(summary: &[Row], dems: &[&str]) -> String {
          viewBox=\"0 0 {width} {height}\" font-family=\"sans-serif\" font-size=\"12\">\n\
          <rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n"
     );
-    let ys: Vec<f64> = summary.iter().map(|r| r.rms_deg).filter(|v| *v > 0.0).collect();
+    let ys: Vec<f64> = summary
+        .iter()
+        .map(|r| r.rms_deg)
+        .filter(|v| *v > 0.0)
+        .collect();
     let (ylo, yhi) = log_range(&ys);
     let colour = |r: &Row| -> &'static str {
         match r.variant.split(' ').next().unwrap_or("") {
@@ -1405,8 +1444,11 @@ fn svg(summary: &[Row], dems: &[&str]) -> String {
             _ => "#000000",
         }
     };
-    let panels: [(&str, Box<dyn Fn(&Row) -> f64>); 2] = [
-        ("bytes per 256² tile", Box::new(|r: &Row| r.bytes_per_tile as f64)),
+    let panels: [(&str, XOf); 2] = [
+        (
+            "bytes per 256² tile",
+            Box::new(|r: &Row| r.bytes_per_tile as f64),
+        ),
         (
             "compression time per 256² tile (ms)",
             Box::new(|r: &Row| r.compress_ms_per_tile),
@@ -1414,14 +1456,17 @@ fn svg(summary: &[Row], dems: &[&str]) -> String {
     ];
     for (pi, (xlabel, xf)) in panels.iter().enumerate() {
         let x0 = pi as f64 * (ml + pw + mr) + ml;
-        let xs: Vec<f64> = summary.iter().map(|r| xf(r)).filter(|v| *v > 0.0).collect();
+        let xs: Vec<f64> = summary.iter().map(xf).filter(|v| *v > 0.0).collect();
         let (xlo, xhi) = log_range(&xs);
         let px = |v: f64| x0 + (v.log10() - xlo) / (xhi - xlo) * pw;
         let py = |v: f64| mt + ph - (v.log10() - ylo) / (yhi - ylo) * ph;
         s += &format!(
             "<rect x=\"{x0}\" y=\"{mt}\" width=\"{pw}\" height=\"{ph}\" fill=\"none\" stroke=\"#333\"/>\n"
         );
-        for (lo, hi, f, horiz) in [(xlo, xhi, &px as &dyn Fn(f64) -> f64, false), (ylo, yhi, &py, true)] {
+        for (lo, hi, f, horiz) in [
+            (xlo, xhi, &px as &dyn Fn(f64) -> f64, false),
+            (ylo, yhi, &py, true),
+        ] {
             let mut e = lo.floor() as i32;
             while (e as f64) <= hi.ceil() {
                 for m in 1..10 {
@@ -1436,12 +1481,21 @@ fn svg(summary: &[Row], dems: &[&str]) -> String {
                     if horiz {
                         s += &format!("<line x1=\"{x0}\" x2=\"{}\" y1=\"{c:.1}\" y2=\"{c:.1}\" stroke=\"{stroke}\"/>\n", x0 + pw);
                         if major || (hi - lo) < 1.5 && (m == 2 || m == 5) {
-                            s += &format!("<text x=\"{}\" y=\"{:.1}\" text-anchor=\"end\">{}</text>\n", x0 - 4.0, c + 4.0, tick(v));
+                            s += &format!(
+                                "<text x=\"{}\" y=\"{:.1}\" text-anchor=\"end\">{}</text>\n",
+                                x0 - 4.0,
+                                c + 4.0,
+                                tick(v)
+                            );
                         }
                     } else {
                         s += &format!("<line x1=\"{c:.1}\" x2=\"{c:.1}\" y1=\"{mt}\" y2=\"{}\" stroke=\"{stroke}\"/>\n", mt + ph);
                         if major || (hi - lo) < 1.5 && (m == 2 || m == 5) {
-                            s += &format!("<text x=\"{c:.1}\" y=\"{}\" text-anchor=\"middle\">{}</text>\n", mt + ph + 16.0, tick(v));
+                            s += &format!(
+                                "<text x=\"{c:.1}\" y=\"{}\" text-anchor=\"middle\">{}</text>\n",
+                                mt + ph + 16.0,
+                                tick(v)
+                            );
                         }
                     }
                 }
@@ -1475,7 +1529,12 @@ fn svg(summary: &[Row], dems: &[&str]) -> String {
     // Legend.
     let ly = mt + ph + mb + 10.0;
     let mut lx = ml;
-    for (name, c) in [("K = 4", "#1b9e77"), ("K = 8", "#d95f02"), ("K = 16", "#7570b3"), ("K = 32", "#e7298a")] {
+    for (name, c) in [
+        ("K = 4", "#1b9e77"),
+        ("K = 8", "#d95f02"),
+        ("K = 16", "#7570b3"),
+        ("K = 32", "#e7298a"),
+    ] {
         s += &format!("<rect x=\"{lx}\" y=\"{}\" width=\"12\" height=\"12\" fill=\"{c}\"/><text x=\"{}\" y=\"{}\">{name}</text>\n", ly, lx + 16.0, ly + 11.0);
         lx += 80.0;
     }
@@ -1504,11 +1563,18 @@ fn svg(summary: &[Row], dems: &[&str]) -> String {
             lit_nan: 0,
         };
         s += &marker(&fake, lx + 6.0, ly2 + 6.0, "#555");
-        s += &format!("<text x=\"{}\" y=\"{}\">{label}</text>\n", lx + 16.0, ly2 + 11.0);
+        s += &format!(
+            "<text x=\"{}\" y=\"{}\">{label}</text>\n",
+            lx + 16.0,
+            ly2 + 11.0
+        );
         lx += 130.0;
     }
     let ly3 = ly2 + 24.0;
-    s += &format!("<text x=\"{ml}\" y=\"{}\">filled: plain (no taper); hollow: Lanczos σ taper</text>\n", ly3 + 11.0);
+    s += &format!(
+        "<text x=\"{ml}\" y=\"{}\">filled: plain (no taper); hollow: Lanczos σ taper</text>\n",
+        ly3 + 11.0
+    );
     let classic_row = |n: usize| Row {
         case: String::new(),
         real: true,
@@ -1525,8 +1591,14 @@ fn svg(summary: &[Row], dems: &[&str]) -> String {
         lit_mae_constant: None,
         lit_nan: 0,
     };
-    s += &marker(&classic_row(8), ml + 366.0, ly3 + 6.0, "#000");
-    s += &format!("<text x=\"{}\" y=\"{}\">classic 8 / 12 samples (f16, labelled)</text>\n", ml + 380.0, ly3 + 11.0);
+    let legend_cross = marker(&classic_row(8), ml + 366.0, ly3 + 6.0, "#000");
+    s += legend_cross.split("<text").next().unwrap_or("");
+    s += "\n";
+    s += &format!(
+        "<text x=\"{}\" y=\"{}\">classic 8 / 12 samples (f16, labelled)</text>\n",
+        ml + 380.0,
+        ly3 + 11.0
+    );
     let ly4 = ly3 + 24.0;
     s += &format!(
         "<text x=\"{ml}\" y=\"{}\" fill=\"#555\">DEMs: {}</text>\n",
@@ -1557,7 +1629,8 @@ fn marker(r: &Row, x: f64, y: f64, c: &str) -> String {
     }
     let hollow = r.variant.ends_with("lanczos");
     let fill = if hollow { "white" } else { c };
-    let style = format!("fill=\"{fill}\" stroke=\"{c}\" stroke-width=\"1.5\" fill-opacity=\"0.85\"");
+    let style =
+        format!("fill=\"{fill}\" stroke=\"{c}\" stroke-width=\"1.5\" fill-opacity=\"0.85\"");
     let multires = r.variant.contains("multires");
     let snorm = r.variant.contains("snorm16");
     match (multires, snorm) {
