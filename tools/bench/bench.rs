@@ -93,6 +93,39 @@ pub enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Error against bytes and compression time of Fourier-compressed horizon maps (issue 10):
+    /// K ∈ {4, 8, 16, 32} × f16/snorm16 × full/multires × plain/Lanczos and classic 8- and
+    /// 12-sample maps, on a block of each shared real DEM and on synthetic stiff cases (cliff,
+    /// spike, crater rim, pole, cube corner); horizon RMS/p99/max, shadow pixel error rate,
+    /// lit-fraction error, bytes and compression time per 256² tile; an SVG of error vs cost.
+    Fourier {
+        /// Folder holding the shared DEMs.
+        #[arg(long, default_value = "../shared/data")]
+        data: PathBuf,
+        /// Observer block side (pixels); 128 keeps the whole run near 10 minutes on 2 cores
+        /// (bytes and times are reported per 256² tile whatever the block).
+        #[arg(long, default_value_t = 128)]
+        block: usize,
+        /// Azimuths of the raw maps.
+        #[arg(long, default_value_t = 360)]
+        azimuths: usize,
+        /// Pixels per case for the lit-fraction error (fixed pseudo-random subset).
+        #[arg(long, default_value_t = 512)]
+        lit_pixels: usize,
+        /// Where to write the figure.
+        #[arg(long, default_value = "docs/fourier-error.svg")]
+        svg: PathBuf,
+        /// A 64² block and at most 64 lit-fraction pixels, to try things quickly.
+        #[arg(long)]
+        quick: bool,
+        /// Only the cases whose name contains this (case-insensitive), e.g. gale or spike.
+        #[arg(long)]
+        only: Option<String>,
+        #[arg(long)]
+        markdown: bool,
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 struct Case {
@@ -327,6 +360,30 @@ pub fn run(cmd: BenchCommand, quiet: bool) -> Result<()> {
             json,
         } => run_horizon(
             &peers, &data, azimuths, size, ref_pixels, markdown, json, quiet,
+        ),
+        BenchCommand::Fourier {
+            data,
+            block,
+            azimuths,
+            lit_pixels,
+            svg,
+            quick,
+            only,
+            markdown,
+            json,
+        } => crate::fourier::run(
+            crate::fourier::Args {
+                data,
+                block,
+                azimuths,
+                markdown,
+                json,
+                svg,
+                quick,
+                lit_pixels,
+                only,
+            },
+            quiet,
         ),
     }
 }
@@ -991,11 +1048,11 @@ fn run_mip(
 // bench horizon
 
 /// Earth's mean radius: r.horizon always uses it, so every tool sees the same curvature.
-const EARTH_RADIUS_M: f64 = 6_371_008.8;
+pub(crate) const EARTH_RADIUS_M: f64 = 6_371_008.8;
 /// Pixel spacing of the peers' synthetic UTM DEMs.
 const PEER_PIXEL_M: f64 = 30.0;
 /// Fritsch et al.'s Mars whole-body bake: 800 m/px, ≈150 CPU-hours.
-const MARS_RADIUS_M: f64 = 3_396_190.0;
+pub(crate) const MARS_RADIUS_M: f64 = 3_396_190.0;
 const MARS_PIXEL_M: f64 = 800.0;
 const MARS_HMIN_M: f64 = -8_200.0;
 const MARS_HMAX_M: f64 = 21_200.0;
@@ -1057,7 +1114,7 @@ fn read_npy_f32(path: &Path) -> Result<(usize, usize, Vec<f32>)> {
 }
 
 /// `n` distinct pixels of a w × h raster drawn by a fixed-seed xorshift.
-fn random_pixels(w: usize, h: usize, n: usize) -> Vec<(usize, usize)> {
+pub(crate) fn random_pixels(w: usize, h: usize, n: usize) -> Vec<(usize, usize)> {
     let n = n.min(w * h);
     let mut state = 0x2545_F491_4F6C_DD1Du64;
     let mut seen = std::collections::HashSet::new();

@@ -4,6 +4,7 @@
 //! no benchmark drivers.
 
 mod bench;
+mod fourier;
 
 use std::process::ExitCode;
 
