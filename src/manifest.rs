@@ -174,6 +174,8 @@ pub struct FourierProduct {
     pub encoding: String,
     /// `none` or `lanczos`.
     pub sigma: String,
+    /// How reduced groups were made: `mean` or `fit` (docs/fourier.md).
+    pub reduce: String,
     /// The groups of a tile holding `coefficients`.
     pub groups: Vec<FourierGroup>,
     /// Bytes of a tile's file holding `coefficients`.

@@ -12,7 +12,7 @@ pub mod pyramid;
 pub mod series;
 pub mod sun;
 
-pub use self::pyramid::{Encoding, Layout, Pyramid};
+pub use self::pyramid::{Encoding, Layout, Pyramid, Reduce};
 pub use self::series::{evaluate, max_coefficients, Sigma, Transform};
 pub mod stage;
 

@@ -113,6 +113,157 @@ impl std::str::FromStr for Encoding {
     }
 }
 
+/// How a reduced group's texels are made from the full-resolution coefficients.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Reduce {
+    /// The mean of the finer pixels' coefficients (the coefficients of the averaged horizon).
+    #[default]
+    Mean,
+    /// The texels whose bilinear interpolation at the pixel centres, as a GPU samples them, is
+    /// closest to the pixels' coefficients in least squares (by Parseval: the smallest RMS
+    /// horizon error over azimuths that texels at this resolution can give).
+    Fit,
+}
+
+impl Reduce {
+    pub fn name(self) -> &'static str {
+        match self {
+            Reduce::Mean => "mean",
+            Reduce::Fit => "fit",
+        }
+    }
+}
+
+impl std::str::FromStr for Reduce {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "mean" => Ok(Reduce::Mean),
+            "fit" => Ok(Reduce::Fit),
+            _ => Err(format!("unknown reduction '{s}' (mean, fit)")),
+        }
+    }
+}
+
+/// The r × n least-squares projection P = (UᵀU)⁻¹Uᵀ of the 1-D linear interpolation U (n × r)
+/// from r texels to the centres of n pixels, clamp to edge, as a GPU samples: texel values
+/// P·x interpolate to the closest values to x.
+fn fit_projection(n: usize, r: usize) -> Vec<f64> {
+    // U as (texel a, weight a, texel b, weight b) per pixel.
+    let last = r as i64 - 1;
+    let u: Vec<(usize, f64, usize, f64)> = (0..n)
+        .map(|i| {
+            let x = (i as f64 + 0.5) * r as f64 / n as f64 - 0.5;
+            let x0 = x.floor();
+            let f = x - x0;
+            let a = (x0 as i64).clamp(0, last) as usize;
+            let b = (x0 as i64 + 1).clamp(0, last) as usize;
+            (a, 1.0 - f, b, f)
+        })
+        .collect();
+    // M = UᵀU (r × r) and Uᵀ (r × n).
+    let mut m = vec![0.0f64; r * r];
+    let mut ut = vec![0.0f64; r * n];
+    for (i, &(a, wa, b, wb)) in u.iter().enumerate() {
+        m[a * r + a] += wa * wa;
+        m[a * r + b] += wa * wb;
+        m[b * r + a] += wb * wa;
+        m[b * r + b] += wb * wb;
+        ut[a * n + i] += wa;
+        ut[b * n + i] += wb;
+    }
+    // Solve M P = Uᵀ by Gauss-Jordan with partial pivoting (M is symmetric positive definite
+    // when every texel is reached, which n ≥ r guarantees; r ≤ n is small).
+    let mut p = ut;
+    for col in 0..r {
+        let piv = (col..r)
+            .max_by(|&x, &y| m[x * r + col].abs().total_cmp(&m[y * r + col].abs()))
+            .expect("rows");
+        if piv != col {
+            for k in 0..r {
+                m.swap(col * r + k, piv * r + k);
+            }
+            for k in 0..n {
+                p.swap(col * n + k, piv * n + k);
+            }
+        }
+        let d = m[col * r + col];
+        for k in 0..r {
+            m[col * r + k] /= d;
+        }
+        for k in 0..n {
+            p[col * n + k] /= d;
+        }
+        for row in 0..r {
+            if row != col {
+                let f = m[row * r + col];
+                if f != 0.0 {
+                    for k in 0..r {
+                        m[row * r + k] -= f * m[col * r + k];
+                    }
+                    for k in 0..n {
+                        p[row * n + k] -= f * p[col * n + k];
+                    }
+                }
+            }
+        }
+    }
+    p
+}
+
+/// Replace the mean texels `vals` of group `g` (res² texels × 4 slots) by the least-squares
+/// fit of the pixels' coefficients (no-data pixels take their texel's mean).
+#[allow(clippy::too_many_arguments)]
+fn fit_group(
+    vals: &mut [[f32; 2]],
+    coef: &[[f32; 2]],
+    k_full: usize,
+    k: usize,
+    g: usize,
+    n: usize,
+    res: usize,
+    valid: &[bool],
+) {
+    let p = fit_projection(n, res);
+    let mut fine = vec![0.0f64; n * n];
+    let mut half = vec![0.0f64; n * res];
+    for c in 0..GROUP {
+        let kk = g * GROUP + c;
+        if kk >= k {
+            break;
+        }
+        for part in 0..2 {
+            for j in 0..n {
+                let ty = (2 * j + 1) * res / (2 * n);
+                for i in 0..n {
+                    fine[j * n + i] = if valid[j * n + i] {
+                        coef[(j * n + i) * k_full + kk][part] as f64
+                    } else {
+                        let tx = (2 * i + 1) * res / (2 * n);
+                        vals[(ty * res + tx) * GROUP + c][part] as f64
+                    };
+                }
+            }
+            // Along x: half[j][t] = Σ_i fine[j][i] P[t][i]; along y: T[s][t] = Σ_j P[s][j] half[j][t].
+            for j in 0..n {
+                let row = &fine[j * n..(j + 1) * n];
+                for t in 0..res {
+                    let pr = &p[t * n..(t + 1) * n];
+                    half[j * res + t] = row.iter().zip(pr).map(|(a, b)| a * b).sum();
+                }
+            }
+            for s in 0..res {
+                let pr = &p[s * n..(s + 1) * n];
+                for t in 0..res {
+                    let v: f64 = (0..n).map(|j| pr[j] * half[j * res + t]).sum();
+                    vals[(s * res + t) * GROUP + c][part] = v as f32;
+                }
+            }
+        }
+    }
+}
+
 /// Number of groups holding `k` coefficients.
 pub fn groups(k: usize) -> usize {
     k.div_ceil(GROUP)
@@ -189,6 +340,7 @@ impl Pyramid {
         layout: Layout,
         encoding: Encoding,
         sigma: Sigma,
+        reduce: Reduce,
         max_horizon_deg: f32,
     ) -> Pyramid {
         assert!(k >= 1 && k <= k_full);
@@ -230,6 +382,9 @@ impl Pyramid {
                     }
                 })
                 .collect();
+            if reduce == Reduce::Fit && res < n {
+                fit_group(&mut vals, coef, k_full, k, g, n, res, valid);
+            }
             let scale = match encoding {
                 Encoding::F16 => 1.0,
                 Encoding::Snorm16 => {
@@ -549,7 +704,19 @@ mod tests {
             *c = [x.sin() * 20.0, (x * 1.3).cos() * 3.0];
         }
         let valid: Vec<bool> = (0..n * n).map(|i| i % 17 != 3).collect();
-        Pyramid::build(n, 360, &coef, k, k, &valid, layout, enc, Sigma::None, 12.5)
+        Pyramid::build(
+            n,
+            360,
+            &coef,
+            k,
+            k,
+            &valid,
+            layout,
+            enc,
+            Sigma::None,
+            Reduce::Mean,
+            12.5,
+        )
     }
 
     #[test]
@@ -585,6 +752,7 @@ mod tests {
             Layout::Multires,
             Encoding::F16,
             Sigma::None,
+            Reduce::Mean,
             0.0,
         );
         assert_eq!(
@@ -595,6 +763,58 @@ mod tests {
         assert_eq!(p.groups[3].coef[0], [31.5, 12.0]);
         // Group 1, texel (1, 0): pixels (2..4) × (0..2): indices 2, 3, 10, 11 → 6.5.
         assert_eq!(p.groups[1].coef[GROUP], [6.5, 4.0]);
+    }
+
+    #[test]
+    fn fitted_texels_interpolate_closer_than_means() {
+        // A smooth ramp of coefficients across the tile: bilinear sampling of the fitted
+        // texels reproduces it almost exactly (interior), the means are off by the ramp's
+        // curvature and the clamped edges.
+        let n = 32;
+        let k = 8;
+        let coef: Vec<[f32; 2]> = (0..n * n * k)
+            .map(|i| {
+                let p = i / k;
+                let (x, y) = ((p % n) as f32, (p / n) as f32);
+                [(x * 0.3).sin() * 5.0 + y * 0.1, (y * 0.2).cos() * 3.0]
+            })
+            .collect();
+        let valid = vec![true; n * n];
+        let err = |reduce| {
+            let p = Pyramid::build(
+                n,
+                64,
+                &coef,
+                k,
+                k,
+                &valid,
+                Layout::Multires,
+                Encoding::F16,
+                Sigma::None,
+                reduce,
+                0.0,
+            );
+            let mut c = Vec::new();
+            let mut e = 0.0f64;
+            for j in 0..n {
+                for i in 0..n {
+                    p.coefficients_at(i as f64 + 0.5, j as f64 + 0.5, &mut c);
+                    for s in 4..k {
+                        let w = coef[(j * n + i) * k + s];
+                        e += (c[s][0] - w[0] as f64).powi(2) + (c[s][1] - w[1] as f64).powi(2);
+                    }
+                }
+            }
+            (e / (n * n) as f64).sqrt()
+        };
+        let (mean, fit) = (err(Reduce::Mean), err(Reduce::Fit));
+        assert!(fit < 0.7 * mean, "fit {fit} vs mean {mean}");
+        // The projection reproduces texel values that are already a bilinear image.
+        let p = fit_projection(16, 4);
+        for t in 0..4 {
+            let s: f64 = (0..16).map(|i| p[t * 16 + i]).sum();
+            assert!((s - 1.0).abs() < 1e-9, "row {t} sums to {s}");
+        }
     }
 
     #[test]

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::pyramid::{self, Encoding, Layout, Pyramid, GROUP};
+use super::pyramid::{self, Encoding, Layout, Pyramid, Reduce, GROUP};
 use super::series::{max_coefficients, Scratch, Sigma, Transform};
 use crate::error::{Error, Result};
 use crate::layout::TileId;
@@ -36,6 +36,8 @@ pub struct FourierOptions {
     pub layout: Layout,
     pub encoding: Encoding,
     pub sigma: Sigma,
+    /// How reduced groups are made from the pixels' coefficients (multires).
+    pub reduce: Reduce,
     /// Choose K per tile: the fewest whose truncation error (99th percentile over the tile's
     /// pixels of the RMS over azimuths) is at most this many degrees.
     pub max_error_deg: Option<f64>,
@@ -57,6 +59,7 @@ impl Default for FourierOptions {
             layout: Layout::Multires,
             encoding: Encoding::F16,
             sigma: Sigma::None,
+            reduce: Reduce::Mean,
             max_error_deg: None,
             min_sun_el_deg: None,
             sun_distance_au: None,
@@ -295,6 +298,7 @@ impl Encoder {
             layout,
             enc,
             sigma,
+            self.opts.reduce,
             max_h as f32,
         );
         let bytes = p.file_bytes() as u64;
@@ -443,6 +447,7 @@ pub fn product(
         layout: opts.layout.name().into(),
         encoding: opts.encoding.name().into(),
         sigma: opts.sigma.name().into(),
+        reduce: opts.reduce.name().into(),
         groups: group_list(n, opts.coefficients, opts.layout),
         bytes_per_tile: pyramid::file_bytes(n, opts.coefficients, opts.layout) as u64,
         floor: FLOOR.into(),

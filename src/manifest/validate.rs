@@ -384,6 +384,9 @@ fn fourier(path: &Path, ts: &Tileset, f: &crate::manifest::FourierProduct) -> Re
     f.sigma
         .parse::<crate::fourier::Sigma>()
         .map_err(|e| bad(path, "products.fourier.sigma", e))?;
+    f.reduce
+        .parse::<crate::fourier::pyramid::Reduce>()
+        .map_err(|e| bad(path, "products.fourier.reduce", e))?;
     if let Some(&l) = f.levels.iter().find(|&&l| l >= lay.levels) {
         return Err(bad(
             path,

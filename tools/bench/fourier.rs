@@ -17,6 +17,7 @@ use serde::Serialize;
 use penumbra::cube::{Face, Vec3};
 use penumbra::fourier::pyramid::file_bytes;
 use penumbra::fourier::stage::{Encoder, FourierOptions};
+use penumbra::fourier::Reduce;
 use penumbra::fourier::sun::{lit_fraction, sun_distance_au, sun_radius_deg, Frame, Model, Sun};
 use penumbra::fourier::{evaluate, Encoding, Layout, Pyramid, Sigma};
 use penumbra::horizon::{horizons_with, Context as HzContext, Method, Rect, DEFAULT_NEAR_PX};
@@ -57,6 +58,7 @@ enum Variant {
         encoding: Encoding,
         layout: Layout,
         sigma: Sigma,
+        reduce: Reduce,
     },
     Classic(usize),
 }
@@ -73,9 +75,18 @@ impl Variant {
                             encoding,
                             layout,
                             sigma,
+                            reduce: Reduce::Mean,
                         });
                     }
                 }
+                // Beyond the paper: reduced groups fitted for bilinear sampling.
+                v.push(Variant::Fourier {
+                    k,
+                    encoding,
+                    layout: Layout::Multires,
+                    sigma: Sigma::None,
+                    reduce: Reduce::Fit,
+                });
             }
         }
         v.push(Variant::Classic(8));
@@ -90,15 +101,17 @@ impl Variant {
                 encoding,
                 layout,
                 sigma,
+                reduce,
             } => format!(
-                "F{k} {} {} {}",
+                "F{k} {} {} {}{}",
                 layout.name(),
                 encoding.name(),
                 if sigma == Sigma::None {
                     "plain"
                 } else {
                     "lanczos"
-                }
+                },
+                if reduce == Reduce::Fit { " fit" } else { "" }
             ),
             Variant::Classic(n) => format!("classic {n}"),
         }
@@ -111,6 +124,7 @@ impl Variant {
             encoding: Encoding::F16,
             layout: Layout::Multires,
             sigma: Sigma::None,
+            reduce: Reduce::Mean,
         }
     }
 
@@ -1041,12 +1055,14 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
                     encoding,
                     layout,
                     sigma,
+                    reduce,
                 } => {
                     let opts = FourierOptions {
                         coefficients: k,
                         layout,
                         encoding,
                         sigma,
+                        reduce,
                         ..Default::default()
                     };
                     let enc =
@@ -1118,6 +1134,7 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
         encoding: Encoding::F16,
         layout: Layout::Multires,
         sigma: Sigma::None,
+        reduce: Reduce::Mean,
     }
     .name();
     let find = |c: &str, v: &str| rows.iter().find(|r| r.case == c && r.variant == v);
@@ -1572,7 +1589,7 @@ fn svg(summary: &[Row], dems: &[&str]) -> String {
     }
     let ly3 = ly2 + 24.0;
     s += &format!(
-        "<text x=\"{ml}\" y=\"{}\">filled: plain (no taper); hollow: Lanczos σ taper</text>\n",
+        "<text x=\"{ml}\" y=\"{}\">filled: plain; hollow: Lanczos σ taper; dot: --reduce fit</text>\n",
         ly3 + 11.0
     );
     let classic_row = |n: usize| Row {
@@ -1591,12 +1608,12 @@ fn svg(summary: &[Row], dems: &[&str]) -> String {
         lit_mae_constant: None,
         lit_nan: 0,
     };
-    let legend_cross = marker(&classic_row(8), ml + 366.0, ly3 + 6.0, "#000");
+    let legend_cross = marker(&classic_row(8), ml + 420.0, ly3 + 6.0, "#000");
     s += legend_cross.split("<text").next().unwrap_or("");
     s += "\n";
     s += &format!(
         "<text x=\"{}\" y=\"{}\">classic 8 / 12 samples (f16, labelled)</text>\n",
-        ml + 380.0,
+        ml + 434.0,
         ly3 + 11.0
     );
     let ly4 = ly3 + 24.0;
@@ -1626,6 +1643,15 @@ fn marker(r: &Row, x: f64, y: f64, c: &str) -> String {
             x + 8.0,
             y - 6.0
         );
+    }
+    // Fitted reduction: the layout's marker with a black dot in it.
+    if let Some(base) = r.variant.strip_suffix(" fit") {
+        let plain = Row {
+            variant: base.to_string(),
+            ..r.clone()
+        };
+        return marker(&plain, x, y, c)
+            + &format!("<circle cx=\"{x:.1}\" cy=\"{:.1}\" r=\"1.8\" fill=\"#000\"/>\n", y + 0.5);
     }
     let hollow = r.variant.ends_with("lanczos");
     let fill = if hollow { "white" } else { c };

@@ -12,7 +12,7 @@ use penumbra::body::Body;
 use penumbra::cube::Projection;
 use penumbra::dem::Resampling;
 use penumbra::fourier::sun::Model;
-use penumbra::fourier::{Encoding, FourierOptions, Layout, Sigma};
+use penumbra::fourier::{Encoding, FourierOptions, Layout, Reduce, Sigma};
 use penumbra::horizon::{HorizonOptions, HorizonPrecision, Method};
 use penumbra::mip::{MipOptions, Precision};
 use penumbra::query::HorizonFrom;
@@ -229,6 +229,10 @@ struct FourierFlags {
     /// none, or lanczos σ-factors against Gibbs ringing.
     #[arg(long, default_value = "none")]
     sigma: Sigma,
+    /// How multires groups are reduced: mean (the finer pixels' mean, as in the paper) or fit
+    /// (least squares for bilinear sampling: lower error at the same size).
+    #[arg(long, default_value = "mean")]
+    reduce: Reduce,
     /// Choose K per tile: the fewest coefficients (up to --coefficients) whose truncation
     /// error (99th percentile of per-pixel RMS) is within this many degrees.
     #[arg(long, allow_hyphen_values = true)]
@@ -250,6 +254,7 @@ impl FourierFlags {
             layout: self.layout,
             encoding: self.encoding,
             sigma: self.sigma,
+            reduce: self.reduce,
             max_error_deg: self.max_error_deg,
             min_sun_el_deg: self.min_sun_el,
             sun_distance_au: self.sun_distance_au,
