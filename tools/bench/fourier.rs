@@ -17,8 +17,8 @@ use serde::Serialize;
 use penumbra::cube::{Face, Vec3};
 use penumbra::fourier::pyramid::file_bytes;
 use penumbra::fourier::stage::{Encoder, FourierOptions};
-use penumbra::fourier::Reduce;
 use penumbra::fourier::sun::{lit_fraction, sun_distance_au, sun_radius_deg, Frame, Model, Sun};
+use penumbra::fourier::Reduce;
 use penumbra::fourier::{evaluate, Encoding, Layout, Pyramid, Sigma};
 use penumbra::horizon::{horizons_with, Context as HzContext, Method, Rect, DEFAULT_NEAR_PX};
 use penumbra::tileio::HeightTile;
@@ -1651,7 +1651,10 @@ fn marker(r: &Row, x: f64, y: f64, c: &str) -> String {
             ..r.clone()
         };
         return marker(&plain, x, y, c)
-            + &format!("<circle cx=\"{x:.1}\" cy=\"{:.1}\" r=\"1.8\" fill=\"#000\"/>\n", y + 0.5);
+            + &format!(
+                "<circle cx=\"{x:.1}\" cy=\"{:.1}\" r=\"1.8\" fill=\"#000\"/>\n",
+                y + 0.5
+            );
     }
     let hollow = r.variant.ends_with("lanczos");
     let fill = if hollow { "white" } else { c };
