@@ -79,6 +79,7 @@ pub fn start(
                 .filter(|p| p.recorded_key(ts).is_some())
                 .all(|&p| writer.verify(p))
         {
+            writer.discard_stage(spec.name, key)?;
             return Ok(Start::UpToDate);
         }
     }

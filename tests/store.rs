@@ -251,6 +251,30 @@ fn killed_streamed_fourier_resumes_to_the_uninterrupted_bytes() {
 }
 
 #[test]
+fn an_up_to_date_stage_clears_what_a_kill_after_its_commit_left() {
+    // A kill between a commit's renames and its clean-up leaves the committed run's marker in
+    // staging; the next run of that stage finds its output up to date and clears it.
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("t");
+    let o = out.to_str().unwrap();
+    ok(&[BAKE, &["--out", o]].concat());
+    let ts = penumbra::manifest::Tileset::load(&out).unwrap();
+    let key = ts.products.mip.unwrap().run_key;
+    let stale = out.join(".penumbra/staging/mip");
+    std::fs::create_dir_all(&stale).unwrap();
+    std::fs::write(stale.join("run.json"), format!("{{\"run_key\":\"{key}\"}}")).unwrap();
+    // A staged run of another key is an interrupted run to resume: it stays.
+    let other = out.join(".penumbra/staging/fourier");
+    std::fs::create_dir_all(&other).unwrap();
+    std::fs::write(other.join("run.json"), br#"{"run_key":"another"}"#).unwrap();
+    let r = run(&["mip", o, "--json"]);
+    let j: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    assert_eq!(j["up_to_date"], true);
+    assert!(!stale.exists(), "the committed run's staging is left");
+    assert!(other.join("run.json").exists());
+}
+
+#[test]
 fn a_second_writer_is_refused_at_once_and_the_first_wins() {
     let tmp = tempfile::tempdir().unwrap();
     let reference = tmp.path().join("reference");

@@ -129,6 +129,21 @@ impl Writer {
         })
     }
 
+    /// Remove what a run of stage `name` with `run_key` left in staging once that run's
+    /// output is committed (a kill between the commit's renames and its clean-up leaves the
+    /// run marker behind). Staging of a run with another key is kept for its resume.
+    pub fn discard_stage(&self, name: &str, run_key: &str) -> Result<()> {
+        let root = self.state().join("staging").join(name);
+        let same = fsio::read_capped(&root.join(RUN), 1 << 16, "a run marker")
+            .ok()
+            .and_then(|b| serde_json::from_slice::<RunMarker>(&b).ok())
+            .is_some_and(|m| m.run_key == run_key);
+        if same {
+            remove_tree(&root)?;
+        }
+        Ok(())
+    }
+
     /// The staging folder of stage `name` for a run with `run_key`: kept (resume) when an
     /// interrupted run of the same key left it, else made afresh.
     pub fn stage(&mut self, name: &str, run_key: &str) -> Result<Staging> {
