@@ -21,6 +21,7 @@ pub mod progress;
 pub mod query;
 pub mod runner;
 pub mod scene;
+pub mod shadow;
 pub mod tileio;
 pub mod tileset;
 pub mod tiling;

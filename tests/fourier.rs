@@ -550,3 +550,145 @@ fn bake_makes_pyramids_of_the_embedded_scene_by_default() {
     ]));
     assert!((0.0..=1.0).contains(&a["lit_fraction"].as_f64().unwrap()));
 }
+
+#[test]
+fn tile_shadow_images_from_pyramids_and_raw_maps_agree() {
+    let tmp = tempfile::tempdir().unwrap();
+    // Level 7 of 64-px tiles is 333 m/px: the scene is about 60 px across the pole there.
+    let out = tmp.path().join("tiles");
+    let o = out.to_str().unwrap().to_string();
+    json(&run(&[
+        "bake",
+        "--out",
+        &o,
+        "--scene-size",
+        "1024",
+        "--levels",
+        "8",
+        "--tile-size",
+        "64",
+        "--horizon-levels",
+        "7",
+        "--keep-raw",
+        "--json",
+    ]));
+    // The tile holding the pole.
+    let q = json(&run(&[
+        "query", "height", &o, "--lat", "-89.95", "--lon", "0", "--level", "7", "--json",
+    ]));
+    let tile = format!(
+        "{}/{}/{}",
+        q["face"].as_str().unwrap(),
+        q["tile"][1],
+        q["tile"][0]
+    );
+    let images = |from: &str| -> (serde_json::Value, Vec<u8>, Vec<u8>) {
+        let lit = tmp.path().join(format!("lit-{from}.png"));
+        let rel = tmp.path().join(format!("relief-{from}.png"));
+        let r = json(&run(&[
+            "shadow",
+            &o,
+            "--level",
+            "7",
+            "--tile",
+            &tile,
+            "--sun-lat",
+            "-2",
+            "--sun-lon",
+            "45",
+            "--from",
+            from,
+            "--out",
+            lit.to_str().unwrap(),
+            "--relief",
+            rel.to_str().unwrap(),
+            "--json",
+        ]));
+        // Grey where there is data (R = G = B), the no-data colour elsewhere: keep the red channel.
+        let red = |p: &Path| -> image::GrayImage {
+            let im = image::open(p).unwrap().to_rgb8();
+            image::GrayImage::from_fn(im.width(), im.height(), |x, y| {
+                let px = im.get_pixel(x, y).0;
+                image::Luma([if px[0] == px[1] && px[1] == px[2] {
+                    px[0]
+                } else {
+                    0
+                }])
+            })
+        };
+        let l = red(&lit);
+        let rl = red(&rel);
+        assert_eq!((l.width(), l.height()), (64, 64));
+        assert_eq!((rl.width(), rl.height()), (64, 64));
+        (r, l.into_raw(), rl.into_raw())
+    };
+    let (rf, lf, _) = images("fourier");
+    let (rr, lr, relief) = images("raw");
+    let total = |r: &serde_json::Value| {
+        [
+            "lit_pixels",
+            "dark_pixels",
+            "partial_pixels",
+            "no_data_pixels",
+        ]
+        .iter()
+        .map(|k| r[k].as_u64().unwrap())
+        .sum::<u64>()
+    };
+    assert_eq!((total(&rf), total(&rr)), (4096, 4096));
+    // A low sun (about 2° at the pole): both shadowed and lit pixels.
+    assert!(
+        rr["dark_pixels"].as_u64().unwrap() > 0 && rr["lit_pixels"].as_u64().unwrap() > 0,
+        "{rr}"
+    );
+    // Pyramids and raw maps agree on the lit/shadowed decision almost everywhere.
+    let data = rr["lit_pixels"].as_u64().unwrap()
+        + rr["dark_pixels"].as_u64().unwrap()
+        + rr["partial_pixels"].as_u64().unwrap();
+    let differ = lf
+        .iter()
+        .zip(&lr)
+        .filter(|(a, b)| (**a >= 128) != (**b >= 128))
+        .count();
+    assert!(
+        (differ as f64) <= 0.1 * data as f64,
+        "{differ} of {data} pixels differ between fourier and raw"
+    );
+    // Shadowed pixels are dark in the relief (ambient only).
+    for (l, r) in lr.iter().zip(&relief) {
+        if *l == 0 {
+            assert!(*r <= 26, "a shadowed pixel is {r}/255 in the relief");
+        }
+    }
+    // Bad input: exit 2, no image written.
+    let lit = tmp.path().join("bad.png");
+    let l = lit.to_str().unwrap();
+    for (level, t, sun_lat, needle) in [
+        ("7", "nz/1", "-2", "FACE/Y/X"),
+        ("7", "qq/1/1", "-2", "FACE/Y/X"),
+        ("7", "nz/0/0", "-2", "has no tile"),
+        ("7", tile.as_str(), "95", "--sun-lat"),
+        // The parent of the pole's tile exists at level 6 but has no horizons.
+        ("6", "nz/31/32", "-2", "level 6 has no"),
+    ] {
+        let a = vec![
+            "shadow",
+            &o,
+            "--level",
+            level,
+            "--tile",
+            t,
+            "--sun-lat",
+            sun_lat,
+            "--sun-lon",
+            "0",
+            "--out",
+            l,
+        ];
+        let out = run(&a);
+        let e = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{a:?}: {e}");
+        assert!(e.contains(needle), "{a:?}: {e}");
+        assert!(!lit.exists());
+    }
+}

@@ -111,6 +111,41 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Shadows of one tile for a sun over a sub-solar point: the lit fraction of the sun's disc
+    /// per pixel (grey PNG) and a shaded relief with those shadows, from the horizon products.
+    Shadow {
+        /// Tileset folder.
+        dir: PathBuf,
+        /// Tile level.
+        #[arg(long)]
+        level: u8,
+        /// The tile: FACE/Y/X (e.g. nz/31/32; faces px, nx, py, ny, pz, nz).
+        #[arg(long)]
+        tile: String,
+        /// Sub-solar latitude, degrees.
+        #[arg(long, allow_hyphen_values = true)]
+        sun_lat: f64,
+        /// Sub-solar east longitude, degrees.
+        #[arg(long, allow_hyphen_values = true)]
+        sun_lon: f64,
+        /// The body's distance from the Sun (AU; default: the body preset's).
+        #[arg(long, allow_hyphen_values = true)]
+        sun_distance_au: Option<f64>,
+        /// Horizons from: fourier (the pyramids) or raw (the stored maps).
+        #[arg(long, default_value = "fourier")]
+        from: penumbra::shadow::HorizonSource,
+        /// Disc model: constant (the paper's cheapest), segment, slices or exact.
+        #[arg(long, default_value = "constant")]
+        model: Model,
+        /// Lit-fraction image to write (PNG, white = fully lit).
+        #[arg(long)]
+        out: PathBuf,
+        /// Also write a shaded relief with the shadows here (PNG).
+        #[arg(long)]
+        relief: Option<PathBuf>,
+        #[arg(long)]
+        json: bool,
+    },
     /// Describe a tileset.
     Info {
         /// Tileset folder.
@@ -435,6 +470,27 @@ struct BakeArgs {
 /// 4 tiles of 512² at 106 m/px, about 1.5 minutes of horizons on 2 cores.
 const EMBEDDED_HORIZON_LEVEL: u8 = 6;
 
+/// A tile given as FACE/Y/X at `level`.
+fn parse_tile(level: u8, s: &str) -> Result<penumbra::layout::TileId> {
+    let parts: Vec<&str> = s.split('/').collect();
+    let bad = || {
+        anyhow::anyhow!(
+            "--tile {s}: give FACE/Y/X, e.g. nz/31/32 (faces px, nx, py, ny, pz, nz; Y and X \
+             the tile's row and column at --level)"
+        )
+    };
+    if parts.len() != 3 {
+        return Err(bad());
+    }
+    let face = (0..6)
+        .filter_map(penumbra::cube::Face::from_index)
+        .find(|f| f.name() == parts[0])
+        .ok_or_else(bad)?;
+    let y: u32 = parts[1].parse().map_err(|_| bad())?;
+    let x: u32 = parts[2].parse().map_err(|_| bad())?;
+    Ok(penumbra::layout::TileId { level, face, x, y })
+}
+
 fn body_arg(b: &BodyArgs) -> Result<BodyChoice> {
     // An unknown name or a bad radius is refused before any file is read.
     if b.body.is_some() || b.radius_m.is_some() {
@@ -561,6 +617,42 @@ fn run(cli: Cli) -> Result<()> {
             let opts = flags.options(levels, max_output_gib);
             let report = penumbra::fourier::build_fourier(&dir, &opts, &progress)?;
             output::print_fourier(&report, t0.elapsed().as_secs_f64(), json)?;
+        }
+        Command::Shadow {
+            dir,
+            level,
+            tile,
+            sun_lat,
+            sun_lon,
+            sun_distance_au,
+            from,
+            model,
+            out,
+            relief,
+            json,
+        } => {
+            let id = parse_tile(level, &tile)?;
+            let t0 = std::time::Instant::now();
+            let sh = penumbra::shadow::tile_shadows(
+                &dir,
+                id,
+                sun_lat,
+                sun_lon,
+                sun_distance_au,
+                from,
+                model,
+            )?;
+            penumbra::shadow::write_grey_png(&out, sh.n, &sh.lit)?;
+            if let Some(r) = &relief {
+                penumbra::shadow::write_grey_png(r, sh.n, &sh.relief)?;
+            }
+            output::print_shadows(
+                &sh,
+                &out,
+                relief.as_deref(),
+                t0.elapsed().as_secs_f64(),
+                json,
+            )?;
         }
         Command::Info { dir, json } => output::print_info(&dir, json)?,
         Command::Query(QueryCommand::Height {

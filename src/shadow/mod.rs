@@ -1,0 +1,305 @@
+//! Shadows of a whole tile for one sun: the lit fraction of the sun's disc at every pixel and a
+//! shaded relief with those shadows, the picture a user looks at first. The sun is fixed by its
+//! sub-solar point (a direction in the body frame, at infinity), so its local elevation varies
+//! across the tile. Today from the horizon products (raw maps or Fourier pyramids); the
+//! ray-marching methods of Jung et al., Timokhin & Mikhaylyuk and Sakalauskas join here.
+
+use std::path::Path;
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::cube::{self, dot, Vec3};
+use crate::error::{Error, Result};
+use crate::fourier::sun::{self, Frame, Model, Sun};
+use crate::horizon::stage::terrain_range;
+use crate::layout::TileId;
+use crate::tileset::Store;
+
+/// Where the horizon comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum HorizonSource {
+    /// The stored raw maps, linearly interpolated in azimuth.
+    Raw,
+    /// The Fourier pyramids, sampled at each pixel centre as a GPU would.
+    Fourier,
+}
+
+impl std::str::FromStr for HorizonSource {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "raw" => Ok(HorizonSource::Raw),
+            "fourier" => Ok(HorizonSource::Fourier),
+            _ => Err(format!("unknown horizon source '{s}' (raw, fourier)")),
+        }
+    }
+}
+
+/// One tile's shadows.
+#[derive(Clone, Debug, Serialize)]
+pub struct TileShadows {
+    pub tile: TileId,
+    pub n: usize,
+    /// Lit fraction per interior pixel, row-major (NaN: no data).
+    #[serde(skip)]
+    pub lit: Vec<f32>,
+    /// Lambertian shading of the terrain times the lit fraction, with 10 % ambient, in [0, 1]
+    /// (NaN: no data).
+    #[serde(skip)]
+    pub relief: Vec<f32>,
+    /// Sun elevation range over the tile's pixels (degrees) and its radius.
+    pub sun_elevation_deg: [f64; 2],
+    pub sun_radius_deg: f64,
+    /// Pixels fully lit, fully shadowed, partly lit, without data.
+    pub lit_pixels: u64,
+    pub dark_pixels: u64,
+    pub partial_pixels: u64,
+    pub no_data_pixels: u64,
+}
+
+/// Shadows of `tile` for a sun over (sun_lat, sun_lon) (degrees), from the horizons of
+/// `from`, with the disc `model`.
+pub fn tile_shadows(
+    dir: &Path,
+    tile: TileId,
+    sun_lat: f64,
+    sun_lon: f64,
+    sun_distance_au: Option<f64>,
+    from: HorizonSource,
+    model: Model,
+) -> Result<TileShadows> {
+    if !(sun_lat.is_finite() && (-90.0..=90.0).contains(&sun_lat)) {
+        return Err(Error::param(
+            "sun_lat",
+            format!("{sun_lat} is outside −90..=90 degrees"),
+        ));
+    }
+    if !(sun_lon.is_finite() && (-180.0..=360.0).contains(&sun_lon)) {
+        return Err(Error::param(
+            "sun_lon",
+            format!("{sun_lon} is outside −180..=360 degrees"),
+        ));
+    }
+    let store = Store::open(dir)?;
+    let ts = store.manifest();
+    if !ts.has_tile(tile) {
+        return Err(Error::usage(format!(
+            "{} has no tile {tile}: `penumbra info {}` lists the coverage",
+            dir.display(),
+            dir.display()
+        )));
+    }
+    let dist = sun_distance_au
+        .or_else(|| sun::sun_distance_au(&ts.body.name))
+        .ok_or_else(|| {
+            Error::param(
+                "sun_distance_au",
+                format!(
+                    "is needed: the body '{}' has no distance from the Sun on record; give it in AU",
+                    ts.body.name
+                ),
+            )
+        })?;
+    if !(dist.is_finite() && (0.01..=1.0e4).contains(&dist)) {
+        return Err(Error::param(
+            "sun_distance_au",
+            format!("{dist} is outside 0.01..=10000 AU"),
+        ));
+    }
+    let lay = ts.layout;
+    let n = lay.tile_size as usize;
+    let levels = match from {
+        HorizonSource::Raw => ts.products.horizon.as_ref().map(|h| h.levels.clone()),
+        HorizonSource::Fourier => ts.products.fourier.as_ref().map(|f| f.levels.clone()),
+    };
+    let name = match from {
+        HorizonSource::Raw => "raw horizon maps (`penumbra horizon`)",
+        HorizonSource::Fourier => {
+            "Fourier pyramids (`penumbra horizon --fourier` or `penumbra fourier`)"
+        }
+    };
+    match levels {
+        None => return Err(store.missing(&format!("tileset has no {name}: make them first"))),
+        Some(l) if !l.contains(&tile.level) => {
+            return Err(Error::usage(format!(
+                "level {} has no {name} in {} (levels {l:?})",
+                tile.level,
+                dir.display()
+            )))
+        }
+        Some(_) => {}
+    }
+    let raw = match from {
+        HorizonSource::Raw => Some(store.horizon(tile)?),
+        HorizonSource::Fourier => None,
+    };
+    let pyramid = match from {
+        HorizonSource::Fourier => {
+            let p = store.fourier(tile)?;
+            if p.fully_lit {
+                return Err(Error::usage(format!(
+                    "tile {tile} is stored as fully lit (no horizon kept): rebuild the pyramids \
+                     without --min-sun-el to render it"
+                )));
+            }
+            Some(p)
+        }
+        HorizonSource::Raw => None,
+    };
+    let heights = store.height(tile)?.expect("covered");
+    let halo = lay.halo as usize;
+    let r = ts.body.radius_m;
+    let tmin = terrain_range(ts).map_or(0.0, |t| t.0);
+    let s_dir = cube::latlon_to_dir(sun_lat.to_radians(), sun_lon.to_radians());
+    let radius_deg = sun::sun_radius_deg(dist);
+    let a = raw.as_ref().map_or(0, |e| e.len() / (n * n));
+    // Position of a stored pixel (halo included) in metres, body frame.
+    let size = heights.size as i64;
+    let pos = |i: i64, j: i64| -> Option<Vec3> {
+        let (x, y) = (i + halo as i64, j + halo as i64);
+        if !(0..size).contains(&x) || !(0..size).contains(&y) {
+            return None;
+        }
+        let h = heights.height[y as usize * heights.size + x as usize];
+        if !h.is_finite() {
+            return None;
+        }
+        let d = lay.pixel_dir(tile, i, j);
+        let k = r + h as f64;
+        Some([d[0] * k, d[1] * k, d[2] * k])
+    };
+    let rows: Vec<(Vec<f32>, Vec<f32>, [f64; 2])> = (0..n)
+        .into_par_iter()
+        .map(|j| {
+            let mut lit = vec![f32::NAN; n];
+            let mut relief = vec![f32::NAN; n];
+            let mut el_range = [f64::INFINITY, f64::NEG_INFINITY];
+            let mut coef = Vec::new();
+            let mut samples = vec![0.0f32; a];
+            for i in 0..n {
+                let Some(p) = pos(i as i64, j as i64) else {
+                    continue;
+                };
+                let (s, t) = lay.pixel_st(tile, i as i64, j as i64);
+                let (u, v) = (lay.projection.s_to_u(s), lay.projection.s_to_u(t));
+                let frame = Frame::at(tile.face, u, v);
+                let h0 = heights.height[(j + halo) * heights.size + i + halo] as f64;
+                let floor = -((r + tmin) / (r + h0.max(tmin)))
+                    .clamp(-1.0, 1.0)
+                    .acos()
+                    .to_degrees();
+                let sun = Sun {
+                    dir: s_dir,
+                    radius_deg,
+                };
+                let el = frame.elevation_deg(s_dir);
+                el_range[0] = el_range[0].min(el);
+                el_range[1] = el_range[1].max(el);
+                let f = if let Some(pyr) = &pyramid {
+                    pyr.coefficients_at(i as f64 + 0.5, j as f64 + 0.5, &mut coef);
+                    let c = &coef;
+                    sun::lit_fraction(&frame, &sun, model, &|phi| {
+                        crate::fourier::evaluate(c, phi).max(floor)
+                    })
+                } else {
+                    let e = raw.as_ref().expect("raw");
+                    for (k, v) in samples.iter_mut().enumerate() {
+                        *v = e[k * n * n + j * n + i].max(floor as f32);
+                    }
+                    let sm = &samples;
+                    sun::lit_fraction(&frame, &sun, model, &|phi| {
+                        let x = phi.rem_euclid(std::f64::consts::TAU) / std::f64::consts::TAU
+                            * a as f64;
+                        let k = (x.floor() as usize).min(a - 1);
+                        let w = x - k as f64;
+                        sm[k] as f64 * (1.0 - w) + sm[(k + 1) % a] as f64 * w
+                    })
+                };
+                lit[i] = f as f32;
+                // Lambert from the central differences of the pixel positions (halo: one
+                // pixel beyond the tile's edge is there).
+                let shade = match (
+                    pos(i as i64 + 1, j as i64),
+                    pos(i as i64 - 1, j as i64),
+                    pos(i as i64, j as i64 - 1),
+                    pos(i as i64, j as i64 + 1),
+                ) {
+                    (Some(e), Some(w), Some(nn), Some(ss)) => {
+                        let a3 = [e[0] - w[0], e[1] - w[1], e[2] - w[2]];
+                        let b3 = [nn[0] - ss[0], nn[1] - ss[1], nn[2] - ss[2]];
+                        let mut nrm = [
+                            a3[1] * b3[2] - a3[2] * b3[1],
+                            a3[2] * b3[0] - a3[0] * b3[2],
+                            a3[0] * b3[1] - a3[1] * b3[0],
+                        ];
+                        if dot(nrm, p) < 0.0 {
+                            nrm = [-nrm[0], -nrm[1], -nrm[2]];
+                        }
+                        let l = dot(nrm, nrm).sqrt();
+                        if l > 0.0 {
+                            (dot(nrm, s_dir) / l).max(0.0)
+                        } else {
+                            0.0
+                        }
+                    }
+                    _ => dot(frame.up, s_dir).max(0.0),
+                };
+                relief[i] = (0.1 + 0.9 * shade * f) as f32;
+            }
+            (lit, relief, el_range)
+        })
+        .collect();
+    let mut out = TileShadows {
+        tile,
+        n,
+        lit: Vec::with_capacity(n * n),
+        relief: Vec::with_capacity(n * n),
+        sun_elevation_deg: [f64::INFINITY, f64::NEG_INFINITY],
+        sun_radius_deg: radius_deg,
+        lit_pixels: 0,
+        dark_pixels: 0,
+        partial_pixels: 0,
+        no_data_pixels: 0,
+    };
+    for (l, rl, e) in rows {
+        out.sun_elevation_deg[0] = out.sun_elevation_deg[0].min(e[0]);
+        out.sun_elevation_deg[1] = out.sun_elevation_deg[1].max(e[1]);
+        for &v in &l {
+            match v {
+                v if v.is_nan() => out.no_data_pixels += 1,
+                v if v >= 1.0 => out.lit_pixels += 1,
+                v if v <= 0.0 => out.dark_pixels += 1,
+                _ => out.partial_pixels += 1,
+            }
+        }
+        out.lit.extend(l);
+        out.relief.extend(rl);
+    }
+    Ok(out)
+}
+
+/// Colour of pixels without data in the images (dark blue: neither lit nor shadowed).
+pub const NO_DATA_RGB: [u8; 3] = [40, 60, 110];
+
+/// Write a row-major image of values in [0, 1] as an 8-bit grey PNG (NaN, no data:
+/// [`NO_DATA_RGB`]), atomically.
+pub fn write_grey_png(path: &Path, n: usize, v: &[f32]) -> Result<()> {
+    let bytes: Vec<u8> = v
+        .iter()
+        .flat_map(|&x| {
+            if x.is_finite() {
+                let g = (x.clamp(0.0, 1.0) * 255.0).round() as u8;
+                [g, g, g]
+            } else {
+                NO_DATA_RGB
+            }
+        })
+        .collect();
+    let img = image::RgbImage::from_raw(n as u32, n as u32, bytes).expect("n² pixels");
+    let mut buf = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut buf, image::ImageFormat::Png)
+        .map_err(|e| Error::invalid(path, format!("PNG encoding failed: {e}")))?;
+    crate::fsio::write_atomic_bytes(path, buf.get_ref())
+}
