@@ -174,13 +174,33 @@ fn weight(k: usize, a: usize) -> f64 {
     }
 }
 
+/// A horizon of `A` samples at plane azimuths 2πk/A read at plane azimuth `phi` (radians):
+/// linear between the neighbouring samples, periodic. What the classic horizon maps do, and
+/// how the raw maps are read between their samples.
+pub fn interpolate_samples(samples: &[f32], phi: f64) -> f64 {
+    let a = samples.len();
+    let x = phi.rem_euclid(std::f64::consts::TAU) / std::f64::consts::TAU * a as f64;
+    let k = (x.floor() as usize).min(a - 1);
+    let f = x - k as f64;
+    samples[k] as f64 * (1.0 - f) + samples[(k + 1) % a] as f64 * f
+}
+
 /// α(θ) = Σ Re(c_k) cos kθ − Im(c_k) sin kθ (degrees), θ in radians. The powers e^{ikθ} come
 /// from one sin/cos and a rotation in f64 (error ≈ K·1e-16, stable at every K).
 pub fn evaluate(c: &[[f64; 2]], theta: f64) -> f64 {
+    sum_series(c.iter().map(|v| (v[0], v[1])), theta)
+}
+
+/// [`evaluate`] from f32 coefficients.
+pub fn evaluate32(c: &[[f32; 2]], theta: f64) -> f64 {
+    sum_series(c.iter().map(|v| (v[0] as f64, v[1] as f64)), theta)
+}
+
+fn sum_series(c: impl Iterator<Item = (f64, f64)>, theta: f64) -> f64 {
     let (s1, c1) = theta.sin_cos();
     let (mut cs, mut sn) = (1.0f64, 0.0f64);
     let mut sum = 0.0;
-    for (k, ck) in c.iter().enumerate() {
+    for (k, (re, im)) in c.enumerate() {
         if k > 0 {
             let nc = cs * c1 - sn * s1;
             sn = sn * c1 + cs * s1;
@@ -192,28 +212,7 @@ pub fn evaluate(c: &[[f64; 2]], theta: f64) -> f64 {
                 sn /= r;
             }
         }
-        sum += ck[0] * cs - ck[1] * sn;
-    }
-    sum
-}
-
-/// [`evaluate`] from f32 coefficients.
-pub fn evaluate32(c: &[[f32; 2]], theta: f64) -> f64 {
-    let (s1, c1) = theta.sin_cos();
-    let (mut cs, mut sn) = (1.0f64, 0.0f64);
-    let mut sum = 0.0;
-    for (k, ck) in c.iter().enumerate() {
-        if k > 0 {
-            let nc = cs * c1 - sn * s1;
-            sn = sn * c1 + cs * s1;
-            cs = nc;
-            if k % 64 == 0 {
-                let r = (cs * cs + sn * sn).sqrt();
-                cs /= r;
-                sn /= r;
-            }
-        }
-        sum += ck[0] as f64 * cs - ck[1] as f64 * sn;
+        sum += re * cs - im * sn;
     }
     sum
 }

@@ -108,6 +108,39 @@ pub fn check_options(opts: &FourierOptions, azimuths: usize) -> Result<()> {
     Ok(())
 }
 
+/// The floor of the stored horizons (degrees) for an observer at height `h0` on a body of
+/// `radius_m` whose lowest terrain is `terrain_min_m`: the elevation of the tangent to the
+/// sphere of the lowest terrain. Below it lies the body, mapped or not.
+pub fn floor_deg(radius_m: f64, terrain_min_m: f64, h0: f64) -> f64 {
+    -((radius_m + terrain_min_m) / (radius_m + h0.max(terrain_min_m)))
+        .clamp(-1.0, 1.0)
+        .acos()
+        .to_degrees()
+}
+
+/// The body's distance from the Sun (AU): the one given (checked: 0.01..=10000), else the body
+/// preset's; an error naming the option when neither is known.
+pub fn sun_distance(distance_au: Option<f64>, body: &str) -> Result<f64> {
+    if let Some(d) = distance_au {
+        if !(d.is_finite() && (0.01..=1.0e4).contains(&d)) {
+            return Err(Error::param(
+                "sun_distance_au",
+                format!("{d} is outside 0.01..=10000 AU"),
+            ));
+        }
+        return Ok(d);
+    }
+    super::sun::sun_distance_au(body).ok_or_else(|| {
+        Error::param(
+            "sun_distance_au",
+            format!(
+                "is needed: the body '{body}' has no distance from the Sun on record; give it \
+                 in AU"
+            ),
+        )
+    })
+}
+
 /// Checks of the options against a tileset: a sun radius must be known for `min_sun_el_deg`.
 pub fn check_tileset(opts: &FourierOptions, ts: &Tileset) -> Result<()> {
     if opts.min_sun_el_deg.is_some() {
@@ -119,18 +152,7 @@ pub fn check_tileset(opts: &FourierOptions, ts: &Tileset) -> Result<()> {
 /// The sun's apparent radius (degrees) seen from `body`: from the distance given, else the
 /// body preset's; an error naming the option when neither is known.
 pub fn sun_radius_deg(distance_au: Option<f64>, body: &str) -> Result<f64> {
-    let d = distance_au
-        .or_else(|| super::sun::sun_distance_au(body))
-        .ok_or_else(|| {
-            Error::param(
-                "sun_distance_au",
-                format!(
-                    "is needed: the body '{body}' has no distance from the Sun on record; give \
-                     it in AU"
-                ),
-            )
-        })?;
-    Ok(super::sun::sun_radius_deg(d))
+    Ok(super::sun::sun_radius_deg(sun_distance(distance_au, body)?))
 }
 
 /// What one tile's compression found.
@@ -198,11 +220,7 @@ impl Encoder {
 
     /// The floor (degrees) of an observer at height `h0`: the tangent to the lowest sphere.
     pub fn floor_deg(&self, h0: f64) -> f64 {
-        let r = self.radius_m;
-        -((r + self.terrain_min_m) / (r + h0.max(self.terrain_min_m)))
-            .clamp(-1.0, 1.0)
-            .acos()
-            .to_degrees()
+        floor_deg(self.radius_m, self.terrain_min_m, h0)
     }
 
     /// The pyramid of one tile from its raw maps (`A` planes of n², degrees) and its height

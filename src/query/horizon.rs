@@ -90,13 +90,7 @@ impl Profile {
     /// Elevation (degrees) at plane azimuth `phi` (radians).
     fn at(&self, phi: f64) -> f64 {
         match self {
-            Profile::Samples(s) => {
-                let a = s.len();
-                let x = phi.rem_euclid(std::f64::consts::TAU) / std::f64::consts::TAU * a as f64;
-                let k = (x.floor() as usize).min(a - 1);
-                let f = x - k as f64;
-                s[k] as f64 * (1.0 - f) + s[(k + 1) % a] as f64 * f
-            }
+            Profile::Samples(s) => crate::fourier::series::interpolate_samples(s, phi),
             Profile::Series(c) => crate::fourier::evaluate(c, phi),
         }
     }
@@ -386,28 +380,13 @@ pub fn shadow(
             format!("{sun_el} is not an elevation in −90..=90 degrees"),
         ));
     }
-    if let Some(d) = sun_distance_au {
-        if !(d.is_finite() && (0.01..=1.0e4).contains(&d)) {
-            return Err(Error::param(
-                "sun_distance_au",
-                format!("{d} is outside 0.01..=10000 AU"),
-            ));
-        }
+    if sun_distance_au.is_some() {
+        crate::fourier::stage::sun_distance(sun_distance_au, "")?;
     }
     check_options(opts)?;
     let store = Store::open(dir)?;
     let ts = store.manifest();
-    let dist = sun_distance_au
-        .or_else(|| sun::sun_distance_au(&ts.body.name))
-        .ok_or_else(|| {
-            Error::param(
-                "sun_distance_au",
-                format!(
-                    "is needed: the body '{}' has no distance from the Sun on record; give it in AU",
-                    ts.body.name
-                ),
-            )
-        })?;
+    let dist = crate::fourier::stage::sun_distance(sun_distance_au, &ts.body.name)?;
     let px = locate_pixel(&store, dir, lat, lon, level)?;
     let (s, t) = px.st;
     let lay = ts.layout;
@@ -418,57 +397,9 @@ pub fn shadow(
         radius_deg: sun::sun_radius_deg(dist),
     };
     let phi = frame.plane_azimuth(sun.dir);
-    // A tile stored as fully lit answers for suns at or above its threshold without a horizon.
-    if from == HorizonFrom::Fourier {
-        if let Some(f) = &ts.products.fourier {
-            if f.levels.contains(&px.level) {
-                let p = store.fourier(px.tile)?;
-                if p.fully_lit && f.min_sun_el_deg.is_some_and(|m| sun_el >= m) {
-                    let d = lay.st_to_dir(px.tile.face, s, t);
-                    let (plat, plon) = crate::cube::dir_to_latlon(d);
-                    return Ok(ShadowAnswer {
-                        query_lat_deg: lat,
-                        query_lon_deg: lon,
-                        lat_deg: plat.to_degrees(),
-                        lon_deg: plon.to_degrees(),
-                        height_m: px.height as f64,
-                        level: px.level,
-                        face: px.tile.face.name().into(),
-                        tile: [px.tile.x, px.tile.y],
-                        pixel: [px.i as u32, px.j as u32],
-                        sun_azimuth_deg: sun_az.rem_euclid(360.0),
-                        sun_elevation_deg: sun_el,
-                        sun_plane_azimuth_deg: phi.to_degrees(),
-                        sun_radius_deg: sun.radius_deg,
-                        sun_distance_au: dist,
-                        horizon_deg: p.max_horizon_deg as f64,
-                        lit_fraction: 1.0,
-                        model,
-                        source: "fourier (tile stored fully lit)".into(),
-                        method: Method::Fast,
-                    });
-                }
-            }
-        }
-    }
-    let (mut prof, source, method, _, _) = profile(&store, dir, &px, from, opts)?;
-    // Raw and computed horizons are floored as the pyramids are: below the tangent to the
-    // sphere of the lowest terrain lies the body, mapped or not (−90° means no mapped terrain).
-    if let (Profile::Samples(e), Some((tmin, _))) = (&mut prof, terrain_range(ts)) {
-        let r = ts.body.radius_m;
-        let floor = -((r + tmin) / (r + (px.height as f64).max(tmin)))
-            .clamp(-1.0, 1.0)
-            .acos()
-            .to_degrees();
-        for v in e.iter_mut() {
-            *v = v.max(floor as f32);
-        }
-    }
-    let horizon = |p: f64| prof.at(p);
-    let lit = sun::lit_fraction(&frame, &sun, model, &horizon);
     let d = lay.st_to_dir(px.tile.face, s, t);
     let (plat, plon) = crate::cube::dir_to_latlon(d);
-    Ok(ShadowAnswer {
+    let answer = |horizon_deg: f64, lit_fraction: f64, source: &str, method: Method| ShadowAnswer {
         query_lat_deg: lat,
         query_lon_deg: lon,
         lat_deg: plat.to_degrees(),
@@ -483,10 +414,38 @@ pub fn shadow(
         sun_plane_azimuth_deg: phi.to_degrees(),
         sun_radius_deg: sun.radius_deg,
         sun_distance_au: dist,
-        horizon_deg: prof.at(phi),
-        lit_fraction: lit,
+        horizon_deg,
+        lit_fraction,
         model,
         source: source.into(),
         method,
-    })
+    };
+    // A tile stored as fully lit answers for suns at or above its threshold without a horizon.
+    if from == HorizonFrom::Fourier {
+        if let Some(f) = &ts.products.fourier {
+            if f.levels.contains(&px.level) {
+                let p = store.fourier(px.tile)?;
+                if p.fully_lit && f.min_sun_el_deg.is_some_and(|m| sun_el >= m) {
+                    return Ok(answer(
+                        p.max_horizon_deg as f64,
+                        1.0,
+                        "fourier (tile stored fully lit)",
+                        Method::Fast,
+                    ));
+                }
+            }
+        }
+    }
+    let (mut prof, source, method, _, _) = profile(&store, dir, &px, from, opts)?;
+    // Raw and computed horizons are floored as the pyramids are: below the tangent to the
+    // sphere of the lowest terrain lies the body, mapped or not (−90° means no mapped terrain).
+    if let (Profile::Samples(e), Some((tmin, _))) = (&mut prof, terrain_range(ts)) {
+        let floor = crate::fourier::stage::floor_deg(ts.body.radius_m, tmin, px.height as f64);
+        for v in e.iter_mut() {
+            *v = v.max(floor as f32);
+        }
+    }
+    let horizon = |p: f64| prof.at(p);
+    let lit = sun::lit_fraction(&frame, &sun, model, &horizon);
+    Ok(answer(prof.at(phi), lit, source, method))
 }

@@ -91,23 +91,7 @@ pub fn tile_shadows(
             dir.display()
         )));
     }
-    let dist = sun_distance_au
-        .or_else(|| sun::sun_distance_au(&ts.body.name))
-        .ok_or_else(|| {
-            Error::param(
-                "sun_distance_au",
-                format!(
-                    "is needed: the body '{}' has no distance from the Sun on record; give it in AU",
-                    ts.body.name
-                ),
-            )
-        })?;
-    if !(dist.is_finite() && (0.01..=1.0e4).contains(&dist)) {
-        return Err(Error::param(
-            "sun_distance_au",
-            format!("{dist} is outside 0.01..=10000 AU"),
-        ));
-    }
+    let dist = crate::fourier::stage::sun_distance(sun_distance_au, &ts.body.name)?;
     let lay = ts.layout;
     let n = lay.tile_size as usize;
     let levels = match from {
@@ -186,10 +170,7 @@ pub fn tile_shadows(
                 let (u, v) = (lay.projection.s_to_u(s), lay.projection.s_to_u(t));
                 let frame = Frame::at(tile.face, u, v);
                 let h0 = heights.height[(j + halo) * heights.size + i + halo] as f64;
-                let floor = -((r + tmin) / (r + h0.max(tmin)))
-                    .clamp(-1.0, 1.0)
-                    .acos()
-                    .to_degrees();
+                let floor = crate::fourier::stage::floor_deg(r, tmin, h0);
                 let sun = Sun {
                     dir: s_dir,
                     radius_deg,
@@ -210,11 +191,7 @@ pub fn tile_shadows(
                     }
                     let sm = &samples;
                     sun::lit_fraction(&frame, &sun, model, &|phi| {
-                        let x = phi.rem_euclid(std::f64::consts::TAU) / std::f64::consts::TAU
-                            * a as f64;
-                        let k = (x.floor() as usize).min(a - 1);
-                        let w = x - k as f64;
-                        sm[k] as f64 * (1.0 - w) + sm[(k + 1) % a] as f64 * w
+                        crate::fourier::series::interpolate_samples(sm, phi)
                     })
                 };
                 lit[i] = f as f32;
