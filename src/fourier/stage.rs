@@ -97,13 +97,8 @@ pub fn check_options(opts: &FourierOptions, azimuths: usize) -> Result<()> {
             ));
         }
     }
-    if let Some(d) = opts.sun_distance_au {
-        if !(d.is_finite() && (0.01..=1.0e4).contains(&d)) {
-            return Err(Error::param(
-                "sun_distance_au",
-                format!("{d} is outside 0.01..=10000 AU"),
-            ));
-        }
+    if opts.sun_distance_au.is_some() {
+        sun_distance(opts.sun_distance_au, "")?;
     }
     Ok(())
 }
@@ -411,19 +406,9 @@ impl Tally {
         self.count(id, s);
     }
 
-    /// A tile an interrupted run wrote: its own header says what the manifest needs.
-    pub fn add_kept(&mut self, id: TileId, path: &Path, n: usize, a: usize) -> Result<()> {
-        let b = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-        let p = Pyramid::decode(&b, path, n, a)?;
-        self.count(
-            id,
-            TileStats {
-                k: p.k,
-                fully_lit: p.fully_lit,
-                bytes: b.len() as u64,
-            },
-        );
-        Ok(())
+    /// A tile an interrupted run wrote (its stats from [`kept`]).
+    pub fn add_kept(&mut self, id: TileId, s: TileStats) {
+        self.count(id, s);
     }
 
     fn count(&mut self, id: TileId, s: TileStats) {
@@ -503,12 +488,16 @@ pub fn check_output_size(opts: &FourierOptions, tiles: usize, n: usize) -> Resul
     Ok(())
 }
 
-/// A resumed run keeps a file that decodes with this run's settings.
-pub fn keeps(path: &Path, n: usize, a: usize) -> bool {
-    std::fs::read(path)
-        .ok()
-        .and_then(|b| Pyramid::decode(&b, path, n, a).ok())
-        .is_some()
+/// A file an interrupted run left that decodes with this run's settings, with what the manifest
+/// needs from its header; None: rewrite it.
+pub fn kept(path: &Path, n: usize, a: usize) -> Option<TileStats> {
+    let b = std::fs::read(path).ok()?;
+    let p = Pyramid::decode(&b, path, n, a).ok()?;
+    Some(TileStats {
+        k: p.k,
+        fully_lit: p.fully_lit,
+        bytes: b.len() as u64,
+    })
 }
 
 pub fn tile_path(dir: &Path, id: TileId) -> PathBuf {
@@ -633,8 +622,8 @@ pub fn build_fourier(
     progress.start("fourier", tiles.len() as u64);
     for &id in &tiles {
         let out = tile_path(run.out(), id);
-        if run.resume() && keeps(&out, n, a) {
-            tally.add_kept(id, &out, n, a)?;
+        if let Some(stats) = run.resume().then(|| kept(&out, n, a)).flatten() {
+            tally.add_kept(id, stats);
             report.tiles_kept += 1;
             progress.inc(1);
             continue;

@@ -616,17 +616,20 @@ pub fn build_horizons(
             }
             reach
         });
-        if run.resume()
-            && (!opts.writes_raw()
-                || out.exists() && read_horizon_exr(&out, n).is_ok_and(|(a, _)| a == opts.azimuths))
-            && (encoder.is_none() || crate::fourier::stage::keeps(&fout, n, opts.azimuths))
-        {
-            if encoder.is_some() {
-                tally.add_kept(id, &fout, n, opts.azimuths)?;
+        if run.resume() {
+            let raw_kept = !opts.writes_raw()
+                || out.exists() && read_horizon_exr(&out, n).is_ok_and(|(a, _)| a == opts.azimuths);
+            let pyramid = encoder
+                .as_ref()
+                .map(|_| crate::fourier::stage::kept(&fout, n, opts.azimuths));
+            if raw_kept && !matches!(pyramid, Some(None)) {
+                if let Some(Some(stats)) = pyramid {
+                    tally.add_kept(id, stats);
+                }
+                kept += 1;
+                progress.inc(1);
+                continue;
             }
-            kept += 1;
-            progress.inc(1);
-            continue;
         }
         let t0 = std::time::Instant::now();
         let elev = if let Some(reach) = reach {

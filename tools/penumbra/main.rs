@@ -467,7 +467,7 @@ struct BakeArgs {
 }
 
 /// Horizon level of the embedded scene's default bake (or its finest level when it has fewer):
-/// 4 tiles of 512² at 106 m/px, about 1.5 minutes of horizons on 2 cores.
+/// 4 tiles of 512² at 106 m/px; finer levels cost many times more horizon time.
 const EMBEDDED_HORIZON_LEVEL: u8 = 6;
 
 /// A tile given as FACE/Y/X at `level`.
