@@ -128,7 +128,7 @@ impl Context {
     /// metres per plane pixel along φ. NaN when a needed neighbour has no data. Both methods
     /// include it, so a bare sphere reads 0 at h = 0.
     #[inline]
-    pub(super) fn slope0_g(&self, x0: usize, y0: usize, cos: f64, sin: f64, g: f64) -> f64 {
+    pub(crate) fn slope0_g(&self, x0: usize, y0: usize, cos: f64, sin: f64, g: f64) -> f64 {
         let (cx, cy) = (cos, -sin);
         let (x, y) = (x0 as i64, y0 as i64);
         let h0 = self.at(x, y) as f64;
@@ -227,18 +227,18 @@ pub(super) fn pixel_geometry(ctx: &Context, rect: Rect) -> Vec<PixelGeo> {
 
 /// An observer's ray in a context raster: the plane line (x0, y0) + s·(cos φ, −sin φ), s in
 /// plane pixels, which is a great circle.
-pub(super) struct Ray {
-    pub(super) x0: f64,
-    pub(super) y0: f64,
-    pub(super) cx: f64,
-    pub(super) cy: f64,
+pub(crate) struct Ray {
+    pub(crate) x0: f64,
+    pub(crate) y0: f64,
+    pub(crate) cx: f64,
+    pub(crate) cy: f64,
     h0: f64,
-    pub(super) r0: f64,
+    pub(crate) r0: f64,
     /// The ray's great-circle plane, with the observer's direction as first axis: the plane
     /// point at distance s is (a0 + s·a1, s·b1) there.
-    pub(super) a0: f64,
-    pub(super) a1: f64,
-    pub(super) b1: f64,
+    pub(crate) a0: f64,
+    pub(crate) a1: f64,
+    pub(crate) b1: f64,
     /// Curvature drop per plane pixel², metres (for locating maxima inside a cell only).
     kappa: f64,
 }
@@ -267,9 +267,21 @@ impl Ray {
         }
     }
 
+    /// The ray from raster pixel (x, y) along plane azimuth `phi` (radians, counter-clockwise
+    /// from +U): one pixel's [`Ray::from_parts`].
+    pub(crate) fn toward(ctx: &Context, x: usize, y: usize, phi: f64) -> Ray {
+        let p = ctx.plane_point(x as f64, y as f64);
+        let n0 = dot(p, p).sqrt();
+        let g = PixelGeo {
+            ph: [p[0] / n0, p[1] / n0, p[2] / n0],
+            n0,
+        };
+        Ray::from_parts(ctx, x, y, &g, &Azimuth::new(ctx, phi))
+    }
+
     /// Ground metres per plane pixel along the ray at the observer: r0·dψ/ds = r0·b1/a0.
     #[inline]
-    pub(super) fn ground_per_px(&self) -> f64 {
+    pub(crate) fn ground_per_px(&self) -> f64 {
         self.r0 * self.b1 / self.a0
     }
 
@@ -278,7 +290,7 @@ impl Ray {
     /// (r cos ψ − r0)/(r sin ψ) is (r·a − r0·‖(a,b)‖)/(r·b); −∞ outside the raster or over no
     /// data.
     #[inline]
-    pub(super) fn slope_at(&self, ctx: &Context, s: f64) -> f64 {
+    pub(crate) fn slope_at(&self, ctx: &Context, s: f64) -> f64 {
         let v = ctx.bilinear64(self.x0 + s * self.cx, self.y0 + s * self.cy);
         if v.is_nan() {
             return f64::NEG_INFINITY;
@@ -291,7 +303,7 @@ impl Ray {
 
     /// Slope of terrain of height `h` at distance `s` (as [`Ray::slope_at`]).
     #[inline]
-    fn slope_of(&self, ctx: &Context, s: f64, h: f64) -> f64 {
+    pub(crate) fn slope_of(&self, ctx: &Context, s: f64, h: f64) -> f64 {
         let (a, b) = (self.a0 + s * self.a1, s * self.b1);
         let n = (a * a + b * b).sqrt();
         let r = ctx.radius_m + h;
@@ -303,7 +315,7 @@ impl Ray {
     /// the bilinear height is a quadratic in s, so with the curvature drop the slope
     /// (A + B·s + C·s²)/(g·s) peaks inside a cell only at s* = √(A/C); the interval's start,
     /// the crossings and s* are evaluated exactly.
-    pub(super) fn max_over(&self, ctx: &Context, s_from: f64, s_to: f64, floor: f64) -> (f64, f64) {
+    pub(crate) fn max_over(&self, ctx: &Context, s_from: f64, s_to: f64, floor: f64) -> (f64, f64) {
         let (mut best, mut at) = (floor, f64::NAN);
         let (w1, h1) = ((ctx.width - 1) as f64, (ctx.height - 1) as f64);
         let (x, y) = (self.x0 + s_from * self.cx, self.y0 + s_from * self.cy);
@@ -373,10 +385,10 @@ impl Ray {
 
 /// One axis of an Amanatides–Woo cell walk along a ray: the cell index, its step (±1, 0) and
 /// the distances (along the ray) of the next grid-line crossing and between crossings.
-pub(super) struct Axis {
-    pub(super) i: i64,
+pub(crate) struct Axis {
+    pub(crate) i: i64,
     step: i64,
-    pub(super) next: f64,
+    pub(crate) next: f64,
     delta: f64,
 }
 
@@ -384,7 +396,7 @@ impl Axis {
     /// At coordinate `x` ≥ 0, reached at distance `s0`, moving `d` per unit distance: the cell
     /// the ray is in just after (leaving a grid line backwards, the cell below it).
     #[inline]
-    pub(super) fn new(x: f64, d: f64, s0: f64) -> Axis {
+    pub(crate) fn new(x: f64, d: f64, s0: f64) -> Axis {
         // x ≥ 0: truncation is floor.
         let fl = (x as i64) as f64;
         let (i, step, next, delta) = if d > 1e-12 {
@@ -405,7 +417,7 @@ impl Axis {
 
     /// Steps into the next cell when the walk has reached this axis' crossing.
     #[inline]
-    pub(super) fn advance(&mut self, s: f64) {
+    pub(crate) fn advance(&mut self, s: f64) {
         if self.next <= s {
             self.i += self.step;
             self.next += self.delta;

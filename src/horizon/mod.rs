@@ -17,6 +17,7 @@ pub(crate) mod stage;
 mod sweep;
 
 pub use self::geometry::{compass_azimuth_deg, plane_azimuth, Context, Rect};
+pub(crate) use self::geometry::{Axis, Ray};
 pub use self::method::{horizons, horizons_reference_step, horizons_with, Method};
 pub use self::near::{DEFAULT_NEAR_PX, MAX_NEAR_PX};
 pub use self::stage::{

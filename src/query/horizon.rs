@@ -348,9 +348,17 @@ pub struct ShadowAnswer {
     /// Fraction of the sun's disc above the horizon, in [0, 1].
     pub lit_fraction: f64,
     pub model: Model,
-    /// `stored`, `computed` or `fourier` (as for the horizon query).
+    /// `stored`, `computed` or `fourier` (as for the horizon query), or `traced` for the
+    /// ray-marching methods.
     pub source: String,
-    pub method: Method,
+    /// The shadow method: `horizon` (a lookup in the horizon products), `reference`,
+    /// `uniform N`, `dp RUNS`, `dp-dda RUNS` or `extrema`.
+    pub method: String,
+    /// For `horizon`: the method that computed the horizon (fast or reference).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub horizon_method: Option<Method>,
+    /// Context searched around the pixel's tile by a ray-marching method (pixels; 0 otherwise).
+    pub margin_px: u64,
 }
 
 /// The lit fraction of the sun's disc at the pixel over (lat, lon) for a sun at compass
@@ -367,6 +375,7 @@ pub fn shadow(
     model: Model,
     from: HorizonFrom,
     opts: &HorizonOptions,
+    trace: Option<&crate::shadow::trace::Method>,
 ) -> Result<ShadowAnswer> {
     if !(sun_az.is_finite() && (-360.0..=720.0).contains(&sun_az)) {
         return Err(Error::param(
@@ -399,7 +408,11 @@ pub fn shadow(
     let phi = frame.plane_azimuth(sun.dir);
     let d = lay.st_to_dir(px.tile.face, s, t);
     let (plat, plon) = crate::cube::dir_to_latlon(d);
-    let answer = |horizon_deg: f64, lit_fraction: f64, source: &str, method: Method| ShadowAnswer {
+    let answer = |horizon_deg: f64,
+                  lit_fraction: f64,
+                  source: &str,
+                  method: Option<Method>,
+                  margin_px: u64| ShadowAnswer {
         query_lat_deg: lat,
         query_lon_deg: lon,
         lat_deg: plat.to_degrees(),
@@ -418,8 +431,21 @@ pub fn shadow(
         lit_fraction,
         model,
         source: source.into(),
-        method,
+        method: trace.map_or("horizon".into(), |m| m.label()),
+        horizon_method: method,
+        margin_px,
     };
+    if let Some(m) = trace {
+        crate::horizon::stage::check_layout(dir, ts)?;
+        let low = sun_el - sun.radius_deg - 0.05;
+        let (ctx, rect) = crate::shadow::shadow_context(&store, px.tile, low, opts.max_margin_px)?;
+        let margin = (rect.x0.max(rect.y0)) as u64;
+        let tmin = terrain_range(ts).map_or(0.0, |t| t.0);
+        let tracer = crate::shadow::Tracer::new(&ctx, tmin);
+        let mut work = crate::shadow::trace::Work::default();
+        let t = tracer.trace(rect.x0 + px.i, rect.y0 + px.j, &sun, m, &mut work);
+        return Ok(answer(t.horizon_deg, t.lit, "traced", None, margin));
+    }
     // A tile stored as fully lit answers for suns at or above its threshold without a horizon.
     if from == HorizonFrom::Fourier {
         if let Some(f) = &ts.products.fourier {
@@ -430,7 +456,8 @@ pub fn shadow(
                         p.max_horizon_deg as f64,
                         1.0,
                         "fourier (tile stored fully lit)",
-                        Method::Fast,
+                        Some(Method::Fast),
+                        0,
                     ));
                 }
             }
@@ -447,5 +474,5 @@ pub fn shadow(
     }
     let horizon = |p: f64| prof.at(p);
     let lit = sun::lit_fraction(&frame, &sun, model, &horizon);
-    Ok(answer(prof.at(phi), lit, source, method))
+    Ok(answer(prof.at(phi), lit, source, Some(method), 0))
 }

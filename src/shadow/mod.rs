@@ -1,8 +1,15 @@
-//! Shadows of a whole tile for one sun: the lit fraction of the sun's disc at every pixel and a
-//! shaded relief with those shadows, the picture a user looks at first. The sun is fixed by its
-//! sub-solar point (a direction in the body frame, at infinity), so its local elevation varies
-//! across the tile. Today from the horizon products (raw maps or Fourier pyramids); the
-//! ray-marching methods of Jung et al., Timokhin & Mikhaylyuk and Sakalauskas join here.
+//! Shadows of a tileset for one sun: the lit fraction of the sun's disc at a point or over a
+//! whole tile, and a shaded relief with those shadows, the picture a user looks at first. The
+//! sun is fixed by its sub-solar point (a direction in the body frame, at infinity), so its
+//! local elevation varies across a tile.
+//!
+//! One interface, several methods ([`ShadowMethod`]): the ray-marching methods of [`trace`]
+//! (the exact `reference`, `uniform` stepping, Jung et al.'s `dp` over a maximum mipmap,
+//! Timokhin & Mikhaylyuk's `extrema` traversal) search the terrain itself on the face's
+//! extended gnomonic plane, across tile and face edges, as the horizon stage does; `horizon`
+//! looks the baked horizon products up (raw maps or Fourier pyramids).
+
+pub mod trace;
 
 use std::path::Path;
 
@@ -12,9 +19,14 @@ use serde::Serialize;
 use crate::cube::{self, dot, Vec3};
 use crate::error::{Error, Result};
 use crate::fourier::sun::{self, Frame, Model, Sun};
-use crate::horizon::stage::terrain_range;
+use crate::horizon::stage::{
+    check_layout, context_for, coverage_box, margin_for, reach_rad, terrain_range,
+};
+use crate::horizon::{Context, Rect};
 use crate::layout::TileId;
 use crate::tileset::Store;
+
+pub use self::trace::{Runs, Tracer};
 
 /// Where the horizon comes from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -35,6 +47,74 @@ impl std::str::FromStr for HorizonSource {
             _ => Err(format!("unknown horizon source '{s}' (raw, fourier)")),
         }
     }
+}
+
+/// How a shadow is found.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ShadowMethod {
+    /// Search the terrain along the sun's ray ([`trace`]).
+    Trace(trace::Method),
+    /// Look the baked horizon up, with a disc model.
+    Horizon(HorizonSource, Model),
+}
+
+impl ShadowMethod {
+    pub fn label(&self) -> String {
+        match self {
+            ShadowMethod::Trace(m) => m.label(),
+            ShadowMethod::Horizon(HorizonSource::Raw, m) => format!("horizon raw {m}"),
+            ShadowMethod::Horizon(HorizonSource::Fourier, m) => format!("horizon fourier {m}"),
+        }
+    }
+}
+
+/// The context raster a ray-marching method searches for `tile`: as far as terrain could hide
+/// any part of a sun whose lowest point over the tile is `lowest_deg` above the horizontal
+/// (and no farther than a horizon could see), capped at `cap_px`.
+pub fn shadow_context(
+    store: &Store,
+    tile: TileId,
+    lowest_deg: f64,
+    cap_px: u64,
+) -> Result<(Context, Rect)> {
+    let ts = store.manifest();
+    check_layout(store.dir(), ts)?;
+    let (tmin, tmax) = terrain_range(ts).unwrap_or((0.0, 0.0));
+    let r = ts.body.radius_m;
+    // From the lowest observer, the line at the lowest elevation climbs above the highest
+    // terrain after ψ = acos(r0·cos e / r_max) − e.
+    let e = lowest_deg.clamp(-89.0, 89.0).to_radians();
+    let c = ((r + tmin) * e.cos() / (r + tmax)).min(1.0);
+    let sun_rad = (c.acos() - e).max(0.0);
+    let rad = reach_rad(r, tmin, tmax, tmax).min(sun_rad);
+    let reach = margin_for(ts, tile, rad, cap_px);
+    let cover = coverage_box(ts, tile.level, tile.face);
+    context_for(store, tile, reach.margin_px, cover)
+}
+
+/// The lowest elevation (degrees) of the sun's lower limb over `tile`: the sun's elevation is
+/// lowest on the tile's border, sampled at 64 points, less 0.05° for the gaps between them.
+pub fn lowest_sun_deg(store: &Store, tile: TileId, sun: &Sun) -> f64 {
+    let lay = store.manifest().layout;
+    let n = lay.tile_size as i64;
+    let mut lo = f64::INFINITY;
+    for k in 0..64 {
+        let e = k % 16 * n / 16;
+        let (i, j) = match k / 16 {
+            0 => (e, 0),
+            1 => (n - 1, e),
+            2 => (n - 1 - e, n - 1),
+            _ => (0, n - 1 - e),
+        };
+        let (s, t) = lay.pixel_st(tile, i, j);
+        let f = Frame::at(
+            tile.face,
+            lay.projection.s_to_u(s),
+            lay.projection.s_to_u(t),
+        );
+        lo = lo.min(f.elevation_deg(sun.dir));
+    }
+    lo - sun.radius_deg - 0.05
 }
 
 /// One tile's shadows.
@@ -59,17 +139,11 @@ pub struct TileShadows {
     pub no_data_pixels: u64,
 }
 
-/// Shadows of `tile` for a sun over (sun_lat, sun_lon) (degrees), from the horizons of
-/// `from`, with the disc `model`.
-pub fn tile_shadows(
-    dir: &Path,
-    tile: TileId,
-    sun_lat: f64,
-    sun_lon: f64,
-    sun_distance_au: Option<f64>,
-    from: HorizonSource,
-    model: Model,
-) -> Result<TileShadows> {
+/// Largest context margin (pixels) the ray-marching methods search around a tile.
+pub const MAX_MARGIN_PX: u64 = 4096;
+
+/// Checks a sub-solar point (degrees).
+pub fn check_subsolar(sun_lat: f64, sun_lon: f64) -> Result<()> {
     if !(sun_lat.is_finite() && (-90.0..=90.0).contains(&sun_lat)) {
         return Err(Error::param(
             "sun_lat",
@@ -82,6 +156,57 @@ pub fn tile_shadows(
             format!("{sun_lon} is outside −180..=360 degrees"),
         ));
     }
+    Ok(())
+}
+
+/// The per-pixel lit fraction of one method over one tile.
+enum Source<'a> {
+    Raw(Vec<f32>, usize),
+    Fourier(crate::fourier::Pyramid),
+    Trace(Tracer<'a>, Rect, &'a trace::Method),
+}
+
+/// Checks that the tileset holds what `method` reads at `level`: an exit-2 error naming what
+/// to run first otherwise.
+pub fn check_products(store: &Store, method: &ShadowMethod, level: u8) -> Result<()> {
+    let ts = store.manifest();
+    let dir = store.dir();
+    let (levels, name) = match method {
+        ShadowMethod::Trace(_) => {
+            check_layout(dir, ts)?;
+            return Ok(());
+        }
+        ShadowMethod::Horizon(HorizonSource::Raw, _) => (
+            ts.products.horizon.as_ref().map(|h| h.levels.clone()),
+            "raw horizon maps (`penumbra horizon`, or `--keep-raw` with `--fourier`)",
+        ),
+        ShadowMethod::Horizon(HorizonSource::Fourier, _) => (
+            ts.products.fourier.as_ref().map(|f| f.levels.clone()),
+            "Fourier pyramids (`penumbra horizon --fourier` or `penumbra fourier`)",
+        ),
+    };
+    match levels {
+        None => Err(store.missing(&format!(
+            "tileset has no {name}: make them first, or use a ray-marching method (--method dp)"
+        ))),
+        Some(l) if !l.contains(&level) => Err(Error::usage(format!(
+            "level {level} has no {name} in {} (levels {l:?})",
+            dir.display()
+        ))),
+        Some(_) => Ok(()),
+    }
+}
+
+/// Shadows of `tile` for a sun over (sun_lat, sun_lon) (degrees) by `method`.
+pub fn tile_shadows(
+    dir: &Path,
+    tile: TileId,
+    sun_lat: f64,
+    sun_lon: f64,
+    sun_distance_au: Option<f64>,
+    method: &ShadowMethod,
+) -> Result<TileShadows> {
+    check_subsolar(sun_lat, sun_lon)?;
     let store = Store::open(dir)?;
     let ts = store.manifest();
     if !ts.has_tile(tile) {
@@ -92,53 +217,46 @@ pub fn tile_shadows(
         )));
     }
     let dist = crate::fourier::stage::sun_distance(sun_distance_au, &ts.body.name)?;
+    check_products(&store, method, tile.level)?;
     let lay = ts.layout;
     let n = lay.tile_size as usize;
-    let levels = match from {
-        HorizonSource::Raw => ts.products.horizon.as_ref().map(|h| h.levels.clone()),
-        HorizonSource::Fourier => ts.products.fourier.as_ref().map(|f| f.levels.clone()),
-    };
-    let name = match from {
-        HorizonSource::Raw => "raw horizon maps (`penumbra horizon`)",
-        HorizonSource::Fourier => {
-            "Fourier pyramids (`penumbra horizon --fourier` or `penumbra fourier`)"
-        }
-    };
-    match levels {
-        None => return Err(store.missing(&format!("tileset has no {name}: make them first"))),
-        Some(l) if !l.contains(&tile.level) => {
-            return Err(Error::usage(format!(
-                "level {} has no {name} in {} (levels {l:?})",
-                tile.level,
-                dir.display()
-            )))
-        }
-        Some(_) => {}
-    }
-    let raw = match from {
-        HorizonSource::Raw => Some(store.horizon(tile)?),
-        HorizonSource::Fourier => None,
-    };
-    let pyramid = match from {
-        HorizonSource::Fourier => {
-            let p = store.fourier(tile)?;
-            if p.fully_lit {
-                return Err(Error::usage(format!(
-                    "tile {tile} is stored as fully lit (no horizon kept): rebuild the pyramids \
-                     without --min-sun-el to render it"
-                )));
-            }
-            Some(p)
-        }
-        HorizonSource::Raw => None,
-    };
-    let heights = store.height(tile)?.expect("covered");
-    let halo = lay.halo as usize;
     let r = ts.body.radius_m;
     let tmin = terrain_range(ts).map_or(0.0, |t| t.0);
     let s_dir = cube::latlon_to_dir(sun_lat.to_radians(), sun_lon.to_radians());
     let radius_deg = sun::sun_radius_deg(dist);
-    let a = raw.as_ref().map_or(0, |e| e.len() / (n * n));
+    let sun = Sun {
+        dir: s_dir,
+        radius_deg,
+    };
+    let ctx_rect;
+    let source = match method {
+        ShadowMethod::Horizon(HorizonSource::Raw, _) => {
+            let e = store.horizon(tile)?;
+            let a = e.len() / (n * n);
+            Source::Raw(e, a)
+        }
+        ShadowMethod::Horizon(HorizonSource::Fourier, _) => {
+            let p = store.fourier(tile)?;
+            if p.fully_lit {
+                return Err(Error::usage(format!(
+                    "tile {tile} is stored as fully lit (no horizon kept): rebuild the pyramids \
+                     without --min-sun-el to render it, or use a ray-marching method"
+                )));
+            }
+            Source::Fourier(p)
+        }
+        ShadowMethod::Trace(m) => {
+            let low = lowest_sun_deg(&store, tile, &sun);
+            ctx_rect = shadow_context(&store, tile, low, MAX_MARGIN_PX)?;
+            Source::Trace(Tracer::new(&ctx_rect.0, tmin), ctx_rect.1, m)
+        }
+    };
+    let model = match method {
+        ShadowMethod::Horizon(_, m) => *m,
+        ShadowMethod::Trace(_) => Model::Exact,
+    };
+    let heights = store.height(tile)?.expect("covered");
+    let halo = lay.halo as usize;
     // Position of a stored pixel (halo included) in metres, body frame.
     let size = heights.size as i64;
     let pos = |i: i64, j: i64| -> Option<Vec3> {
@@ -154,6 +272,7 @@ pub fn tile_shadows(
         let k = r + h as f64;
         Some([d[0] * k, d[1] * k, d[2] * k])
     };
+    let source = &source;
     let rows: Vec<(Vec<f32>, Vec<f32>, [f64; 2])> = (0..n)
         .into_par_iter()
         .map(|j| {
@@ -161,7 +280,11 @@ pub fn tile_shadows(
             let mut relief = vec![f32::NAN; n];
             let mut el_range = [f64::INFINITY, f64::NEG_INFINITY];
             let mut coef = Vec::new();
-            let mut samples = vec![0.0f32; a];
+            let mut work = trace::Work::default();
+            let mut samples = match source {
+                Source::Raw(_, a) => vec![0.0f32; *a],
+                _ => Vec::new(),
+            };
             for i in 0..n {
                 let Some(p) = pos(i as i64, j as i64) else {
                     continue;
@@ -171,28 +294,29 @@ pub fn tile_shadows(
                 let frame = Frame::at(tile.face, u, v);
                 let h0 = heights.height[(j + halo) * heights.size + i + halo] as f64;
                 let floor = crate::fourier::stage::floor_deg(r, tmin, h0);
-                let sun = Sun {
-                    dir: s_dir,
-                    radius_deg,
-                };
                 let el = frame.elevation_deg(s_dir);
                 el_range[0] = el_range[0].min(el);
                 el_range[1] = el_range[1].max(el);
-                let f = if let Some(pyr) = &pyramid {
-                    pyr.coefficients_at(i as f64 + 0.5, j as f64 + 0.5, &mut coef);
-                    let c = &coef;
-                    sun::lit_fraction(&frame, &sun, model, &|phi| {
-                        crate::fourier::evaluate(c, phi).max(floor)
-                    })
-                } else {
-                    let e = raw.as_ref().expect("raw");
-                    for (k, v) in samples.iter_mut().enumerate() {
-                        *v = e[k * n * n + j * n + i].max(floor as f32);
+                let f = match source {
+                    Source::Fourier(pyr) => {
+                        pyr.coefficients_at(i as f64 + 0.5, j as f64 + 0.5, &mut coef);
+                        let c = &coef;
+                        sun::lit_fraction(&frame, &sun, model, &|phi| {
+                            crate::fourier::evaluate(c, phi).max(floor)
+                        })
                     }
-                    let sm = &samples;
-                    sun::lit_fraction(&frame, &sun, model, &|phi| {
-                        crate::fourier::series::interpolate_samples(sm, phi)
-                    })
+                    Source::Raw(e, _) => {
+                        for (k, v) in samples.iter_mut().enumerate() {
+                            *v = e[k * n * n + j * n + i].max(floor as f32);
+                        }
+                        let sm = &samples;
+                        sun::lit_fraction(&frame, &sun, model, &|phi| {
+                            crate::fourier::series::interpolate_samples(sm, phi)
+                        })
+                    }
+                    Source::Trace(tr, rect, m) => {
+                        tr.lit(rect.x0 + i, rect.y0 + j, &sun, m, &mut work)
+                    }
                 };
                 lit[i] = f as f32;
                 // Lambert from the central differences of the pixel positions (halo: one

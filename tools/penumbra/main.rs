@@ -11,6 +11,7 @@ use penumbra::bake::{self, BodyChoice, Input, Plan, Stage};
 use penumbra::body::Body;
 use penumbra::cube::Projection;
 use penumbra::dem::Resampling;
+use penumbra::error::Error;
 use penumbra::fourier::sun::Model;
 use penumbra::fourier::{Encoding, FourierOptions, Layout, Reduce, Sigma};
 use penumbra::horizon::{HorizonOptions, HorizonPrecision, Method};
@@ -131,10 +132,13 @@ enum Command {
         /// The body's distance from the Sun (AU; default: the body preset's).
         #[arg(long, allow_hyphen_values = true)]
         sun_distance_au: Option<f64>,
-        /// Horizons from: fourier (the pyramids) or raw (the stored maps).
-        #[arg(long, default_value = "fourier")]
-        from: penumbra::shadow::HorizonSource,
-        /// Disc model: constant (the paper's cheapest), segment, slices or exact.
+        #[command(flatten)]
+        shadow: ShadowFlags,
+        /// With --method horizon: fourier (the pyramids) or raw (the stored maps).
+        #[arg(long)]
+        from: Option<penumbra::shadow::HorizonSource>,
+        /// With --method horizon: the disc model, constant (the paper's cheapest), segment,
+        /// slices or exact.
         #[arg(long, default_value = "constant")]
         model: Model,
         /// Lit-fraction image to write (PNG, white = fully lit).
@@ -237,17 +241,88 @@ enum QueryCommand {
         /// sun's apparent radius.
         #[arg(long, allow_hyphen_values = true)]
         sun_distance_au: Option<f64>,
-        /// Horizon source: fourier, raw, reference or auto (as for `query horizon`).
-        #[arg(long, default_value = "fourier")]
-        from: HorizonFrom,
-        /// Disc model: constant, segment, slices (Fritsch et al.) or exact.
+        #[command(flatten)]
+        shadow: ShadowFlags,
+        /// With --method horizon: fourier, raw, reference or auto (as for `query horizon`;
+        /// default fourier).
+        #[arg(long)]
+        from: Option<HorizonFrom>,
+        /// With --method horizon: the disc model, constant, segment, slices (Fritsch et al.)
+        /// or exact.
         #[arg(long, default_value = "exact")]
         model: Model,
-        #[command(flatten)]
-        flags: HorizonFlags,
+        /// With --from auto|reference: azimuth samples of a computed horizon.
+        #[arg(long, default_value_t = 360)]
+        azimuths: usize,
+        /// With --from auto|reference: fast or reference horizon computation.
+        #[arg(long, default_value = "fast")]
+        horizon_method: Method,
+        /// Largest context margin searched around the pixel's tile, in pixels of its level.
+        #[arg(long, default_value_t = 4096)]
+        max_margin_px: u64,
         #[arg(long)]
         json: bool,
     },
+}
+
+/// How a shadow is found: `--method` and its settings.
+#[derive(Args, Clone)]
+struct ShadowFlags {
+    /// horizon (look the baked horizons up), reference (exact search of the terrain, exact
+    /// disc), uniform (fixed steps), dp (Jung et al. over a maximum mipmap), dp-dda (the same
+    /// with a canonical DDA that skips texels) or extrema (Timokhin & Mikhaylyuk, hard).
+    #[arg(long, default_value = "horizon")]
+    method: String,
+    /// With --method uniform: steps along the ray (1..=1048576).
+    #[arg(long, default_value_t = 100)]
+    steps: usize,
+    /// With --method dp|dp-dda: N′ of each concatenated run (e.g. 5,5,5 or 5,5,5,3), or auto
+    /// (each run reaches as far again as the ray has come, until it leaves the terrain).
+    #[arg(long, default_value = "auto")]
+    dp_levels: String,
+}
+
+impl ShadowFlags {
+    /// The ray-marching method asked, or None for `horizon`.
+    fn trace(&self) -> Result<Option<penumbra::shadow::trace::Method>> {
+        use penumbra::shadow::trace::{Method as T, MAX_STEPS};
+        let runs = || -> Result<penumbra::shadow::Runs> {
+            self.dp_levels
+                .parse()
+                .map_err(|e: String| Error::param("dp_levels", e).into())
+        };
+        if !(1..=MAX_STEPS).contains(&self.steps) {
+            return Err(Error::param(
+                "steps",
+                format!("{} is outside 1..={MAX_STEPS}", self.steps),
+            )
+            .into());
+        }
+        Ok(Some(match self.method.as_str() {
+            "horizon" => return Ok(None),
+            "reference" => T::Reference,
+            "uniform" => T::Uniform { steps: self.steps },
+            "dp" => T::Dp {
+                runs: runs()?,
+                dda: false,
+            },
+            "dp-dda" => T::Dp {
+                runs: runs()?,
+                dda: true,
+            },
+            "extrema" => T::Extrema,
+            other => {
+                return Err(Error::param(
+                    "method",
+                    format!(
+                        "unknown shadow method '{other}': use horizon, reference, uniform, dp, \
+                         dp-dda or extrema"
+                    ),
+                )
+                .into())
+            }
+        }))
+    }
 }
 
 #[derive(Args, Clone)]
@@ -625,6 +700,7 @@ fn run(cli: Cli) -> Result<()> {
             sun_lat,
             sun_lon,
             sun_distance_au,
+            shadow,
             from,
             model,
             out,
@@ -632,6 +708,22 @@ fn run(cli: Cli) -> Result<()> {
             json,
         } => {
             let id = parse_tile(level, &tile)?;
+            let method = match shadow.trace()? {
+                Some(m) => {
+                    if from.is_some() {
+                        return Err(Error::usage(
+                            "--from chooses the horizons of --method horizon; ray-marching \
+                             methods search the terrain itself",
+                        )
+                        .into());
+                    }
+                    penumbra::shadow::ShadowMethod::Trace(m)
+                }
+                None => penumbra::shadow::ShadowMethod::Horizon(
+                    from.unwrap_or(penumbra::shadow::HorizonSource::Fourier),
+                    model,
+                ),
+            };
             let t0 = std::time::Instant::now();
             let sh = penumbra::shadow::tile_shadows(
                 &dir,
@@ -639,8 +731,7 @@ fn run(cli: Cli) -> Result<()> {
                 sun_lat,
                 sun_lon,
                 sun_distance_au,
-                from,
-                model,
+                &method,
             )?;
             penumbra::shadow::write_grey_png(&out, sh.n, &sh.lit)?;
             if let Some(r) = &relief {
@@ -697,12 +788,28 @@ fn run(cli: Cli) -> Result<()> {
             sun_az,
             sun_el,
             sun_distance_au,
+            shadow,
             from,
             model,
-            flags,
+            azimuths,
+            horizon_method,
+            max_margin_px,
             json,
         }) => {
-            let opts = flags.options();
+            let trace = shadow.trace()?;
+            if trace.is_some() && from.is_some() {
+                return Err(Error::usage(
+                    "--from chooses the horizons of --method horizon; ray-marching methods \
+                     search the terrain itself",
+                )
+                .into());
+            }
+            let opts = HorizonOptions {
+                azimuths,
+                method: horizon_method,
+                max_margin_px,
+                ..Default::default()
+            };
             let ans = penumbra::query::shadow(
                 &dir,
                 lat,
@@ -712,8 +819,9 @@ fn run(cli: Cli) -> Result<()> {
                 sun_el,
                 sun_distance_au,
                 model,
-                from,
+                from.unwrap_or(HorizonFrom::Fourier),
                 &opts,
+                trace.as_ref(),
             )?;
             output::print_shadow_answer(&ans, json)?;
         }

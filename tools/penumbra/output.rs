@@ -303,7 +303,7 @@ pub fn print_shadow_answer(a: &ShadowAnswer, json: bool) -> Result<()> {
         a.sun_distance_au,
         a.horizon_deg,
         a.source,
-        a.method.name(),
+        a.horizon_method.map_or(a.method.as_str(), |m| m.name()),
         a.model.name()
     )?;
     writeln!(out, "lit fraction {:.6}", a.lit_fraction)?;

@@ -1,0 +1,784 @@
+//! The ray-marching shadow methods over one [`Context`] raster (a face's extended gnomonic
+//! plane, where the shadow ray of a surface point projects to a straight line: the great circle
+//! through the point and the sub-solar point). Each method estimates the horizon's elevation in
+//! the sun's azimuth (as a slope, tan of the elevation) out to where the ray leaves the terrain
+//! volume, and turns it into the lit fraction of the sun's disc:
+//!
+//! - [`Method::Reference`]: the exact search of the continuous bilinear surface (the horizon
+//!   reference's cell walk) in [`REFERENCE_AZIMUTHS`] azimuths across the disc, and the exact
+//!   disc visibility over that horizon (the Fourier issue's `--model exact`);
+//! - [`Method::Uniform`]: `steps` equal steps out to where the ray leaves the terrain volume
+//!   (Jung et al.'s baseline), bilinear samples;
+//! - [`Method::Dp`]: Jung et al.'s Algorithm 1 over a maximum mipmap: runs of N′ levels,
+//!   coarse to fine, at each level the (at most three) texels the ray crosses inside the chosen
+//!   parent, the one that could rise highest kept; the chosen finest cell is searched exactly;
+//!   runs are concatenated ({5,5,5}, {5,5,5,3}, or `auto`: each run as long as the distance
+//!   already covered, until the ray leaves the terrain volume). `dda` samples two points per
+//!   level instead (the canonical DDA of their Fig. 4a, which misses corner texels);
+//! - [`Method::Extrema`]: Timokhin & Mikhaylyuk's min/max traversal (hard shadow): texels the
+//!   ray passes above are skipped, a texel whose minimum already reaches the ray ends the walk
+//!   as shadowed, the rest are refined down to exact cells.
+//!
+//! The soft methods (uniform, dp) use Jung et al.'s disc occlusion (Eq. 6–7): a horizon at
+//! elevation α hides the circular segment of the disc below α. Every horizon is floored at the
+//! tangent to the sphere of the lowest terrain, as the horizon products are.
+
+use crate::fourier::sun::{self, Frame, Model, Sun};
+use crate::horizon::{Axis, Context, Ray};
+
+/// Azimuths across the sun's disc in which the reference searches the exact horizon.
+pub const REFERENCE_AZIMUTHS: usize = 7;
+/// The exact near field of the ray-marching methods (plane pixels): inside it the observer's
+/// own cells' bounds are useless (they contain the observer), so every method searches it
+/// exactly, as the reference does.
+pub const NEAR_PX: f64 = 1.5;
+/// Largest N′ of one DP run, and most runs.
+pub const MAX_DP_LEVELS: usize = 16;
+pub const MAX_DP_RUNS: usize = 16;
+/// Most uniform steps.
+pub const MAX_STEPS: usize = 1 << 20;
+
+/// How Jung et al.'s DP concatenates its runs.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Runs {
+    /// Runs of these N′, one after the other (`5,5,5`).
+    Fixed(Vec<usize>),
+    /// Each run reaches as far again as the distance covered so far (at least N′ = 5), until
+    /// the ray leaves the terrain volume.
+    Auto,
+}
+
+impl std::fmt::Display for Runs {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Runs::Auto => f.write_str("auto"),
+            Runs::Fixed(v) => {
+                let s: Vec<String> = v.iter().map(|n| n.to_string()).collect();
+                f.write_str(&s.join(","))
+            }
+        }
+    }
+}
+
+impl std::str::FromStr for Runs {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Runs, String> {
+        if s == "auto" {
+            return Ok(Runs::Auto);
+        }
+        let v: Vec<usize> = s
+            .split(',')
+            .map(|p| p.trim().parse::<usize>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| format!("'{s}' is not a list of DP levels such as 5,5,5 (or auto)"))?;
+        if v.is_empty() || v.len() > MAX_DP_RUNS {
+            return Err(format!("'{s}': give 1..={MAX_DP_RUNS} runs"));
+        }
+        if let Some(bad) = v.iter().find(|&&n| !(1..=MAX_DP_LEVELS).contains(&n)) {
+            return Err(format!(
+                "'{s}': a run has {bad} levels; each needs 1..={MAX_DP_LEVELS}"
+            ));
+        }
+        Ok(Runs::Fixed(v))
+    }
+}
+
+/// A ray-marching shadow method.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Method {
+    Reference,
+    Uniform { steps: usize },
+    Dp { runs: Runs, dda: bool },
+    Extrema,
+}
+
+impl Method {
+    /// Whether the method answers 0 or 1 only.
+    pub fn is_hard(&self) -> bool {
+        matches!(self, Method::Extrema)
+    }
+
+    pub fn label(&self) -> String {
+        match self {
+            Method::Reference => "reference".into(),
+            Method::Uniform { steps } => format!("uniform {steps}"),
+            Method::Dp { runs, dda: false } => format!("dp {runs}"),
+            Method::Dp { runs, dda: true } => format!("dp-dda {runs}"),
+            Method::Extrema => "extrema".into(),
+        }
+    }
+}
+
+/// Level `m` of the min/max pyramid over the raster's *cells* (cell (i, j) spans the pixel
+/// centres (i..=i+1, j..=j+1), so its extrema bound the bilinear surface there exactly);
+/// texel (X, Y) of level m covers cells [X·2^m, (X+1)·2^m).
+struct Level {
+    w: usize,
+    h: usize,
+    /// Highest terrain in the texel (−∞: none).
+    max: Vec<f32>,
+    /// Lowest terrain in the texel (−∞ when part of it has none: no guarantee then).
+    min: Vec<f32>,
+}
+
+/// The min/max pyramid of a context raster's cells.
+pub struct Extrema {
+    levels: Vec<Level>,
+}
+
+impl Extrema {
+    pub fn new(ctx: &Context) -> Extrema {
+        let (w, h) = (ctx.width.max(2) - 1, ctx.height.max(2) - 1);
+        let mut max = vec![f32::NEG_INFINITY; w * h];
+        let mut min = vec![f32::NEG_INFINITY; w * h];
+        for j in 0..h {
+            for i in 0..w {
+                let (mut hi, mut lo, mut all) = (f32::NEG_INFINITY, f32::INFINITY, true);
+                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    let v = ctx.at((i + dx) as i64, (j + dy) as i64);
+                    if v.is_nan() {
+                        all = false;
+                    } else {
+                        hi = hi.max(v);
+                        lo = lo.min(v);
+                    }
+                }
+                // With a no-data corner the bilinear surface still lies below the present
+                // corners, but part of the cell may hold no terrain: no lower bound then.
+                max[j * w + i] = hi;
+                if all {
+                    min[j * w + i] = lo;
+                }
+            }
+        }
+        let mut levels = vec![Level { w, h, max, min }];
+        while levels.last().is_some_and(|l| l.w > 1 || l.h > 1) {
+            let p = levels.last().expect("one level");
+            let (w2, h2) = (p.w.div_ceil(2), p.h.div_ceil(2));
+            let mut max = vec![f32::NEG_INFINITY; w2 * h2];
+            let mut min = vec![f32::INFINITY; w2 * h2];
+            for y in 0..p.h {
+                for x in 0..p.w {
+                    let o = (y / 2) * w2 + x / 2;
+                    max[o] = max[o].max(p.max[y * p.w + x]);
+                    min[o] = min[o].min(p.min[y * p.w + x]);
+                }
+            }
+            // A texel hanging over the raster's edge covers cells without terrain.
+            if p.w % 2 == 1 {
+                for y in 0..h2 {
+                    min[y * w2 + w2 - 1] = f32::NEG_INFINITY;
+                }
+            }
+            if p.h % 2 == 1 {
+                for x in 0..w2 {
+                    min[(h2 - 1) * w2 + x] = f32::NEG_INFINITY;
+                }
+            }
+            levels.push(Level {
+                w: w2,
+                h: h2,
+                max,
+                min,
+            });
+        }
+        Extrema { levels }
+    }
+
+    /// Number of levels (level 0: cells).
+    pub fn len(&self) -> usize {
+        self.levels.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.levels.is_empty()
+    }
+
+    /// (max, min) of texel (x, y) of level m; (−∞, −∞) outside.
+    #[inline]
+    fn get(&self, m: usize, x: i64, y: i64) -> (f32, f32) {
+        let l = &self.levels[m];
+        if x < 0 || y < 0 || x >= l.w as i64 || y >= l.h as i64 {
+            return (f32::NEG_INFINITY, f32::NEG_INFINITY);
+        }
+        let o = y as usize * l.w + x as usize;
+        (l.max[o], l.min[o])
+    }
+
+    /// Bytes held.
+    pub fn bytes(&self) -> usize {
+        self.levels.iter().map(|l| 8 * l.w * l.h).sum()
+    }
+}
+
+/// The sun at one surface point.
+#[derive(Clone, Copy, Debug)]
+pub struct SunAt {
+    pub frame: Frame,
+    /// Plane azimuth of the sun's vertical plane (radians) and its centre's elevation and
+    /// radius (degrees).
+    pub phi: f64,
+    pub elevation_deg: f64,
+    pub radius_deg: f64,
+}
+
+/// Counters of the work a method did (texels or samples visited), summed over pixels.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Work {
+    pub visits: u64,
+}
+
+/// One context raster prepared for the ray-marching methods.
+pub struct Tracer<'a> {
+    pub ctx: &'a Context,
+    pub pyramid: Extrema,
+    /// Highest terrain of the raster (m).
+    pub hmax: f64,
+    /// Lowest terrain of the body (or what stands for it), for the floor (m).
+    pub terrain_min_m: f64,
+}
+
+impl<'a> Tracer<'a> {
+    /// `terrain_min_m`: the lowest terrain of the body as far as known (the tileset's), below
+    /// whose sphere's tangent no horizon is taken to lie (as the horizon products).
+    pub fn new(ctx: &'a Context, terrain_min_m: f64) -> Tracer<'a> {
+        let pyramid = Extrema::new(ctx);
+        let hmax = ctx.max_height() as f64;
+        let tmin = ctx
+            .heights
+            .iter()
+            .filter(|v| v.is_finite())
+            .fold(f64::INFINITY, |m, &v| m.min(v as f64));
+        Tracer {
+            ctx,
+            pyramid,
+            hmax,
+            terrain_min_m: terrain_min_m.min(tmin),
+        }
+    }
+
+    /// The sun seen from raster pixel (x, y).
+    pub fn sun_at(&self, x: usize, y: usize, sun: &Sun) -> SunAt {
+        let (u, v) = self.ctx.uv(x as f64, y as f64);
+        let frame = Frame::at(self.ctx.face, u, v);
+        let el = frame.elevation_deg(sun.dir);
+        SunAt {
+            frame,
+            phi: frame.plane_azimuth(sun.dir),
+            elevation_deg: el,
+            radius_deg: sun.radius_deg.clamp(0.0, 60.0),
+        }
+    }
+
+    /// Lit fraction of the sun's disc at raster pixel (x, y) by `method`; NaN over no data.
+    pub fn lit(&self, x: usize, y: usize, sun: &Sun, method: &Method, work: &mut Work) -> f64 {
+        self.trace(x, y, sun, method, work).lit
+    }
+
+    /// [`Tracer::lit`] and the horizon the method found in the sun's azimuth.
+    pub fn trace(&self, x: usize, y: usize, sun: &Sun, method: &Method, work: &mut Work) -> Traced {
+        let h0 = self.ctx.at(x as i64, y as i64);
+        if h0.is_nan() {
+            return Traced {
+                lit: f64::NAN,
+                horizon_deg: f64::NAN,
+            };
+        }
+        let at = self.sun_at(x, y, sun);
+        let floor =
+            crate::fourier::stage::floor_deg(self.ctx.radius_m, self.terrain_min_m, h0 as f64);
+        let (el, r) = (at.elevation_deg, at.radius_deg);
+        // Bounds of the disc: a horizon below its bottom leaves it whole, one above its top
+        // hides it; the searches stop there.
+        let lo = tan_deg(el - r);
+        let hi = tan_deg(el + r);
+        let done = |lit: f64, a: f64| Traced {
+            lit,
+            horizon_deg: degrees(a, floor),
+        };
+        if el + r <= floor && !matches!(method, Method::Extrema) {
+            // Below the body's own horizon whatever the terrain does.
+            return done(0.0, f64::NEG_INFINITY);
+        }
+        match method {
+            Method::Reference => {
+                let (lit, a) = self.reference(x, y, sun, &at, floor, work);
+                Traced {
+                    lit,
+                    horizon_deg: a,
+                }
+            }
+            Method::Extrema => {
+                if el <= floor {
+                    return done(0.0, f64::NEG_INFINITY);
+                }
+                let ray = Ray::toward(self.ctx, x, y, at.phi);
+                let dark = self.extrema(&ray, x, y, &at, tan_deg(el), work);
+                // The traversal decides without finding the horizon.
+                Traced {
+                    lit: if dark { 0.0 } else { 1.0 },
+                    horizon_deg: f64::NAN,
+                }
+            }
+            Method::Uniform { steps } => {
+                let ray = Ray::toward(self.ctx, x, y, at.phi);
+                let a = self.uniform(&ray, *steps, lo, work);
+                done(occlusion(a, floor, el, r), a)
+            }
+            Method::Dp { runs, dda } => {
+                let ray = Ray::toward(self.ctx, x, y, at.phi);
+                let a = self.dp(&ray, x, y, &at, runs, *dda, lo, hi, work);
+                done(occlusion(a, floor, el, r), a)
+            }
+        }
+    }
+
+    /// Distance (plane pixels) at which the ray leaves the raster.
+    fn raster_exit(&self, ray: &Ray) -> f64 {
+        let (w1, h1) = ((self.ctx.width - 1) as f64, (self.ctx.height - 1) as f64);
+        let ex = if ray.cx > 1e-12 {
+            (w1 - ray.x0) / ray.cx
+        } else if ray.cx < -1e-12 {
+            ray.x0 / -ray.cx
+        } else {
+            f64::INFINITY
+        };
+        let ey = if ray.cy > 1e-12 {
+            (h1 - ray.y0) / ray.cy
+        } else if ray.cy < -1e-12 {
+            ray.y0 / -ray.cy
+        } else {
+            f64::INFINITY
+        };
+        ex.min(ey).max(0.0)
+    }
+
+    /// Distance (plane pixels) beyond which no terrain of the raster can reach slope `t`: where
+    /// the line at elevation atan(t) from the observer climbs above the highest terrain
+    /// (r(ψ) = r0·cos e / cos(ψ + e)), capped at the raster's edge.
+    fn exit(&self, ray: &Ray, t: f64) -> f64 {
+        let edge = self.raster_exit(ray);
+        let e = t.atan();
+        let rmax = self.ctx.radius_m + self.hmax;
+        let c = ray.r0 * e.cos() / rmax;
+        if c.is_nan() || c >= 1.0 {
+            return edge;
+        }
+        let psi = c.acos() - e;
+        if psi.is_nan() || psi <= 0.0 {
+            return 0.0;
+        }
+        if psi >= std::f64::consts::FRAC_PI_2 {
+            return edge;
+        }
+        let tp = psi.tan();
+        let den = ray.b1 - ray.a1 * tp;
+        if den <= 0.0 {
+            return edge;
+        }
+        (ray.a0 * tp / den).min(edge)
+    }
+
+    /// The largest slope terrain no higher than `h` can have over s ∈ [sa, sb] (sa > 0): the
+    /// slope of height h falls with distance when h is above the observer; below it, it rises
+    /// up to the tangent point ψ* = acos(r_h / r0) and falls after.
+    #[inline]
+    fn max_slope(&self, ray: &Ray, sa: f64, sb: f64, h: f64) -> f64 {
+        if h == f64::NEG_INFINITY {
+            return f64::NEG_INFINITY;
+        }
+        let rh = self.ctx.radius_m + h;
+        if rh >= ray.r0 {
+            return ray.slope_of(self.ctx, sa, h);
+        }
+        let tp = (1.0 - (rh / ray.r0).powi(2)).max(0.0).sqrt() / (rh / ray.r0);
+        let den = ray.b1 - ray.a1 * tp;
+        let s_star = if den > 0.0 {
+            ray.a0 * tp / den
+        } else {
+            f64::INFINITY
+        };
+        ray.slope_of(self.ctx, s_star.clamp(sa, sb), h)
+    }
+
+    /// The exact horizon slope near the observer: its own directional derivative and the
+    /// cells out to [`NEAR_PX`].
+    fn near(&self, ray: &Ray, x: usize, y: usize, at: &SunAt, work: &mut Work) -> f64 {
+        let (sn, cs) = at.phi.sin_cos();
+        let s0 = self.ctx.slope0_g(x, y, cs, sn, ray.ground_per_px());
+        let best = if s0.is_nan() { f64::NEG_INFINITY } else { s0 };
+        work.visits += 3;
+        ray.max_over(self.ctx, 0.0, NEAR_PX, best).0
+    }
+
+    /// The exact horizon slope along `ray`, searched until it reaches `hi` or nothing farther
+    /// can rise above max(best, `lo`).
+    #[allow(clippy::too_many_arguments)]
+    fn exact(
+        &self,
+        ray: &Ray,
+        x: usize,
+        y: usize,
+        at: &SunAt,
+        lo: f64,
+        hi: f64,
+        work: &mut Work,
+    ) -> f64 {
+        let mut best = self.near(ray, x, y, at, work);
+        let end = self.exit(ray, lo);
+        let mut s = NEAR_PX;
+        const CHUNK: f64 = 8.0;
+        while s < end && best < hi {
+            let to = (s + CHUNK).min(end);
+            best = ray.max_over(self.ctx, s, to, best).0;
+            work.visits += CHUNK as u64;
+            s = to;
+            if ray.slope_of(self.ctx, s, self.hmax) <= best.max(lo) {
+                break;
+            }
+        }
+        best
+    }
+
+    /// The exact lit fraction and the exact horizon (degrees, clamped to the disc's span) in
+    /// the sun's azimuth.
+    fn reference(
+        &self,
+        x: usize,
+        y: usize,
+        sun: &Sun,
+        at: &SunAt,
+        floor: f64,
+        work: &mut Work,
+    ) -> (f64, f64) {
+        let (el, r) = (at.elevation_deg, at.radius_deg);
+        let lo = tan_deg(el - r);
+        let hi = tan_deg(el + r);
+        let fl = floor as f32;
+        let horizon_at = |phi: f64, work: &mut Work| -> f64 {
+            let ray = Ray::toward(self.ctx, x, y, phi);
+            let a = self.exact(&ray, x, y, at, lo, hi, work);
+            (a.atan().to_degrees() as f32).max(fl) as f64
+        };
+        let span = disc_span(at, sun);
+        if span == 0.0 {
+            let a = horizon_at(at.phi, work);
+            return (sun::lit_fraction(&at.frame, sun, Model::Exact, &|_| a), a);
+        }
+        // Near the zenith the disc spans every azimuth.
+        let q = if span >= 1.0 { 64 } else { REFERENCE_AZIMUTHS };
+        let samples: Vec<f64> = (0..q)
+            .map(|k| {
+                let f = -1.0 + 2.0 * k as f64 / (q - 1) as f64;
+                horizon_at(at.phi + f * span, work)
+            })
+            .collect();
+        let phi0 = at.phi;
+        let hor = |phi: f64| -> f64 {
+            let mut d = (phi - phi0) % std::f64::consts::TAU;
+            if d > std::f64::consts::PI {
+                d -= std::f64::consts::TAU;
+            } else if d < -std::f64::consts::PI {
+                d += std::f64::consts::TAU;
+            }
+            let f = ((d / span + 1.0) / 2.0 * (q - 1) as f64).clamp(0.0, (q - 1) as f64);
+            let k = (f as usize).min(q - 2);
+            let w = f - k as f64;
+            samples[k] * (1.0 - w) + samples[k + 1] * w
+        };
+        (
+            sun::lit_fraction(&at.frame, sun, Model::Exact, &hor),
+            samples[q / 2],
+        )
+    }
+
+    /// Uniform stepping: `steps` bilinear samples at equal spacing out to where the disc's
+    /// bottom ray leaves the terrain volume.
+    fn uniform(&self, ray: &Ray, steps: usize, lo: f64, work: &mut Work) -> f64 {
+        let end = self.exit(ray, lo);
+        let mut best = f64::NEG_INFINITY;
+        if end <= 0.0 || steps == 0 {
+            return best;
+        }
+        let ds = end / steps as f64;
+        for k in 1..=steps {
+            best = best.max(ray.slope_at(self.ctx, k as f64 * ds));
+        }
+        work.visits += steps as u64;
+        best
+    }
+
+    /// Calls `f(tx, ty, s_in, s_out)` for every texel of level `m` the ray crosses for
+    /// s ∈ [sa, sb], in order; stops when `f` returns true (and returns true then).
+    #[inline]
+    fn walk(
+        &self,
+        ray: &Ray,
+        m: usize,
+        sa: f64,
+        sb: f64,
+        f: &mut dyn FnMut(i64, i64, f64, f64) -> bool,
+    ) -> bool {
+        let q = (1u64 << m) as f64;
+        let (x, y) = (ray.x0 + sa * ray.cx, ray.y0 + sa * ray.cy);
+        if !(x >= 0.0 && y >= 0.0) {
+            return false;
+        }
+        let mut ax = Axis::new(x / q, ray.cx / q, sa);
+        let mut ay = Axis::new(y / q, ray.cy / q, sa);
+        let l = &self.pyramid.levels[m];
+        let mut s = sa;
+        while s < sb {
+            if ax.i < 0 || ay.i < 0 || ax.i >= l.w as i64 || ay.i >= l.h as i64 {
+                return false;
+            }
+            let next = ax.next.min(ay.next).min(sb);
+            if next > s && f(ax.i, ay.i, s, next) {
+                return true;
+            }
+            s = next;
+            ax.advance(s);
+            ay.advance(s);
+        }
+        false
+    }
+
+    /// Jung et al.'s DP: the horizon slope as found by runs of coarse-to-fine texel choices.
+    #[allow(clippy::too_many_arguments)]
+    fn dp(
+        &self,
+        ray: &Ray,
+        x: usize,
+        y: usize,
+        at: &SunAt,
+        runs: &Runs,
+        dda: bool,
+        lo: f64,
+        hi: f64,
+        work: &mut Work,
+    ) -> f64 {
+        let mut best = self.near(ray, x, y, at, work);
+        let end = self.exit(ray, lo);
+        // Plane pixels of ray per texel of the major axis.
+        let major = ray.cx.abs().max(ray.cy.abs());
+        let top = self.pyramid.len() - 1;
+        let mut a = NEAR_PX;
+        let mut k = 0;
+        loop {
+            if a >= end || best >= hi {
+                break;
+            }
+            let levels = match runs {
+                Runs::Fixed(v) => match v.get(k) {
+                    Some(&n) => n,
+                    None => break,
+                },
+                Runs::Auto => {
+                    let covered = (a * major).max(1.0);
+                    (covered.log2().floor() as usize + 1).max(5)
+                }
+            };
+            k += 1;
+            let m0 = (levels - 1).min(top);
+            let len = (1u64 << m0) as f64 / major;
+            let b = a + len;
+            best = best.max(self.dp_run(ray, a, b.min(end), m0, dda, best.max(lo), work));
+            a = b;
+            if k > 4096 {
+                break;
+            }
+        }
+        best
+    }
+
+    /// One run of Algorithm 1 over s ∈ [a, b] starting at level `m0`: returns the exact
+    /// horizon slope over the finest cell chosen (or −∞ when no texel could beat `floor`).
+    #[allow(clippy::too_many_arguments)]
+    fn dp_run(
+        &self,
+        ray: &Ray,
+        a: f64,
+        b: f64,
+        m0: usize,
+        dda: bool,
+        floor: f64,
+        work: &mut Work,
+    ) -> f64 {
+        let (mut sa, mut sb) = (a, b);
+        for m in (0..=m0).rev() {
+            // The candidate with the largest bound.
+            let mut cand = (floor, f64::NAN, f64::NAN);
+            if dda {
+                // Canonical DDA: the texels under two points of the interval only.
+                let mid = 0.5 * (sa + sb);
+                for (p, s_in, s_out) in [(0.5 * (sa + mid), sa, mid), (0.5 * (mid + sb), mid, sb)] {
+                    let q = (1u64 << m) as f64;
+                    let (px, py) = (ray.x0 + p * ray.cx, ray.y0 + p * ray.cy);
+                    if !(px >= 0.0 && py >= 0.0) {
+                        continue;
+                    }
+                    let (hmax, _) = self.pyramid.get(m, (px / q) as i64, (py / q) as i64);
+                    work.visits += 1;
+                    let bound = self.max_slope(ray, s_in, s_out, hmax as f64);
+                    if bound > cand.0 {
+                        cand = (bound, s_in, s_out);
+                    }
+                }
+            } else {
+                self.walk(ray, m, sa, sb, &mut |tx, ty, s_in, s_out| {
+                    let (hmax, _) = self.pyramid.get(m, tx, ty);
+                    work.visits += 1;
+                    let bound = self.max_slope(ray, s_in, s_out, hmax as f64);
+                    if bound > cand.0 {
+                        cand = (bound, s_in, s_out);
+                    }
+                    false
+                });
+            }
+            if cand.1.is_nan() {
+                // Nothing under this part of the ray can rise above what is already known.
+                return f64::NEG_INFINITY;
+            }
+            (sa, sb) = (cand.1, cand.2);
+        }
+        work.visits += 1;
+        ray.max_over(self.ctx, sa, sb, f64::NEG_INFINITY).0
+    }
+
+    /// Timokhin & Mikhaylyuk's traversal: whether the terrain reaches slope `t` anywhere along
+    /// the ray (the sun's centre hidden).
+    fn extrema(&self, ray: &Ray, x: usize, y: usize, at: &SunAt, t: f64, work: &mut Work) -> bool {
+        if self.near(ray, x, y, at, work) >= t {
+            return true;
+        }
+        let end = self.exit(ray, t);
+        if end <= NEAR_PX {
+            return false;
+        }
+        let top = (self.pyramid.len() - 1).min(7);
+        self.walk(ray, top, NEAR_PX, end, &mut |tx, ty, sa, sb| {
+            self.extrema_node(ray, top, tx, ty, sa, sb, t, work)
+        })
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn extrema_node(
+        &self,
+        ray: &Ray,
+        m: usize,
+        tx: i64,
+        ty: i64,
+        sa: f64,
+        sb: f64,
+        t: f64,
+        work: &mut Work,
+    ) -> bool {
+        let (hmax, hmin) = self.pyramid.get(m, tx, ty);
+        work.visits += 1;
+        if self.max_slope(ray, sa, sb, hmax as f64) < t {
+            return false;
+        }
+        if hmin > f32::NEG_INFINITY && self.max_slope(ray, sa, sb, hmin as f64) >= t {
+            return true;
+        }
+        if m == 0 {
+            return ray.max_over(self.ctx, sa, sb, f64::NEG_INFINITY).0 >= t;
+        }
+        self.walk(ray, m - 1, sa, sb, &mut |cx, cy, s_in, s_out| {
+            self.extrema_node(ray, m - 1, cx, cy, s_in, s_out, t, work)
+        })
+    }
+}
+
+/// What a method found at one pixel.
+#[derive(Clone, Copy, Debug)]
+pub struct Traced {
+    /// Lit fraction of the disc in [0, 1] (NaN: no data).
+    pub lit: f64,
+    /// The horizon's elevation in the sun's azimuth (degrees, floored; the searches stop at the
+    /// disc's top, so a higher horizon reads lower; NaN for `extrema`, which only decides).
+    pub horizon_deg: f64,
+}
+
+fn degrees(a: f64, floor: f64) -> f64 {
+    if a.is_nan() || a == f64::NEG_INFINITY {
+        floor
+    } else {
+        a.atan().to_degrees().max(floor)
+    }
+}
+
+#[inline]
+fn tan_deg(d: f64) -> f64 {
+    if d >= 90.0 {
+        f64::INFINITY
+    } else if d <= -90.0 {
+        f64::NEG_INFINITY
+    } else {
+        d.to_radians().tan()
+    }
+}
+
+/// Jung et al.'s disc occlusion (Eq. 6–7, the prism assumption): a horizon at slope `a`
+/// (floored at `floor` degrees) hides the circular segment of the disc below it.
+fn occlusion(a: f64, floor: f64, el: f64, r: f64) -> f64 {
+    let alpha = degrees(a, floor);
+    if r <= 0.0 {
+        return if el > alpha {
+            1.0
+        } else if el < alpha {
+            0.0
+        } else {
+            0.5
+        };
+    }
+    sun::segment_fraction((alpha - el) / r)
+}
+
+/// Half the range of plane azimuths the sun's disc spans at a point (radians, 0 for a point
+/// sun, π when the disc holds the zenith): the largest offset of 32 rim points from the
+/// centre's plane azimuth, plus 2 %.
+fn disc_span(at: &SunAt, sun: &Sun) -> f64 {
+    use crate::cube::dot;
+    let r = at.radius_deg.to_radians();
+    if r <= 0.0 {
+        return 0.0;
+    }
+    if at.elevation_deg + at.radius_deg >= 89.9 {
+        return std::f64::consts::PI;
+    }
+    let n = |p: [f64; 3]| {
+        let l = dot(p, p).sqrt();
+        [p[0] / l, p[1] / l, p[2] / l]
+    };
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let s = n(sun.dir);
+    let up = at.frame.up;
+    let eh = n(cross(s, up));
+    let ev = n(cross(eh, s));
+    let t = r.tan();
+    let mut d: f64 = 0.0;
+    for k in 0..32 {
+        let th = std::f64::consts::TAU * k as f64 / 32.0;
+        let (sn, cs) = th.sin_cos();
+        let p = [
+            s[0] + t * (cs * eh[0] + sn * ev[0]),
+            s[1] + t * (cs * eh[1] + sn * ev[1]),
+            s[2] + t * (cs * eh[2] + sn * ev[2]),
+        ];
+        let mut off = (at.frame.plane_azimuth(p) - at.phi) % std::f64::consts::TAU;
+        if off > std::f64::consts::PI {
+            off -= std::f64::consts::TAU;
+        } else if off < -std::f64::consts::PI {
+            off += std::f64::consts::TAU;
+        }
+        d = d.max(off.abs());
+    }
+    (d * 1.02).min(std::f64::consts::PI)
+}
