@@ -128,53 +128,64 @@ pub struct Extrema {
 
 impl Extrema {
     pub fn new(ctx: &Context) -> Extrema {
+        use rayon::prelude::*;
         let (w, h) = (ctx.width.max(2) - 1, ctx.height.max(2) - 1);
         let mut max = vec![f32::NEG_INFINITY; w * h];
         let mut min = vec![f32::NEG_INFINITY; w * h];
-        for j in 0..h {
-            for i in 0..w {
-                let (mut hi, mut lo, mut all) = (f32::NEG_INFINITY, f32::INFINITY, true);
-                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                    let v = ctx.at((i + dx) as i64, (j + dy) as i64);
-                    if v.is_nan() {
-                        all = false;
-                    } else {
-                        hi = hi.max(v);
-                        lo = lo.min(v);
+        max.par_chunks_mut(w)
+            .zip(min.par_chunks_mut(w))
+            .enumerate()
+            .for_each(|(j, (mx, mn))| {
+                let (r0, r1) = (
+                    &ctx.heights[j * ctx.width..][..ctx.width],
+                    &ctx.heights[(j + 1).min(ctx.height - 1) * ctx.width..][..ctx.width],
+                );
+                for i in 0..w {
+                    let i1 = (i + 1).min(ctx.width - 1);
+                    let c = [r0[i], r0[i1], r1[i], r1[i1]];
+                    let (mut hi, mut lo, mut all) = (f32::NEG_INFINITY, f32::INFINITY, true);
+                    for v in c {
+                        if v.is_nan() {
+                            all = false;
+                        } else {
+                            hi = hi.max(v);
+                            lo = lo.min(v);
+                        }
+                    }
+                    // With a no-data corner the bilinear surface still lies below the present
+                    // corners, but part of the cell may hold no terrain: no lower bound then.
+                    mx[i] = hi;
+                    if all {
+                        mn[i] = lo;
                     }
                 }
-                // With a no-data corner the bilinear surface still lies below the present
-                // corners, but part of the cell may hold no terrain: no lower bound then.
-                max[j * w + i] = hi;
-                if all {
-                    min[j * w + i] = lo;
-                }
-            }
-        }
+            });
         let mut levels = vec![Level { w, h, max, min }];
         while levels.last().is_some_and(|l| l.w > 1 || l.h > 1) {
             let p = levels.last().expect("one level");
             let (w2, h2) = (p.w.div_ceil(2), p.h.div_ceil(2));
             let mut max = vec![f32::NEG_INFINITY; w2 * h2];
             let mut min = vec![f32::INFINITY; w2 * h2];
-            for y in 0..p.h {
-                for x in 0..p.w {
-                    let o = (y / 2) * w2 + x / 2;
-                    max[o] = max[o].max(p.max[y * p.w + x]);
-                    min[o] = min[o].min(p.min[y * p.w + x]);
-                }
-            }
-            // A texel hanging over the raster's edge covers cells without terrain.
-            if p.w % 2 == 1 {
-                for y in 0..h2 {
-                    min[y * w2 + w2 - 1] = f32::NEG_INFINITY;
-                }
-            }
-            if p.h % 2 == 1 {
-                for x in 0..w2 {
-                    min[(h2 - 1) * w2 + x] = f32::NEG_INFINITY;
-                }
-            }
+            max.par_chunks_mut(w2)
+                .zip(min.par_chunks_mut(w2))
+                .enumerate()
+                .for_each(|(y2, (mx, mn))| {
+                    for y in [2 * y2, 2 * y2 + 1] {
+                        if y >= p.h {
+                            // A texel hanging over the raster's edge covers cells without
+                            // terrain.
+                            mn.iter_mut().for_each(|v| *v = f32::NEG_INFINITY);
+                            continue;
+                        }
+                        for x in 0..p.w {
+                            mx[x / 2] = mx[x / 2].max(p.max[y * p.w + x]);
+                            mn[x / 2] = mn[x / 2].min(p.min[y * p.w + x]);
+                        }
+                    }
+                    if p.w % 2 == 1 {
+                        mn[w2 - 1] = f32::NEG_INFINITY;
+                    }
+                });
             levels.push(Level {
                 w: w2,
                 h: h2,
@@ -473,6 +484,19 @@ impl<'a> Tracer<'a> {
                 horizon_at(at.phi + f * span, work)
             })
             .collect();
+        // The disc's points lie within its radius of the centre's elevation, and the
+        // interpolated horizon within its samples' range: the plain answers need no model.
+        let (smin, smax) = samples
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
+        if smax < el - r {
+            return (1.0, samples[q / 2]);
+        }
+        if smin > el + r {
+            return (0.0, samples[q / 2]);
+        }
         let phi0 = at.phi;
         let hor = |phi: f64| -> f64 {
             let mut d = (phi - phi0) % std::f64::consts::TAU;

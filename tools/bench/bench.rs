@@ -93,6 +93,38 @@ pub enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Shadow methods side by side (issue 11): reference, uniform stepping, DP over max
+    /// mipmaps (and its canonical-DDA variant), extrema, horizon lookups; error against the
+    /// reference and time per megapixel on 1 and 2 threads, on the embedded scene and a block
+    /// of each shared real DEM, suns at 1°, 5°, 15°, 45° × 8 azimuths; a hard-mask timing and
+    /// pictures.
+    Shadows {
+        /// Folder holding the shared DEMs.
+        #[arg(long, default_value = "../shared/data")]
+        data: PathBuf,
+        /// Block side (pixels) of each case.
+        #[arg(long, default_value_t = 128)]
+        block: usize,
+        /// Side of the hard-mask timing (pixels).
+        #[arg(long, default_value_t = 1024)]
+        mask: usize,
+        /// Where to write the figure.
+        #[arg(long, default_value = "docs/shadows-error.svg")]
+        svg: PathBuf,
+        /// Where to write the pictures.
+        #[arg(long, default_value = "docs/images")]
+        images: PathBuf,
+        /// A 48² block, fewer methods, no pictures.
+        #[arg(long)]
+        quick: bool,
+        /// Only the cases whose name contains this (case-insensitive).
+        #[arg(long)]
+        only: Option<String>,
+        #[arg(long)]
+        markdown: bool,
+        #[arg(long)]
+        json: bool,
+    },
     /// Error against bytes and compression time of Fourier-compressed horizon maps (issue 10):
     /// K ∈ {4, 8, 16, 32} × f16/snorm16 × full/multires × plain/Lanczos and classic 8- and
     /// 12-sample maps, on a block of each shared real DEM and on synthetic stiff cases (cliff,
@@ -360,6 +392,30 @@ pub fn run(cmd: BenchCommand, quiet: bool) -> Result<()> {
             json,
         } => run_horizon(
             &peers, &data, azimuths, size, ref_pixels, markdown, json, quiet,
+        ),
+        BenchCommand::Shadows {
+            data,
+            block,
+            mask,
+            svg,
+            images,
+            quick,
+            only,
+            markdown,
+            json,
+        } => crate::shadows::run(
+            crate::shadows::Args {
+                data,
+                block,
+                mask,
+                markdown,
+                json,
+                svg,
+                images,
+                quick,
+                only,
+            },
+            quiet,
         ),
         BenchCommand::Fourier {
             data,

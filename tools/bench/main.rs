@@ -5,6 +5,7 @@
 
 mod bench;
 mod fourier;
+mod shadows;
 
 use std::process::ExitCode;
 
