@@ -139,6 +139,62 @@ pub struct TileShadows {
     pub no_data_pixels: u64,
 }
 
+/// The sun's centre at one surface point, from the point's gnomonic (u, v) on a face: the
+/// sine of its elevation and its plane azimuth, without building a [`Frame`] (a hard mask
+/// needs only these; the same formulas as [`Frame::elevation_deg`] and
+/// [`Frame::plane_azimuth`]).
+#[derive(Clone, Copy, Debug)]
+pub struct CentreAt {
+    pub sin_el: f64,
+    pub phi: f64,
+}
+
+/// A face's axes, for [`centre_at`].
+#[derive(Clone, Copy, Debug)]
+pub struct FaceAxes {
+    n: Vec3,
+    ua: Vec3,
+    va: Vec3,
+}
+
+impl FaceAxes {
+    pub fn new(face: cube::Face) -> FaceAxes {
+        let (n, ua, va) = face.axes();
+        FaceAxes { n, ua, va }
+    }
+}
+
+/// See [`CentreAt`]; `s` is the unit sun direction.
+#[inline]
+pub fn centre_at(ax: &FaceAxes, u: f64, v: f64, s: Vec3) -> CentreAt {
+    let p = [
+        ax.n[0] + u * ax.ua[0] + v * ax.va[0],
+        ax.n[1] + u * ax.ua[1] + v * ax.va[1],
+        ax.n[2] + u * ax.ua[2] + v * ax.va[2],
+    ];
+    let inv = 1.0 / dot(p, p).sqrt();
+    let up = [p[0] * inv, p[1] * inv, p[2] * inv];
+    let (np, nt) = (dot(ax.n, up), dot(ax.n, s));
+    let x = dot(ax.ua, s) * np - dot(ax.ua, up) * nt;
+    let y = dot(ax.va, s) * np - dot(ax.va, up) * nt;
+    let phi = y.atan2(x);
+    CentreAt {
+        sin_el: dot(s, up).clamp(-1.0, 1.0),
+        phi: if phi < 0.0 {
+            phi + std::f64::consts::TAU
+        } else {
+            phi
+        },
+    }
+}
+
+/// Whether the sun's centre is above a horizon of `horizon_deg` degrees (a hard shadow's
+/// decision; the horizon already floored).
+#[inline]
+pub fn centre_above(c: &CentreAt, horizon_deg: f64) -> bool {
+    c.sin_el > horizon_deg.to_radians().sin()
+}
+
 /// Largest context margin (pixels) the ray-marching methods search around a tile.
 pub const MAX_MARGIN_PX: u64 = 4096;
 

@@ -48,7 +48,8 @@ pub struct Args {
 #[derive(Clone, Debug)]
 enum Bm {
     Trace(Method),
-    /// Lookup in the raw maps (true) or the Fourier pyramids (false), exact disc.
+    /// Lookup in the raw maps (true) or the Fourier pyramids (false), with the constant-altitude
+    /// disc model (Jung et al.'s and Fritsch et al.'s cheapest; `exact` costs 256 strips).
     Horizon(bool),
 }
 
@@ -56,8 +57,8 @@ impl Bm {
     fn label(&self) -> String {
         match self {
             Bm::Trace(m) => m.label(),
-            Bm::Horizon(true) => "horizon raw 360".into(),
-            Bm::Horizon(false) => "horizon fourier F16".into(),
+            Bm::Horizon(true) => "horizon raw 360, constant".into(),
+            Bm::Horizon(false) => "horizon fourier F16, constant".into(),
         }
     }
     fn hard(&self) -> bool {
@@ -137,15 +138,7 @@ fn bake(case: &Case) -> Baked {
         DEFAULT_NEAR_PX,
     );
     let bake_s = t0.elapsed().as_secs_f64();
-    let tile = HeightTile {
-        size: n,
-        height: (0..n * n)
-            .map(|p| {
-                case.ctx.heights[(case.rect.y0 + p / n) * case.ctx.width + case.rect.x0 + p % n]
-            })
-            .collect(),
-        mask: vec![0; n * n],
-    };
+    let tile = block_tile(case);
     let enc = Encoder::for_tiles(
         &FourierOptions::default(),
         n,
@@ -199,7 +192,7 @@ fn eval(
                                 let p = j * n + i;
                                 let nn = n * n;
                                 let e = &b.raw;
-                                lit_fraction(&at.frame, sun, Model::Exact, &|phi| {
+                                lit_fraction(&at.frame, sun, Model::Constant, &|phi| {
                                     let f = phi / std::f64::consts::TAU * AZIMUTHS as f64;
                                     let k0 = (f as usize) % AZIMUTHS;
                                     let w = f - f.floor();
@@ -215,7 +208,7 @@ fn eval(
                                     &mut coef,
                                 );
                                 let c = &coef;
-                                lit_fraction(&at.frame, sun, Model::Exact, &|phi| {
+                                lit_fraction(&at.frame, sun, Model::Constant, &|phi| {
                                     evaluate(c, phi).max(floor)
                                 }) as f32
                             }
@@ -418,7 +411,7 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
         }
     }
     // The 1024² hard mask on the embedded scene.
-    let mask = mask_runs(&scene, args.mask, radius, &say)?;
+    let (mask, mask_bake_s) = mask_runs(&scene, args.mask, radius, &say)?;
     let images = if args.quick {
         Vec::new()
     } else {
@@ -439,7 +432,7 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
         &infos,
         &rows,
         &summary,
-        &mask,
+        (&mask, mask_bake_s),
         &images,
         &notes,
         &args,
@@ -506,59 +499,124 @@ fn summarise(rows: &[Row]) -> Vec<Summary> {
         .collect()
 }
 
+/// Azimuths of the raw maps of the mask's horizon lookups (a lookup reads two samples
+/// whatever their number, so a 1024² block's maps are made with few).
+const MASK_AZIMUTHS: usize = 36;
+
 /// Times of a hard-shadow mask of `size`² pixels of the embedded scene for one sun per
-/// elevation, extrema on 1 and 2 threads.
+/// elevation: extrema, and lookups in raw horizon maps and in Fourier pyramids (their bake
+/// timed apart), on 1 and 2 threads.
 fn mask_runs(
     scene: &penumbra::dem::Dem,
     size: usize,
     radius: f64,
     say: &dyn Fn(String),
-) -> Result<Vec<Mask>> {
+) -> Result<(Vec<Mask>, f64)> {
+    use penumbra::shadow::{centre_above, centre_at, FaceAxes};
     let case = dem_case("mask", scene, "moon", size);
     let n = case.rect.w;
     let tr = Tracer::new(&case.ctx, case.terrain_min_m);
     let c = centre_frame(&case);
+    let t0 = Instant::now();
+    let raw = horizons_with(
+        &case.ctx,
+        case.rect,
+        MASK_AZIMUTHS,
+        HzMethod::Fast,
+        DEFAULT_NEAR_PX,
+    );
+    let tile = block_tile(&case);
+    let enc = Encoder::for_tiles(
+        &FourierOptions::default(),
+        n,
+        0,
+        MASK_AZIMUTHS,
+        case.ctx.radius_m,
+        case.terrain_min_m,
+    );
+    let (pyr, _) = enc.encode(&raw, &tile);
+    let bake_s = t0.elapsed().as_secs_f64();
+    say(format!(
+        "mask {n}²: {MASK_AZIMUTHS}-azimuth horizons and pyramid {bake_s:.1} s"
+    ));
+    let ax = FaceAxes::new(case.ctx.face);
     let mut out = Vec::new();
     for &el in &SUN_EL {
         let sun = Sun {
             dir: c.direction(SUN_AZ[0], el),
             radius_deg: radius,
         };
-        let run = || -> u64 {
-            (0..n)
-                .into_par_iter()
-                .map(|j| {
-                    let mut w = Work::default();
-                    (0..n)
-                        .filter(|&i| {
-                            tr.lit(
-                                case.rect.x0 + i,
-                                case.rect.y0 + j,
-                                &sun,
-                                &Method::Extrema,
-                                &mut w,
-                            ) > 0.5
-                        })
-                        .count() as u64
-                })
-                .sum()
-        };
-        let (lit, t2) = timed(2, run)?;
-        let (_, t1) = timed(1, run)?;
-        say(format!(
-            "mask {n}² at {el}°: {t2:.3} s on 2 threads, {t1:.3} s on 1"
-        ));
-        out.push(Mask {
-            size: n,
-            context: format!("{}×{}", case.ctx.width, case.ctx.height),
-            method: "extrema".into(),
-            sun_el: el,
-            seconds_2t: t2,
-            seconds_1t: t1,
-            lit_px: lit,
-        });
+        for which in ["extrema", "horizon raw", "horizon fourier F16"] {
+            let run = || -> u64 {
+                (0..n)
+                    .into_par_iter()
+                    .map(|j| {
+                        let mut w = Work::default();
+                        let mut coef = Vec::with_capacity(16);
+                        let mut lit = 0u64;
+                        for i in 0..n {
+                            let (x, y) = (case.rect.x0 + i, case.rect.y0 + j);
+                            let on = if which == "extrema" {
+                                tr.lit(x, y, &sun, &Method::Extrema, &mut w) > 0.5
+                            } else {
+                                let h0 = case.ctx.at(x as i64, y as i64);
+                                if h0.is_nan() {
+                                    continue;
+                                }
+                                let (u, v) = case.ctx.uv(x as f64, y as f64);
+                                let at = centre_at(&ax, u, v, sun.dir);
+                                let floor = enc.floor_deg(h0 as f64);
+                                let h = if which == "horizon raw" {
+                                    let f = at.phi / std::f64::consts::TAU * MASK_AZIMUTHS as f64;
+                                    let k0 = (f as usize) % MASK_AZIMUTHS;
+                                    let wt = f - f.floor();
+                                    let p = j * n + i;
+                                    let a = raw[k0 * n * n + p] as f64;
+                                    let b = raw[((k0 + 1) % MASK_AZIMUTHS) * n * n + p] as f64;
+                                    a + (b - a) * wt
+                                } else {
+                                    pyr.coefficients_at(i as f64 + 0.5, j as f64 + 0.5, &mut coef);
+                                    evaluate(&coef, at.phi)
+                                };
+                                centre_above(&at, h.max(floor))
+                            };
+                            lit += on as u64;
+                        }
+                        lit
+                    })
+                    .sum()
+            };
+            let (lit, t2) = timed(2, run)?;
+            let (_, t1) = timed(1, run)?;
+            say(format!(
+                "mask {n}² at {el}°, {which}: {t2:.3} s on 2 threads, {t1:.3} s on 1"
+            ));
+            out.push(Mask {
+                size: n,
+                context: format!("{}×{}", case.ctx.width, case.ctx.height),
+                method: which.into(),
+                sun_el: el,
+                seconds_2t: t2,
+                seconds_1t: t1,
+                lit_px: lit,
+            });
+        }
     }
-    Ok(out)
+    Ok((out, bake_s))
+}
+
+/// The height tile of a case's block (for the encoder's floor and no-data pixels).
+fn block_tile(case: &Case) -> HeightTile {
+    let n = case.rect.w;
+    HeightTile {
+        size: n,
+        height: (0..n * n)
+            .map(|p| {
+                case.ctx.heights[(case.rect.y0 + p / n) * case.ctx.width + case.rect.x0 + p % n]
+            })
+            .collect(),
+        mask: vec![0; n * n],
+    }
 }
 
 /// Pictures of one sun over a 256² block of the embedded scene: the reference, DP, the
@@ -639,7 +697,7 @@ fn markdown(
     infos: &[CaseInfo],
     rows: &[Row],
     summary: &[Summary],
-    mask: &[Mask],
+    (mask, mask_bake_s): (&[Mask], f64),
     images: &[(String, String)],
     notes: &[String],
     args: &Args,
@@ -771,20 +829,25 @@ fn markdown(
             r.ms_per_mpx_2t
         );
     }
+    let _ = writeln!(o, "\n## A hard-shadow mask of the embedded scene\n");
     let _ = writeln!(
         o,
-        "\n## A hard-shadow mask (extrema) of the embedded scene\n"
+        "One sun per elevation (azimuth {}° at the block's centre). The lookups read horizons \
+         baked beforehand ({MASK_AZIMUTHS}-azimuth raw maps and their F16 pyramid, {:.1} s for \
+         the block; a lookup reads the same number of values whatever the azimuth count); \
+         extrema searches the terrain itself.\n",
+        SUN_AZ[0], mask_bake_s
     );
     let _ = writeln!(
         o,
-        "| size | context | sun elevation | 2 threads (s) | 1 thread (s) | lit px |"
+        "| size | context | method | sun elevation | 2 threads (s) | 1 thread (s) | lit px |"
     );
-    let _ = writeln!(o, "|---:|---|---:|---:|---:|---:|");
+    let _ = writeln!(o, "|---:|---|---|---:|---:|---:|---:|");
     for m in mask {
         let _ = writeln!(
             o,
-            "| {}² | {} | {}° | {:.3} | {:.3} | {} |",
-            m.size, m.context, m.sun_el, m.seconds_2t, m.seconds_1t, m.lit_px
+            "| {}² | {} | {} | {}° | {:.3} | {:.3} | {} |",
+            m.size, m.context, m.method, m.sun_el, m.seconds_2t, m.seconds_1t, m.lit_px
         );
     }
     if !images.is_empty() {
