@@ -31,3 +31,6 @@ mod horizon_cases;
 
 // Fourier pyramids: streamed and from raw maps, reconstruction, sun visibility, bad input.
 mod fourier;
+
+// Shadow methods through the CLI: every method against the reference, tiles and boxes, bad input.
+mod shadows;

@@ -440,9 +440,10 @@ pub fn tile_shadows(
 /// Colour of pixels without data in the images (dark blue: neither lit nor shadowed).
 pub const NO_DATA_RGB: [u8; 3] = [40, 60, 110];
 
-/// Write a row-major image of values in [0, 1] as an 8-bit grey PNG (NaN, no data:
+/// Write a row-major `w`×`h` image of values in [0, 1] as an 8-bit grey PNG (NaN, no data:
 /// [`NO_DATA_RGB`]), atomically.
-pub fn write_grey_png(path: &Path, n: usize, v: &[f32]) -> Result<()> {
+pub fn write_grey_png(path: &Path, w: usize, h: usize, v: &[f32]) -> Result<()> {
+    assert_eq!(v.len(), w * h);
     let bytes: Vec<u8> = v
         .iter()
         .flat_map(|&x| {
@@ -454,9 +455,207 @@ pub fn write_grey_png(path: &Path, n: usize, v: &[f32]) -> Result<()> {
             }
         })
         .collect();
-    let img = image::RgbImage::from_raw(n as u32, n as u32, bytes).expect("n² pixels");
+    let img = image::RgbImage::from_raw(w as u32, h as u32, bytes).expect("w·h pixels");
     let mut buf = std::io::Cursor::new(Vec::new());
     img.write_to(&mut buf, image::ImageFormat::Png)
         .map_err(|e| Error::invalid(path, format!("PNG encoding failed: {e}")))?;
     crate::fsio::write_atomic_bytes(path, buf.get_ref())
+}
+
+/// Write a row-major `w`×`h` lit-fraction image as a single-part EXR with one f32 channel
+/// `lit` (NaN: no data), atomically.
+pub fn write_lit_exr(path: &Path, w: usize, h: usize, v: &[f32]) -> Result<()> {
+    use exr::prelude::*;
+    use std::io::Write;
+    assert_eq!(v.len(), w * h);
+    let layer = Layer::new(
+        (w, h),
+        LayerAttributes::named("penumbra-lit-fraction"),
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(SmallVec::from_vec(vec![AnyChannel::new(
+            "lit",
+            FlatSamples::F32(v.to_vec()),
+        )])),
+    );
+    let image = Image::from_layer(layer);
+    crate::fsio::write_atomic(path, |f| {
+        let mut buf = std::io::Cursor::new(Vec::with_capacity(w * h * 4));
+        image
+            .write()
+            .non_parallel()
+            .to_buffered(&mut buf)
+            .map_err(|e| crate::error::Error::invalid(path, format!("EXR encoding failed: {e}")))?;
+        f.write_all(buf.get_ref())
+            .map_err(|e| crate::error::Error::io(path, e))
+    })
+}
+
+/// Most output pixels and tiles of a region.
+pub const MAX_REGION_PX: usize = 8192 * 8192;
+pub const MAX_REGION_TILES: usize = 64;
+
+/// Shadows over a latitude/longitude box, resampled (nearest pixel) onto an equirectangular
+/// grid at the level's pixel size.
+#[derive(Clone, Debug, Serialize)]
+pub struct RegionShadows {
+    /// [lat0, lat1, lon0, lon1], degrees.
+    pub bbox: [f64; 4],
+    pub level: u8,
+    pub width: usize,
+    pub height: usize,
+    /// Grid step, degrees (rows from lat1 down, columns from lon0 east).
+    pub step_deg: f64,
+    pub method: String,
+    #[serde(skip)]
+    pub lit: Vec<f32>,
+    #[serde(skip)]
+    pub relief: Vec<f32>,
+    pub tiles: Vec<String>,
+    pub sun_elevation_deg: [f64; 2],
+    pub sun_radius_deg: f64,
+    pub lit_pixels: u64,
+    pub dark_pixels: u64,
+    pub partial_pixels: u64,
+    pub no_data_pixels: u64,
+}
+
+/// Checks a box [lat0, lat1, lon0, lon1] (degrees).
+pub fn check_bbox(b: [f64; 4]) -> Result<()> {
+    let [lat0, lat1, lon0, lon1] = b;
+    let bad = |what: String| Err(Error::param("bbox", what));
+    if b.iter().any(|v| !v.is_finite()) {
+        return bad(format!("{b:?} holds a value that is not a number"));
+    }
+    if !(-90.0..=90.0).contains(&lat0) || !(-90.0..=90.0).contains(&lat1) || lat0 >= lat1 {
+        return bad(format!(
+            "latitudes {lat0}..{lat1}: give LAT0 < LAT1 within −90..=90"
+        ));
+    }
+    if !(-180.0..=360.0).contains(&lon0)
+        || !(-180.0..=360.0).contains(&lon1)
+        || lon0 >= lon1
+        || lon1 - lon0 > 360.0
+    {
+        return bad(format!(
+            "longitudes {lon0}..{lon1}: give LON0 < LON1 within −180..=360, at most 360 apart"
+        ));
+    }
+    Ok(())
+}
+
+/// Shadows of the box `bbox` = [lat0, lat1, lon0, lon1] (degrees) at `level`: every covered
+/// tile it touches by [`tile_shadows`], resampled onto a latitude/longitude grid.
+pub fn region_shadows(
+    dir: &Path,
+    level: u8,
+    bbox: [f64; 4],
+    sun_lat: f64,
+    sun_lon: f64,
+    sun_distance_au: Option<f64>,
+    method: &ShadowMethod,
+) -> Result<RegionShadows> {
+    check_bbox(bbox)?;
+    check_subsolar(sun_lat, sun_lon)?;
+    let store = Store::open(dir)?;
+    let ts = store.manifest();
+    let lay = ts.layout;
+    if level >= lay.levels {
+        return Err(Error::usage(format!(
+            "{} has levels 0..{}; --level {level} is not one",
+            dir.display(),
+            lay.levels
+        )));
+    }
+    let [lat0, lat1, lon0, lon1] = bbox;
+    let step = (lay.centre_pixel_m(level, ts.body.radius_m) / ts.body.radius_m).to_degrees();
+    let (w, h) = (
+        ((lon1 - lon0) / step).ceil().max(1.0),
+        ((lat1 - lat0) / step).ceil().max(1.0),
+    );
+    if w * h > MAX_REGION_PX as f64 {
+        return Err(Error::usage(format!(
+            "the box is {w}×{h} pixels at level {level} (at most {MAX_REGION_PX}): ask a \
+             coarser --level or a smaller --bbox"
+        )));
+    }
+    let (w, h) = (w as usize, h as usize);
+    // Where each output pixel comes from.
+    let src: Vec<Option<(TileId, u32, u32)>> = (0..w * h)
+        .into_par_iter()
+        .map(|p| {
+            let (r, c) = (p / w, p % w);
+            let lat = lat1 - (r as f64 + 0.5) * step;
+            let lon = lon0 + (c as f64 + 0.5) * step;
+            let d = cube::latlon_to_dir(lat.to_radians(), lon.to_radians());
+            let loc = lay.locate(level, d);
+            let n = lay.tile_size as f64;
+            ts.has_tile(loc.tile).then(|| {
+                (
+                    loc.tile,
+                    loc.px.round().clamp(0.0, n - 1.0) as u32,
+                    loc.py.round().clamp(0.0, n - 1.0) as u32,
+                )
+            })
+        })
+        .collect();
+    let mut tiles: Vec<TileId> = src.iter().flatten().map(|s| s.0).collect();
+    tiles.sort();
+    tiles.dedup();
+    if tiles.is_empty() {
+        return Err(Error::usage(format!(
+            "no tile of level {level} covers the box {bbox:?}: `penumbra info {}` lists the \
+             coverage",
+            dir.display()
+        )));
+    }
+    if tiles.len() > MAX_REGION_TILES {
+        return Err(Error::usage(format!(
+            "the box touches {} tiles of level {level} (at most {MAX_REGION_TILES}): ask a \
+             coarser --level or a smaller --bbox",
+            tiles.len()
+        )));
+    }
+    check_products(&store, method, level)?;
+    drop(store);
+    let mut out = RegionShadows {
+        bbox,
+        level,
+        width: w,
+        height: h,
+        step_deg: step,
+        method: method.label(),
+        lit: vec![f32::NAN; w * h],
+        relief: vec![f32::NAN; w * h],
+        tiles: tiles.iter().map(|t| t.to_string()).collect(),
+        sun_elevation_deg: [f64::INFINITY, f64::NEG_INFINITY],
+        sun_radius_deg: 0.0,
+        lit_pixels: 0,
+        dark_pixels: 0,
+        partial_pixels: 0,
+        no_data_pixels: 0,
+    };
+    for t in &tiles {
+        let sh = tile_shadows(dir, *t, sun_lat, sun_lon, sun_distance_au, method)?;
+        out.sun_radius_deg = sh.sun_radius_deg;
+        out.sun_elevation_deg[0] = out.sun_elevation_deg[0].min(sh.sun_elevation_deg[0]);
+        out.sun_elevation_deg[1] = out.sun_elevation_deg[1].max(sh.sun_elevation_deg[1]);
+        for (p, s) in src.iter().enumerate() {
+            if let Some((tt, i, j)) = s {
+                if tt == t {
+                    let k = *j as usize * sh.n + *i as usize;
+                    out.lit[p] = sh.lit[k];
+                    out.relief[p] = sh.relief[k];
+                }
+            }
+        }
+    }
+    for &v in &out.lit {
+        match v {
+            v if v.is_nan() => out.no_data_pixels += 1,
+            v if v >= 1.0 => out.lit_pixels += 1,
+            v if v <= 0.0 => out.dark_pixels += 1,
+            _ => out.partial_pixels += 1,
+        }
+    }
+    Ok(out)
 }

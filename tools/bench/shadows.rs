@@ -666,7 +666,7 @@ fn pictures(
             render(m)
         };
         let p = dir.join(format!("shadows-{name}.png"));
-        penumbra::shadow::write_grey_png(&p, n, &lit)?;
+        penumbra::shadow::write_grey_png(&p, n, n, &lit)?;
         out.push((name.to_string(), p.display().to_string()));
         if name == "dp" || name == "dp-dda" {
             let e: Vec<f32> = lit
@@ -675,7 +675,7 @@ fn pictures(
                 .map(|(a, b)| ((a - b).abs() * 4.0).min(1.0))
                 .collect();
             let p = dir.join(format!("shadows-{name}-error.png"));
-            penumbra::shadow::write_grey_png(&p, n, &e)?;
+            penumbra::shadow::write_grey_png(&p, n, n, &e)?;
             out.push((format!("{name} |error| ×4"), p.display().to_string()));
         }
     }

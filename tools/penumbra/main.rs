@@ -121,8 +121,12 @@ enum Command {
         #[arg(long)]
         level: u8,
         /// The tile: FACE/Y/X (e.g. nz/31/32; faces px, nx, py, ny, pz, nz).
-        #[arg(long)]
-        tile: String,
+        #[arg(long, required_unless_present = "bbox", conflicts_with = "bbox")]
+        tile: Option<String>,
+        /// Or a latitude/longitude box LAT0,LAT1,LON0,LON1 (degrees), resampled onto a grid at
+        /// the level's pixel size from every tile it touches.
+        #[arg(long, allow_hyphen_values = true)]
+        bbox: Option<String>,
         /// Sub-solar latitude, degrees.
         #[arg(long, allow_hyphen_values = true)]
         sun_lat: f64,
@@ -147,6 +151,10 @@ enum Command {
         /// Also write a shaded relief with the shadows here (PNG).
         #[arg(long)]
         relief: Option<PathBuf>,
+        /// Also write the lit fraction as a float EXR (channel `lit`, NaN = no data) beside
+        /// --out, with the extension .exr.
+        #[arg(long)]
+        exr: bool,
         #[arg(long)]
         json: bool,
     },
@@ -546,6 +554,28 @@ struct BakeArgs {
 const EMBEDDED_HORIZON_LEVEL: u8 = 6;
 
 /// A tile given as FACE/Y/X at `level`.
+/// LAT0,LAT1,LON0,LON1 in degrees.
+fn parse_bbox(b: &str) -> Result<[f64; 4]> {
+    let v: Vec<f64> = b
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| {
+            Error::param(
+                "bbox",
+                format!("'{b}' is not four numbers LAT0,LAT1,LON0,LON1 (degrees)"),
+            )
+        })?;
+    let a: [f64; 4] = v.try_into().map_err(|_| {
+        Error::param(
+            "bbox",
+            format!("'{b}' is not four numbers LAT0,LAT1,LON0,LON1 (degrees)"),
+        )
+    })?;
+    penumbra::shadow::check_bbox(a)?;
+    Ok(a)
+}
+
 fn parse_tile(level: u8, s: &str) -> Result<penumbra::layout::TileId> {
     let parts: Vec<&str> = s.split('/').collect();
     let bad = || {
@@ -705,9 +735,10 @@ fn run(cli: Cli) -> Result<()> {
             model,
             out,
             relief,
+            exr,
+            bbox,
             json,
         } => {
-            let id = parse_tile(level, &tile)?;
             let method = match shadow.trace()? {
                 Some(m) => {
                     if from.is_some() {
@@ -724,26 +755,69 @@ fn run(cli: Cli) -> Result<()> {
                     model,
                 ),
             };
-            let t0 = std::time::Instant::now();
-            let sh = penumbra::shadow::tile_shadows(
-                &dir,
-                id,
-                sun_lat,
-                sun_lon,
-                sun_distance_au,
-                &method,
-            )?;
-            penumbra::shadow::write_grey_png(&out, sh.n, &sh.lit)?;
-            if let Some(r) = &relief {
-                penumbra::shadow::write_grey_png(r, sh.n, &sh.relief)?;
+            let exr_path = exr.then(|| out.with_extension("exr"));
+            if exr_path.as_ref() == Some(&out) {
+                return Err(Error::param(
+                    "out",
+                    "--out names the PNG; with --exr the EXR goes beside it: give a .png name",
+                )
+                .into());
             }
-            output::print_shadows(
-                &sh,
-                &out,
-                relief.as_deref(),
-                t0.elapsed().as_secs_f64(),
-                json,
-            )?;
+            let t0 = std::time::Instant::now();
+            match (tile, bbox) {
+                (Some(tile), _) => {
+                    let id = parse_tile(level, &tile)?;
+                    let sh = penumbra::shadow::tile_shadows(
+                        &dir,
+                        id,
+                        sun_lat,
+                        sun_lon,
+                        sun_distance_au,
+                        &method,
+                    )?;
+                    penumbra::shadow::write_grey_png(&out, sh.n, sh.n, &sh.lit)?;
+                    if let Some(r) = &relief {
+                        penumbra::shadow::write_grey_png(r, sh.n, sh.n, &sh.relief)?;
+                    }
+                    if let Some(e) = &exr_path {
+                        penumbra::shadow::write_lit_exr(e, sh.n, sh.n, &sh.lit)?;
+                    }
+                    output::print_shadows(
+                        &sh,
+                        &out,
+                        relief.as_deref(),
+                        t0.elapsed().as_secs_f64(),
+                        json,
+                    )?;
+                }
+                (None, Some(b)) => {
+                    let bbox = parse_bbox(&b)?;
+                    let sh = penumbra::shadow::region_shadows(
+                        &dir,
+                        level,
+                        bbox,
+                        sun_lat,
+                        sun_lon,
+                        sun_distance_au,
+                        &method,
+                    )?;
+                    penumbra::shadow::write_grey_png(&out, sh.width, sh.height, &sh.lit)?;
+                    if let Some(r) = &relief {
+                        penumbra::shadow::write_grey_png(r, sh.width, sh.height, &sh.relief)?;
+                    }
+                    if let Some(e) = &exr_path {
+                        penumbra::shadow::write_lit_exr(e, sh.width, sh.height, &sh.lit)?;
+                    }
+                    output::print_region_shadows(
+                        &sh,
+                        &out,
+                        relief.as_deref(),
+                        t0.elapsed().as_secs_f64(),
+                        json,
+                    )?;
+                }
+                (None, None) => unreachable!("clap requires --tile or --bbox"),
+            }
         }
         Command::Info { dir, json } => output::print_info(&dir, json)?,
         Command::Query(QueryCommand::Height {

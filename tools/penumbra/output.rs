@@ -276,6 +276,44 @@ pub fn print_shadows(
     Ok(())
 }
 
+pub fn print_region_shadows(
+    s: &penumbra::shadow::RegionShadows,
+    out: &Path,
+    relief: Option<&Path>,
+    wall_s: f64,
+    json: bool,
+) -> Result<()> {
+    if json {
+        let mut v = serde_json::to_value(s)?;
+        v["out"] = serde_json::json!(out.display().to_string());
+        v["relief"] = serde_json::json!(relief.map(|r| r.display().to_string()));
+        v["wall_s"] = serde_json::json!(wall_s);
+        return print_json(&v);
+    }
+    let mut o = std::io::stdout().lock();
+    writeln!(
+        o,
+        "box {:?} at level {} ({}×{} px of {:.5}°, {} tiles, {}): sun elevation {:.2}°..{:.2}° (radius {:.4}°); {} lit, {} shadowed, {} partly lit, {} without data; {}{}; {wall_s:.2} s",
+        s.bbox,
+        s.level,
+        s.width,
+        s.height,
+        s.step_deg,
+        s.tiles.len(),
+        s.method,
+        s.sun_elevation_deg[0],
+        s.sun_elevation_deg[1],
+        s.sun_radius_deg,
+        s.lit_pixels,
+        s.dark_pixels,
+        s.partial_pixels,
+        s.no_data_pixels,
+        out.display(),
+        relief.map(|r| format!(", {}", r.display())).unwrap_or_default()
+    )?;
+    Ok(())
+}
+
 pub fn print_shadow_answer(a: &ShadowAnswer, json: bool) -> Result<()> {
     if json {
         return print_json(a);
