@@ -323,7 +323,7 @@ impl<'a> Tracer<'a> {
                 if el <= floor {
                     return done(0.0, f64::NEG_INFINITY);
                 }
-                let ray = Ray::toward(self.ctx, x, y, at.phi);
+                let ray = ray_toward(self.ctx, x, y, at.phi);
                 let dark = self.extrema(&ray, x, y, &at, tan_deg(el), work);
                 // The traversal decides without finding the horizon.
                 Traced {
@@ -332,12 +332,12 @@ impl<'a> Tracer<'a> {
                 }
             }
             Method::Uniform { steps } => {
-                let ray = Ray::toward(self.ctx, x, y, at.phi);
+                let ray = ray_toward(self.ctx, x, y, at.phi);
                 let a = self.uniform(&ray, *steps, lo, work);
                 done(occlusion(a, floor, el, r), a)
             }
             Method::Dp { runs, dda } => {
-                let ray = Ray::toward(self.ctx, x, y, at.phi);
+                let ray = ray_toward(self.ctx, x, y, at.phi);
                 let a = self.dp(&ray, x, y, &at, runs, *dda, lo, hi, work);
                 done(occlusion(a, floor, el, r), a)
             }
@@ -467,7 +467,7 @@ impl<'a> Tracer<'a> {
         let hi = tan_deg(el + r);
         let fl = floor as f32;
         let horizon_at = |phi: f64, work: &mut Work| -> f64 {
-            let ray = Ray::toward(self.ctx, x, y, phi);
+            let ray = ray_toward(self.ctx, x, y, phi);
             let a = self.exact(&ray, x, y, at, lo, hi, work);
             (a.atan().to_degrees() as f32).max(fl) as f64
         };
@@ -551,6 +551,13 @@ impl<'a> Tracer<'a> {
         let mut ax = Axis::new(x / q, ray.cx / q, sa);
         let mut ay = Axis::new(y / q, ray.cy / q, sa);
         let l = &self.pyramid.levels[m];
+        // A ray along the raster's last row or column lies on its last texels' far edge.
+        if ray.cx == 0.0 && ax.i == l.w as i64 {
+            ax.i -= 1;
+        }
+        if ray.cy == 0.0 && ay.i == l.h as i64 {
+            ay.i -= 1;
+        }
         let mut s = sa;
         while s < sb {
             if ax.i < 0 || ay.i < 0 || ax.i >= l.w as i64 || ay.i >= l.h as i64 {
@@ -633,16 +640,23 @@ impl<'a> Tracer<'a> {
             // The candidate with the largest bound.
             let mut cand = (floor, f64::NAN, f64::NAN);
             if dda {
-                // Canonical DDA: the texels under two points of the interval only.
+                // Canonical DDA: the texels under two points of the interval only; the part of
+                // the ray inside the chosen one (not half of the interval, which may leave out
+                // the part of the texel where its terrain is) is searched at the next level.
+                let q = (1u64 << m) as f64;
                 let mid = 0.5 * (sa + sb);
-                for (p, s_in, s_out) in [(0.5 * (sa + mid), sa, mid), (0.5 * (mid + sb), mid, sb)] {
-                    let q = (1u64 << m) as f64;
+                for p in [0.5 * (sa + mid), 0.5 * (mid + sb)] {
                     let (px, py) = (ray.x0 + p * ray.cx, ray.y0 + p * ray.cy);
                     if !(px >= 0.0 && py >= 0.0) {
                         continue;
                     }
-                    let (hmax, _) = self.pyramid.get(m, (px / q) as i64, (py / q) as i64);
+                    // A point on the raster's far edge is in its last texel.
+                    let l = &self.pyramid.levels[m];
+                    let (tx, ty) = ((px / q) as i64, (py / q) as i64);
+                    let (tx, ty) = (tx.min(l.w as i64 - 1), ty.min(l.h as i64 - 1));
+                    let (hmax, _) = self.pyramid.get(m, tx, ty);
                     work.visits += 1;
+                    let (s_in, s_out) = texel_span(ray, q, tx, ty, sa, sb, p);
                     let bound = self.max_slope(ray, s_in, s_out, hmax as f64);
                     if bound > cand.0 {
                         cand = (bound, s_in, s_out);
@@ -712,6 +726,34 @@ impl<'a> Tracer<'a> {
             self.extrema_node(ray, m - 1, cx, cy, s_in, s_out, t, work)
         })
     }
+}
+
+/// [`Ray::toward`], with a direction component below the cell walk's threshold (1e-12, under
+/// which [`Axis`] does not step) made exactly 0: along a row or column it is cos or sin of a
+/// multiple of π/2, ±1e-16, and on the raster's first row or column a negative one puts every
+/// point of the ray a rounding error outside the raster, where the searches see nothing.
+fn ray_toward(ctx: &Context, x: usize, y: usize, phi: f64) -> Ray {
+    let mut ray = Ray::toward(ctx, x, y, phi);
+    for c in [&mut ray.cx, &mut ray.cy] {
+        if c.abs() <= 1e-12 {
+            *c = 0.0;
+        }
+    }
+    ray
+}
+
+/// The part of [sa, sb] where the ray lies inside texel (tx, ty) of side `q` cells, which holds
+/// the ray's point at `p` (kept inside against rounding).
+fn texel_span(ray: &Ray, q: f64, tx: i64, ty: i64, sa: f64, sb: f64, p: f64) -> (f64, f64) {
+    let (mut lo, mut hi) = (sa, sb);
+    for (o, d, t) in [(ray.x0, ray.cx, tx), (ray.y0, ray.cy, ty)] {
+        if d.abs() > 1e-12 {
+            let (a, b) = ((t as f64 * q - o) / d, ((t + 1) as f64 * q - o) / d);
+            lo = lo.max(a.min(b));
+            hi = hi.min(a.max(b));
+        }
+    }
+    (lo.min(p), hi.max(p))
 }
 
 /// What a method found at one pixel.
