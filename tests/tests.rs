@@ -34,3 +34,5 @@ mod fourier;
 
 // Shadow methods through the CLI: every method against the reference, tiles and boxes, bad input.
 mod shadows;
+// The shadow ray-marching methods in stiff cases with known answers (the library's API).
+mod shadow_methods;
