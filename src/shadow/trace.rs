@@ -87,9 +87,19 @@ impl std::str::FromStr for Runs {
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Method {
     Reference,
-    Uniform { steps: usize },
-    Dp { runs: Runs, dda: bool },
+    Uniform {
+        steps: usize,
+    },
+    Dp {
+        runs: Runs,
+        dda: bool,
+    },
     Extrema,
+    /// The min/max traversal turned into a soft shadow: the exact horizon in the sun's azimuth
+    /// within the disc's band (texels that cannot rise above the best found or the disc's
+    /// bottom are skipped, the walk stops once the disc's top is hidden), with the same disc
+    /// occlusion as DP.
+    ExtremaSoft,
 }
 
 impl Method {
@@ -105,6 +115,7 @@ impl Method {
             Method::Dp { runs, dda: false } => format!("dp {runs}"),
             Method::Dp { runs, dda: true } => format!("dp-dda {runs}"),
             Method::Extrema => "extrema".into(),
+            Method::ExtremaSoft => "extrema-soft".into(),
         }
     }
 }
@@ -339,6 +350,11 @@ impl<'a> Tracer<'a> {
             Method::Dp { runs, dda } => {
                 let ray = ray_toward(self.ctx, x, y, at.phi);
                 let a = self.dp(&ray, x, y, &at, runs, *dda, lo, hi, work);
+                done(occlusion(a, floor, el, r), a)
+            }
+            Method::ExtremaSoft => {
+                let ray = ray_toward(self.ctx, x, y, at.phi);
+                let a = self.extrema_soft(&ray, x, y, &at, lo, hi, work);
                 done(occlusion(a, floor, el, r), a)
             }
         }
@@ -696,6 +712,68 @@ impl<'a> Tracer<'a> {
         let top = (self.pyramid.len() - 1).min(7);
         self.walk(ray, top, NEAR_PX, end, &mut |tx, ty, sa, sb| {
             self.extrema_node(ray, top, tx, ty, sa, sb, t, work)
+        })
+    }
+
+    /// The exact horizon slope in the ray's azimuth where it matters: clamped below at `lo`
+    /// (anything lower leaves the disc whole) and found only up to `hi` (anything higher hides
+    /// it), by the min/max traversal.
+    #[allow(clippy::too_many_arguments)]
+    fn extrema_soft(
+        &self,
+        ray: &Ray,
+        x: usize,
+        y: usize,
+        at: &SunAt,
+        lo: f64,
+        hi: f64,
+        work: &mut Work,
+    ) -> f64 {
+        let mut best = self.near(ray, x, y, at, work);
+        if best >= hi {
+            return best;
+        }
+        let end = self.exit(ray, lo);
+        if end <= NEAR_PX {
+            return best;
+        }
+        let top = (self.pyramid.len() - 1).min(7);
+        self.walk(ray, top, NEAR_PX, end, &mut |tx, ty, sa, sb| {
+            self.soft_node(ray, top, tx, ty, sa, sb, lo, hi, &mut best, work)
+        });
+        best
+    }
+
+    /// One texel of [`Tracer::extrema_soft`]; true when the disc is wholly hidden.
+    #[allow(clippy::too_many_arguments)]
+    fn soft_node(
+        &self,
+        ray: &Ray,
+        m: usize,
+        tx: i64,
+        ty: i64,
+        sa: f64,
+        sb: f64,
+        lo: f64,
+        hi: f64,
+        best: &mut f64,
+        work: &mut Work,
+    ) -> bool {
+        let (hmax, hmin) = self.pyramid.get(m, tx, ty);
+        work.visits += 1;
+        if self.max_slope(ray, sa, sb, hmax as f64) <= best.max(lo) {
+            return false;
+        }
+        if hmin > f32::NEG_INFINITY && self.max_slope(ray, sa, sb, hmin as f64) >= hi {
+            *best = best.max(hi);
+            return true;
+        }
+        if m == 0 {
+            *best = ray.max_over(self.ctx, sa, sb, *best).0;
+            return *best >= hi;
+        }
+        self.walk(ray, m - 1, sa, sb, &mut |cx, cy, s_in, s_out| {
+            self.soft_node(ray, m - 1, cx, cy, s_in, s_out, lo, hi, best, work)
         })
     }
 

@@ -28,7 +28,7 @@ use crate::fourier::{dem_case, real_cases, Case};
 const SUN_EL: [f64; 4] = [1.0, 5.0, 15.0, 45.0];
 const SUN_AZ: [f64; 8] = [17.0, 62.0, 107.0, 152.0, 197.0, 242.0, 287.0, 332.0];
 /// Uniform step counts tried.
-const STEPS: [usize; 8] = [25, 50, 100, 200, 400, 800, 1600, 3200];
+const STEPS: [usize; 7] = [25, 50, 100, 200, 400, 800, 1600];
 /// Azimuths of the raw maps the horizon method looks up.
 const AZIMUTHS: usize = 360;
 
@@ -85,6 +85,7 @@ fn methods(quick: bool) -> Vec<Bm> {
         }));
     }
     v.push(Bm::Trace(Method::Extrema));
+    v.push(Bm::Trace(Method::ExtremaSoft));
     v.push(Bm::Horizon(true));
     v.push(Bm::Horizon(false));
     v
@@ -438,9 +439,8 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
         &args,
         t_all.elapsed().as_secs_f64(),
     );
-    if args.markdown {
-        print!("{md}");
-    } else if !args.json {
+    // Markdown unless only JSON was asked.
+    if args.markdown || !args.json {
         print!("{md}");
     }
     Ok(())

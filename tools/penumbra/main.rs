@@ -278,7 +278,8 @@ enum QueryCommand {
 struct ShadowFlags {
     /// horizon (look the baked horizons up), reference (exact search of the terrain, exact
     /// disc), uniform (fixed steps), dp (Jung et al. over a maximum mipmap), dp-dda (the same
-    /// with a canonical DDA that skips texels) or extrema (Timokhin & Mikhaylyuk, hard).
+    /// with a canonical DDA that skips texels), extrema (Timokhin & Mikhaylyuk, hard) or
+    /// extrema-soft (their traversal finding the exact horizon within the sun's disc).
     #[arg(long, default_value = "horizon")]
     method: String,
     /// With --method uniform: steps along the ray (1..=1048576).
@@ -319,12 +320,13 @@ impl ShadowFlags {
                 dda: true,
             },
             "extrema" => T::Extrema,
+            "extrema-soft" => T::ExtremaSoft,
             other => {
                 return Err(Error::param(
                     "method",
                     format!(
                         "unknown shadow method '{other}': use horizon, reference, uniform, dp, \
-                         dp-dda or extrema"
+                         dp-dda, extrema or extrema-soft"
                     ),
                 )
                 .into())
