@@ -9,6 +9,7 @@
 //! extended gnomonic plane, across tile and face edges, as the horizon stage does; `horizon`
 //! looks the baked horizon products up (raw maps or Fourier pyramids).
 
+pub mod smap;
 pub mod trace;
 
 use std::path::Path;
