@@ -424,18 +424,52 @@ pub fn tile_shadows(
     for (l, rl, e) in rows {
         out.sun_elevation_deg[0] = out.sun_elevation_deg[0].min(e[0]);
         out.sun_elevation_deg[1] = out.sun_elevation_deg[1].max(e[1]);
-        for &v in &l {
-            match v {
-                v if v.is_nan() => out.no_data_pixels += 1,
-                v if v >= 1.0 => out.lit_pixels += 1,
-                v if v <= 0.0 => out.dark_pixels += 1,
-                _ => out.partial_pixels += 1,
-            }
-        }
         out.lit.extend(l);
         out.relief.extend(rl);
     }
+    [
+        out.lit_pixels,
+        out.dark_pixels,
+        out.partial_pixels,
+        out.no_data_pixels,
+    ] = classify(&out.lit);
     Ok(out)
+}
+
+/// Pixels fully lit, fully shadowed, partly lit and without data (NaN) of a lit-fraction image.
+pub fn classify(lit: &[f32]) -> [u64; 4] {
+    let mut c = [0u64; 4];
+    for &v in lit {
+        let k = match v {
+            v if v.is_nan() => 3,
+            v if v >= 1.0 => 0,
+            v if v <= 0.0 => 1,
+            _ => 2,
+        };
+        c[k] += 1;
+    }
+    c
+}
+
+/// Write a `w`×`h` lit-fraction image as PNG, and optionally the shaded relief as PNG and the
+/// lit fraction as float EXR, each atomically.
+pub fn write_images(
+    w: usize,
+    h: usize,
+    lit: &[f32],
+    relief: &[f32],
+    out: &Path,
+    relief_out: Option<&Path>,
+    exr_out: Option<&Path>,
+) -> Result<()> {
+    write_grey_png(out, w, h, lit)?;
+    if let Some(r) = relief_out {
+        write_grey_png(r, w, h, relief)?;
+    }
+    if let Some(e) = exr_out {
+        write_lit_exr(e, w, h, lit)?;
+    }
+    Ok(())
 }
 
 /// Colour of pixels without data in the images (dark blue: neither lit nor shadowed).
@@ -650,13 +684,11 @@ pub fn region_shadows(
             }
         }
     }
-    for &v in &out.lit {
-        match v {
-            v if v.is_nan() => out.no_data_pixels += 1,
-            v if v >= 1.0 => out.lit_pixels += 1,
-            v if v <= 0.0 => out.dark_pixels += 1,
-            _ => out.partial_pixels += 1,
-        }
-    }
+    [
+        out.lit_pixels,
+        out.dark_pixels,
+        out.partial_pixels,
+        out.no_data_pixels,
+    ] = classify(&out.lit);
     Ok(out)
 }

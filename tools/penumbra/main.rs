@@ -777,13 +777,15 @@ fn run(cli: Cli) -> Result<()> {
                         sun_distance_au,
                         &method,
                     )?;
-                    penumbra::shadow::write_grey_png(&out, sh.n, sh.n, &sh.lit)?;
-                    if let Some(r) = &relief {
-                        penumbra::shadow::write_grey_png(r, sh.n, sh.n, &sh.relief)?;
-                    }
-                    if let Some(e) = &exr_path {
-                        penumbra::shadow::write_lit_exr(e, sh.n, sh.n, &sh.lit)?;
-                    }
+                    penumbra::shadow::write_images(
+                        sh.n,
+                        sh.n,
+                        &sh.lit,
+                        &sh.relief,
+                        &out,
+                        relief.as_deref(),
+                        exr_path.as_deref(),
+                    )?;
                     output::print_shadows(
                         &sh,
                         &out,
@@ -803,13 +805,15 @@ fn run(cli: Cli) -> Result<()> {
                         sun_distance_au,
                         &method,
                     )?;
-                    penumbra::shadow::write_grey_png(&out, sh.width, sh.height, &sh.lit)?;
-                    if let Some(r) = &relief {
-                        penumbra::shadow::write_grey_png(r, sh.width, sh.height, &sh.relief)?;
-                    }
-                    if let Some(e) = &exr_path {
-                        penumbra::shadow::write_lit_exr(e, sh.width, sh.height, &sh.lit)?;
-                    }
+                    penumbra::shadow::write_images(
+                        sh.width,
+                        sh.height,
+                        &sh.lit,
+                        &sh.relief,
+                        &out,
+                        relief.as_deref(),
+                        exr_path.as_deref(),
+                    )?;
                     output::print_region_shadows(
                         &sh,
                         &out,

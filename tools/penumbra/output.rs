@@ -244,6 +244,19 @@ pub fn print_fourier(r: &FourierReport, wall_s: f64, json: bool) -> Result<()> {
     Ok(())
 }
 
+/// A shadow report as JSON, with the images written and the wall time.
+fn print_shadow_json(
+    mut v: serde_json::Value,
+    out: &Path,
+    relief: Option<&Path>,
+    wall_s: f64,
+) -> Result<()> {
+    v["out"] = serde_json::json!(out.display().to_string());
+    v["relief"] = serde_json::json!(relief.map(|r| r.display().to_string()));
+    v["wall_s"] = serde_json::json!(wall_s);
+    print_json(&v)
+}
+
 pub fn print_shadows(
     s: &penumbra::shadow::TileShadows,
     out: &Path,
@@ -252,11 +265,7 @@ pub fn print_shadows(
     json: bool,
 ) -> Result<()> {
     if json {
-        let mut v = serde_json::to_value(s)?;
-        v["out"] = serde_json::json!(out.display().to_string());
-        v["relief"] = serde_json::json!(relief.map(|r| r.display().to_string()));
-        v["wall_s"] = serde_json::json!(wall_s);
-        return print_json(&v);
+        return print_shadow_json(serde_json::to_value(s)?, out, relief, wall_s);
     }
     let mut o = std::io::stdout().lock();
     writeln!(
@@ -284,11 +293,7 @@ pub fn print_region_shadows(
     json: bool,
 ) -> Result<()> {
     if json {
-        let mut v = serde_json::to_value(s)?;
-        v["out"] = serde_json::json!(out.display().to_string());
-        v["relief"] = serde_json::json!(relief.map(|r| r.display().to_string()));
-        v["wall_s"] = serde_json::json!(wall_s);
-        return print_json(&v);
+        return print_shadow_json(serde_json::to_value(s)?, out, relief, wall_s);
     }
     let mut o = std::io::stdout().lock();
     writeln!(
