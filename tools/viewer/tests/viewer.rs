@@ -1,0 +1,1 @@
+//! Tests of the `penumbra-view` viewer (headless on Mesa's lavapipe in CI).
