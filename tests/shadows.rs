@@ -79,12 +79,13 @@ fn every_method_answers_a_point_and_agrees_with_the_reference() {
         (-89.85, 300.0),
         (-89.95, 100.0),
     ];
-    let methods: [&[&str]; 6] = [
+    let methods: [&[&str]; 7] = [
         &["--method", "uniform", "--steps", "400"],
         &["--method", "dp"],
         &["--method", "dp", "--dp-levels", "5,5,5,3"],
         &["--method", "dp-dda"],
         &["--method", "extrema"],
+        &["--method", "smap"],
         &["--method", "horizon", "--from", "raw"],
     ];
     let mut err = vec![0.0f64; methods.len()];
@@ -101,8 +102,9 @@ fn every_method_answers_a_point_and_agrees_with_the_reference() {
                 for (k, m) in methods.iter().enumerate() {
                     let (v, q) = lit(&o, lat, lon, az, el, m);
                     assert!((0.0..=1.0).contains(&v), "{m:?}: {q}");
-                    if m[1] == "extrema" {
+                    if m[1] == "extrema" || m[1] == "smap" {
                         assert!(v == 0.0 || v == 1.0, "hard method gave {v}");
+                        assert_eq!(q["method"], m[1]);
                     }
                     err[k] += (v - r).abs();
                     if (v >= 0.5) != (r >= 0.5) {
@@ -118,7 +120,7 @@ fn every_method_answers_a_point_and_agrees_with_the_reference() {
         // Extrema and the 360-sample... (36 here) raw maps decide as the reference does
         // except within a pixel's rounding; DP and uniform stepping estimate.
         let (mae_max, per_max) = match m[1] {
-            "extrema" => (0.1, 0.05),
+            "extrema" | "smap" => (0.1, 0.05),
             "horizon" => (0.1, 0.1),
             _ => (0.1, 0.1),
         };
@@ -136,7 +138,15 @@ fn a_tile_and_a_box_render_with_every_method_the_same_at_any_thread_count() {
     let o = baked(d.path());
     let out = d.path().join("out");
     std::fs::create_dir_all(&out).unwrap();
-    for m in ["reference", "uniform", "dp", "dp-dda", "extrema", "horizon"] {
+    for m in [
+        "reference",
+        "uniform",
+        "dp",
+        "dp-dda",
+        "extrema",
+        "smap",
+        "horizon",
+    ] {
         let png = out.join(format!("{m}.png"));
         let relief = out.join(format!("{m}-relief.png"));
         let p = png.to_str().unwrap();
@@ -175,8 +185,15 @@ fn a_tile_and_a_box_render_with_every_method_the_same_at_any_thread_count() {
         assert_eq!((img.width(), img.height()), (32, 32));
         assert!(png.with_extension("exr").metadata().unwrap().len() > 0);
         assert!(relief.exists());
-        if m == "extrema" {
+        if m == "extrema" || m == "smap" {
             assert_eq!(j["partial_pixels"], 0, "a hard method has no penumbra: {j}");
+        }
+        if m == "smap" {
+            let f = j["smap"]["marked_fraction"].as_f64().unwrap();
+            assert!(f > 0.0 && f < 1.0, "marked fraction {f}: {j}");
+            assert!(j["smap"]["samples"].as_u64().unwrap() >= 32 * 32, "{j}");
+        } else {
+            assert!(j.get("smap").is_none(), "{m}: {j}");
         }
         // Same bytes on one thread.
         let png1 = out.join(format!("{m}-1.png"));

@@ -348,11 +348,11 @@ pub struct ShadowAnswer {
     /// Fraction of the sun's disc above the horizon, in [0, 1].
     pub lit_fraction: f64,
     pub model: Model,
-    /// `stored`, `computed` or `fourier` (as for the horizon query), or `traced` for the
-    /// ray-marching methods.
+    /// `stored`, `computed` or `fourier` (as for the horizon query), `traced` for the
+    /// ray-marching methods or `smap`.
     pub source: String,
     /// The shadow method: `horizon` (a lookup in the horizon products), `reference`,
-    /// `uniform N`, `dp RUNS`, `dp-dda RUNS` or `extrema`.
+    /// `uniform N`, `dp RUNS`, `dp-dda RUNS`, `extrema`, `extrema-soft` or `smap`.
     pub method: String,
     /// For `horizon`: the method that computed the horizon (fast or reference).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -375,8 +375,9 @@ pub fn shadow(
     model: Model,
     from: HorizonFrom,
     opts: &HorizonOptions,
-    trace: Option<&crate::shadow::trace::Method>,
+    search: Option<&crate::shadow::ShadowMethod>,
 ) -> Result<ShadowAnswer> {
+    use crate::shadow::ShadowMethod;
     if !(sun_az.is_finite() && (-360.0..=720.0).contains(&sun_az)) {
         return Err(Error::param(
             "sun_az",
@@ -431,20 +432,35 @@ pub fn shadow(
         lit_fraction,
         model,
         source: source.into(),
-        method: trace.map_or("horizon".into(), |m| m.label()),
+        method: match search {
+            Some(m @ (ShadowMethod::Trace(_) | ShadowMethod::SMap)) => m.label(),
+            _ => "horizon".into(),
+        },
         horizon_method: method,
         margin_px,
     };
-    if let Some(m) = trace {
+    if let Some(m @ (ShadowMethod::Trace(_) | ShadowMethod::SMap)) = search {
         crate::horizon::stage::check_layout(dir, ts)?;
         let low = sun_el - sun.radius_deg - 0.05;
         let (ctx, rect) = crate::shadow::shadow_context(&store, px.tile, low, opts.max_margin_px)?;
         let margin = (rect.x0.max(rect.y0)) as u64;
         let tmin = terrain_range(ts).map_or(0.0, |t| t.0);
-        let tracer = crate::shadow::Tracer::new(&ctx, tmin);
-        let mut work = crate::shadow::trace::Work::default();
-        let t = tracer.trace(rect.x0 + px.i, rect.y0 + px.j, &sun, m, &mut work);
-        return Ok(answer(t.horizon_deg, t.lit, "traced", None, margin));
+        let (x, y) = (rect.x0 + px.i, rect.y0 + px.j);
+        if let ShadowMethod::Trace(m) = m {
+            let tracer = crate::shadow::Tracer::new(&ctx, tmin);
+            let mut work = crate::shadow::trace::Work::default();
+            let t = tracer.trace(x, y, &sun, m, &mut work);
+            return Ok(answer(t.horizon_deg, t.lit, "traced", None, margin));
+        }
+        // The map of this one pixel: every beam it needs, from the raster's sunward edge.
+        let one = crate::horizon::Rect {
+            x0: x,
+            y0: y,
+            w: 1,
+            h: 1,
+        };
+        let map = crate::shadow::smap::SMap::build(&ctx, sun.dir, one, tmin);
+        return Ok(answer(f64::NAN, map.lit(&ctx, x, y), "smap", None, margin));
     }
     // A tile stored as fully lit answers for suns at or above its threshold without a horizon.
     if from == HorizonFrom::Fourier {

@@ -6,8 +6,10 @@
 //! One interface, several methods ([`ShadowMethod`]): the ray-marching methods of [`trace`]
 //! (the exact `reference`, `uniform` stepping, Jung et al.'s `dp` over a maximum mipmap,
 //! Timokhin & Mikhaylyuk's `extrema` traversal) search the terrain itself on the face's
-//! extended gnomonic plane, across tile and face edges, as the horizon stage does; `horizon`
-//! looks the baked horizon products up (raw maps or Fourier pyramids).
+//! extended gnomonic plane, across tile and face edges, as the horizon stage does; `smap`
+//! (Sakalauskas' silhouette map, [`smap`]) prepares the same raster once for the sun's
+//! direction and then answers each pixel from it; `horizon` looks the baked horizon products
+//! up (raw maps or Fourier pyramids).
 
 pub mod smap;
 pub mod trace;
@@ -55,6 +57,9 @@ impl std::str::FromStr for HorizonSource {
 pub enum ShadowMethod {
     /// Search the terrain along the sun's ray ([`trace`]).
     Trace(trace::Method),
+    /// Sakalauskas' silhouette map for the sun's direction ([`smap`]; hard shadow), built once
+    /// per tile (per point for a query) over the same context raster the tracer searches.
+    SMap,
     /// Look the baked horizon up, with a disc model.
     Horizon(HorizonSource, Model),
 }
@@ -63,6 +68,7 @@ impl ShadowMethod {
     pub fn label(&self) -> String {
         match self {
             ShadowMethod::Trace(m) => m.label(),
+            ShadowMethod::SMap => "smap".into(),
             ShadowMethod::Horizon(HorizonSource::Raw, m) => format!("horizon raw {m}"),
             ShadowMethod::Horizon(HorizonSource::Fourier, m) => format!("horizon fourier {m}"),
         }
@@ -138,6 +144,56 @@ pub struct TileShadows {
     pub dark_pixels: u64,
     pub partial_pixels: u64,
     pub no_data_pixels: u64,
+    /// For `smap`: the map's size and marks.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub smap: Option<SMapStats>,
+}
+
+/// What an SMap held and how long it took to build.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct SMapStats {
+    /// Maps built (one per tile).
+    pub maps: u64,
+    pub beams: u64,
+    pub samples: u64,
+    /// Share of the samples marked black (the silhouette seen from the sun: prefix maxima of
+    /// g along their beam), and of those that are local maxima (Sakalauskas' Eq. 1).
+    pub marked_fraction: f64,
+    pub silhouette_fraction: f64,
+    /// Largest map held at once.
+    pub bytes: u64,
+    pub build_s: f64,
+}
+
+impl SMapStats {
+    /// The statistics of one map built in `build_s` seconds.
+    pub fn of(map: &smap::SMap, build_s: f64) -> SMapStats {
+        let (beams, samples) = map.size();
+        SMapStats {
+            maps: 1,
+            beams: beams as u64,
+            samples: samples as u64,
+            marked_fraction: map.marked_fraction(),
+            silhouette_fraction: map.silhouette_fraction(),
+            bytes: map.bytes() as u64,
+            build_s,
+        }
+    }
+
+    /// Both maps' statistics together (fractions weighted by samples).
+    pub fn merge(self, o: SMapStats) -> SMapStats {
+        let n = (self.samples + o.samples).max(1) as f64;
+        let w = |a: f64, b: f64| (a * self.samples as f64 + b * o.samples as f64) / n;
+        SMapStats {
+            maps: self.maps + o.maps,
+            beams: self.beams + o.beams,
+            samples: self.samples + o.samples,
+            marked_fraction: w(self.marked_fraction, o.marked_fraction),
+            silhouette_fraction: w(self.silhouette_fraction, o.silhouette_fraction),
+            bytes: self.bytes.max(o.bytes),
+            build_s: self.build_s + o.build_s,
+        }
+    }
 }
 
 /// The sun's centre at one surface point, from the point's gnomonic (u, v) on a face: the
@@ -221,6 +277,7 @@ enum Source<'a> {
     Raw(Vec<f32>, usize),
     Fourier(crate::fourier::Pyramid),
     Trace(Tracer<'a>, Rect, &'a trace::Method),
+    SMap(smap::SMap, &'a Context, Rect),
 }
 
 /// Checks that the tileset holds what `method` reads at `level`: an exit-2 error naming what
@@ -229,7 +286,7 @@ pub fn check_products(store: &Store, method: &ShadowMethod, level: u8) -> Result
     let ts = store.manifest();
     let dir = store.dir();
     let (levels, name) = match method {
-        ShadowMethod::Trace(_) => {
+        ShadowMethod::Trace(_) | ShadowMethod::SMap => {
             check_layout(dir, ts)?;
             return Ok(());
         }
@@ -286,6 +343,7 @@ pub fn tile_shadows(
         radius_deg,
     };
     let ctx_rect;
+    let mut smap_stats = None;
     let source = match method {
         ShadowMethod::Horizon(HorizonSource::Raw, _) => {
             let e = store.horizon(tile)?;
@@ -307,10 +365,18 @@ pub fn tile_shadows(
             ctx_rect = shadow_context(&store, tile, low, MAX_MARGIN_PX)?;
             Source::Trace(Tracer::new(&ctx_rect.0, tmin), ctx_rect.1, m)
         }
+        ShadowMethod::SMap => {
+            let low = lowest_sun_deg(&store, tile, &sun);
+            ctx_rect = shadow_context(&store, tile, low, MAX_MARGIN_PX)?;
+            let t0 = std::time::Instant::now();
+            let map = smap::SMap::build(&ctx_rect.0, s_dir, ctx_rect.1, tmin);
+            smap_stats = Some(SMapStats::of(&map, t0.elapsed().as_secs_f64()));
+            Source::SMap(map, &ctx_rect.0, ctx_rect.1)
+        }
     };
     let model = match method {
         ShadowMethod::Horizon(_, m) => *m,
-        ShadowMethod::Trace(_) => Model::Exact,
+        ShadowMethod::Trace(_) | ShadowMethod::SMap => Model::Exact,
     };
     let heights = store.height(tile)?.expect("covered");
     let halo = lay.halo as usize;
@@ -374,6 +440,7 @@ pub fn tile_shadows(
                     Source::Trace(tr, rect, m) => {
                         tr.lit(rect.x0 + i, rect.y0 + j, &sun, m, &mut work)
                     }
+                    Source::SMap(map, ctx, rect) => map.lit(ctx, rect.x0 + i, rect.y0 + j),
                 };
                 lit[i] = f as f32;
                 // Lambert from the central differences of the pixel positions (halo: one
@@ -420,6 +487,7 @@ pub fn tile_shadows(
         dark_pixels: 0,
         partial_pixels: 0,
         no_data_pixels: 0,
+        smap: smap_stats,
     };
     for (l, rl, e) in rows {
         out.sun_elevation_deg[0] = out.sun_elevation_deg[0].min(e[0]);
@@ -552,6 +620,9 @@ pub struct RegionShadows {
     pub dark_pixels: u64,
     pub partial_pixels: u64,
     pub no_data_pixels: u64,
+    /// For `smap`: the maps' sizes and marks over all tiles.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub smap: Option<SMapStats>,
 }
 
 /// Checks a box [lat0, lat1, lon0, lon1] (degrees).
@@ -668,9 +739,14 @@ pub fn region_shadows(
         dark_pixels: 0,
         partial_pixels: 0,
         no_data_pixels: 0,
+        smap: None,
     };
     for t in &tiles {
         let sh = tile_shadows(dir, *t, sun_lat, sun_lon, sun_distance_au, method)?;
+        out.smap = match (out.smap, sh.smap) {
+            (Some(a), Some(b)) => Some(a.merge(b)),
+            (a, b) => a.or(b),
+        };
         out.sun_radius_deg = sh.sun_radius_deg;
         out.sun_elevation_deg[0] = out.sun_elevation_deg[0].min(sh.sun_elevation_deg[0]);
         out.sun_elevation_deg[1] = out.sun_elevation_deg[1].max(sh.sun_elevation_deg[1]);

@@ -75,9 +75,9 @@
 
 use rayon::prelude::*;
 
-use super::trace::NEAR_PX;
+use super::trace::{ray_toward, NEAR_PX};
 use crate::cube::{dot, Vec3};
-use crate::horizon::{Axis, Context, Ray, Rect};
+use crate::horizon::{Axis, Context, Rect};
 
 /// Largest distance (raster pixels) between neighbouring beams where they are used.
 pub const BEAM_PX: f64 = 1.0;
@@ -211,6 +211,22 @@ fn sin_beta(p: Vec3, s: Vec3) -> f64 {
         p[0] * s[1] - p[1] * s[0],
     ];
     (dot(c, c) / dot(p, p)).sqrt()
+}
+
+/// Distance (raster pixels) from pixel (x, y) along the unit direction (cx, cy) to the
+/// raster's edge.
+fn raster_edge(ctx: &Context, x: usize, y: usize, cx: f64, cy: f64) -> f64 {
+    let to = |p: f64, d: f64, hi: f64| {
+        if d > 0.0 {
+            (hi - p) / d
+        } else if d < 0.0 {
+            -p / d
+        } else {
+            f64::INFINITY
+        }
+    };
+    let (w1, h1) = ((ctx.width - 1) as f64, (ctx.height - 1) as f64);
+    to(x as f64, cx, w1).min(to(y as f64, cy, h1)).max(0.0)
 }
 
 /// The part [t0, t1] of the line p + t·d (t within [t0, t1]) inside the box
@@ -680,8 +696,9 @@ impl SMap {
     /// The highest g (m) of the terrain on raster pixel (x, y)'s nearest beam from the sun's
     /// end to the last sample at least [`EXACT_PX`] sunward of the pixel's projection onto it
     /// (−∞: none), and that sample's distance from the projection (raster pixels; ∞ when there
-    /// is none, and the exact search must go all the way).
-    fn far(&self, x: usize, y: usize) -> (f64, f64) {
+    /// is none, and the exact search must go all the way). `edge`: how far the pixel's own ray
+    /// runs to the raster's edge (raster pixels), which the beam must cover.
+    fn far(&self, x: usize, y: usize, edge: f64) -> (f64, f64) {
         let (xf, yf) = (x as f64, y as f64);
         let b = self.beam_of(xf, yf);
         let none = (f64::NEG_INFINITY, f64::INFINITY);
@@ -690,7 +707,10 @@ impl SMap {
         }
         let j = ((xf - b.x0) * b.dx + (yf - b.y0) * b.dy) / (STEP_PX * STEP_PX);
         let last = floor_i(j - EXACT_PX / STEP_PX);
-        if last < 0 {
+        // A beam grazing the raster's edge (a pixel on the first or last row or column, the
+        // sun along it) can be cut short by its clipping at either end: then it does not stand
+        // for the pixel's ray, which is searched exactly all the way.
+        if last < 0 || j * STEP_PX < edge - 1.5 || last > b.n as i64 {
             return none;
         }
         let at = (j - last as f64) * STEP_PX;
@@ -728,11 +748,7 @@ impl SMap {
         if below_floor(sin_e, r, self.terrain_min_m, h0) {
             return 0.0;
         }
-        let g_q = (r + h0) * cos_e;
-        let (g_far, near) = self.far(x, y);
-        if g_far >= g_q {
-            return 0.0;
-        }
+
         // The near field, exactly along the pixel's own ray as the tracer searches it (its own
         // directional derivative and the bilinear surface cell by cell), out to where the far
         // field's samples begin. The sun's plane azimuth as Frame::plane_azimuth takes it.
@@ -748,7 +764,14 @@ impl SMap {
             dot(va, s) * np - dot(va, up) * nt,
         );
         let phi = ay.atan2(ax);
-        let ray = Ray::toward(ctx, x, y, phi);
+        // The tracer's ray (a direction component of ±1e-16 along a row or column made 0, or
+        // on the raster's first row the ray would lie a rounding error outside it).
+        let ray = ray_toward(ctx, x, y, phi);
+        let g_q = (r + h0) * cos_e;
+        let (g_far, near) = self.far(x, y, raster_edge(ctx, x, y, ray.cx, ray.cy));
+        if g_far >= g_q {
+            return 0.0;
+        }
         let l = ax.hypot(ay);
         let (cs, sn) = if l > 0.0 {
             (ax / l, ay / l)

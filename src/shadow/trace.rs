@@ -810,7 +810,7 @@ impl<'a> Tracer<'a> {
 /// which [`Axis`] does not step) made exactly 0: along a row or column it is cos or sin of a
 /// multiple of π/2, ±1e-16, and on the raster's first row or column a negative one puts every
 /// point of the ray a rounding error outside the raster, where the searches see nothing.
-fn ray_toward(ctx: &Context, x: usize, y: usize, phi: f64) -> Ray {
+pub(crate) fn ray_toward(ctx: &Context, x: usize, y: usize, phi: f64) -> Ray {
     let mut ray = Ray::toward(ctx, x, y, phi);
     for c in [&mut ray.cx, &mut ray.cy] {
         if c.abs() <= 1e-12 {

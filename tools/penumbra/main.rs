@@ -278,8 +278,9 @@ enum QueryCommand {
 struct ShadowFlags {
     /// horizon (look the baked horizons up), reference (exact search of the terrain, exact
     /// disc), uniform (fixed steps), dp (Jung et al. over a maximum mipmap), dp-dda (the same
-    /// with a canonical DDA that skips texels), extrema (Timokhin & Mikhaylyuk, hard) or
-    /// extrema-soft (their traversal finding the exact horizon within the sun's disc).
+    /// with a canonical DDA that skips texels), extrema (Timokhin & Mikhaylyuk, hard),
+    /// extrema-soft (their traversal finding the exact horizon within the sun's disc) or smap
+    /// (Sakalauskas' silhouette map for the sun's direction, hard).
     #[arg(long, default_value = "horizon")]
     method: String,
     /// With --method uniform: steps along the ray (1..=1048576).
@@ -292,9 +293,10 @@ struct ShadowFlags {
 }
 
 impl ShadowFlags {
-    /// The ray-marching method asked, or None for `horizon`.
-    fn trace(&self) -> Result<Option<penumbra::shadow::trace::Method>> {
+    /// The method, unless it is `horizon` (whose source and model come from other flags).
+    fn search(&self) -> Result<Option<penumbra::shadow::ShadowMethod>> {
         use penumbra::shadow::trace::{Method as T, MAX_STEPS};
+        use penumbra::shadow::ShadowMethod;
         let runs = || -> Result<penumbra::shadow::Runs> {
             self.dp_levels
                 .parse()
@@ -307,8 +309,9 @@ impl ShadowFlags {
             )
             .into());
         }
-        Ok(Some(match self.method.as_str() {
+        Ok(Some(ShadowMethod::Trace(match self.method.as_str() {
             "horizon" => return Ok(None),
+            "smap" => return Ok(Some(ShadowMethod::SMap)),
             "reference" => T::Reference,
             "uniform" => T::Uniform { steps: self.steps },
             "dp" => T::Dp {
@@ -326,12 +329,12 @@ impl ShadowFlags {
                     "method",
                     format!(
                         "unknown shadow method '{other}': use horizon, reference, uniform, dp, \
-                         dp-dda, extrema or extrema-soft"
+                         dp-dda, extrema, extrema-soft or smap"
                     ),
                 )
                 .into())
             }
-        }))
+        })))
     }
 }
 
@@ -741,7 +744,7 @@ fn run(cli: Cli) -> Result<()> {
             bbox,
             json,
         } => {
-            let method = match shadow.trace()? {
+            let method = match shadow.search()? {
                 Some(m) => {
                     if from.is_some() {
                         return Err(Error::usage(
@@ -750,7 +753,7 @@ fn run(cli: Cli) -> Result<()> {
                         )
                         .into());
                     }
-                    penumbra::shadow::ShadowMethod::Trace(m)
+                    m
                 }
                 None => penumbra::shadow::ShadowMethod::Horizon(
                     from.unwrap_or(penumbra::shadow::HorizonSource::Fourier),
@@ -876,8 +879,8 @@ fn run(cli: Cli) -> Result<()> {
             max_margin_px,
             json,
         }) => {
-            let trace = shadow.trace()?;
-            if trace.is_some() && from.is_some() {
+            let search = shadow.search()?;
+            if search.is_some() && from.is_some() {
                 return Err(Error::usage(
                     "--from chooses the horizons of --method horizon; ray-marching methods \
                      search the terrain itself",
@@ -901,7 +904,7 @@ fn run(cli: Cli) -> Result<()> {
                 model,
                 from.unwrap_or(HorizonFrom::Fourier),
                 &opts,
-                trace.as_ref(),
+                search.as_ref(),
             )?;
             output::print_shadow_answer(&ans, json)?;
         }
