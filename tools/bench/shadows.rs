@@ -18,6 +18,7 @@ use penumbra::fourier::stage::{Encoder, FourierOptions};
 use penumbra::fourier::sun::{lit_fraction, sun_radius_deg, Frame, Model, Sun};
 use penumbra::fourier::{evaluate, Pyramid};
 use penumbra::horizon::{horizons_with, Method as HzMethod, DEFAULT_NEAR_PX};
+use penumbra::shadow::smap::SMap;
 use penumbra::shadow::trace::{Method, Runs, Work};
 use penumbra::shadow::Tracer;
 use penumbra::tileio::HeightTile;
@@ -53,6 +54,8 @@ enum Bm {
     /// Lookup in the raw maps (true) or the Fourier pyramids (false), with the constant-altitude
     /// disc model (Jung et al.'s and Fritsch et al.'s cheapest; `exact` costs 256 strips).
     Horizon(bool),
+    /// Sakalauskas' SMap, built once per sun over the block (its build timed with it).
+    SMap,
 }
 
 impl Bm {
@@ -61,10 +64,11 @@ impl Bm {
             Bm::Trace(m) => m.label(),
             Bm::Horizon(true) => "horizon raw 360, constant".into(),
             Bm::Horizon(false) => "horizon fourier F16, constant".into(),
+            Bm::SMap => "smap".into(),
         }
     }
     fn hard(&self) -> bool {
-        matches!(self, Bm::Trace(m) if m.is_hard())
+        matches!(self, Bm::SMap) || matches!(self, Bm::Trace(m) if m.is_hard())
     }
 }
 
@@ -88,6 +92,7 @@ fn methods(quick: bool) -> Vec<Bm> {
     }
     v.push(Bm::Trace(Method::Extrema));
     v.push(Bm::Trace(Method::ExtremaSoft));
+    v.push(Bm::SMap);
     v.push(Bm::Horizon(true));
     v.push(Bm::Horizon(false));
     v
@@ -162,15 +167,28 @@ fn bake(case: &Case) -> Baked {
     }
 }
 
-/// Lit fractions of every (sun, block pixel), sun-major; and texel/sample visits.
+/// Lit fractions of every (sun, block pixel), sun-major; texel/sample visits; for the SMap, the
+/// share of its samples marked black (over all suns).
 fn eval(
     tr: &Tracer,
     case: &Case,
     suns: &[(f64, Sun)],
     m: &Bm,
     baked: Option<&Baked>,
-) -> (Vec<f32>, u64) {
+) -> (Vec<f32>, u64, Option<f64>) {
     let (n, rect) = (case.rect.w, case.rect);
+    if let Bm::SMap = m {
+        let mut lit = Vec::with_capacity(suns.len() * n * n);
+        let (mut marked, mut samples) = (0.0, 0.0);
+        for (_, sun) in suns {
+            let map = SMap::build(&case.ctx, sun.dir, rect, case.terrain_min_m);
+            let k = map.size().1 as f64;
+            marked += map.marked_fraction() * k;
+            samples += k;
+            lit.extend(map.lit_region(&case.ctx));
+        }
+        return (lit, 0, Some(marked / samples.max(1.0)));
+    }
     let rows: Vec<(Vec<f32>, u64)> = (0..suns.len() * n)
         .into_par_iter()
         .map(|k| {
@@ -183,6 +201,7 @@ fn eval(
                 let (x, y) = (rect.x0 + i, rect.y0 + j);
                 *o = match m {
                     Bm::Trace(t) => tr.lit(x, y, sun, t, &mut work) as f32,
+                    Bm::SMap => unreachable!("answered above"),
                     Bm::Horizon(raw) => {
                         let b = baked.expect("baked");
                         let h0 = case.ctx.at(x as i64, y as i64);
@@ -228,7 +247,7 @@ fn eval(
         lit.extend(r);
         visits += v;
     }
-    (lit, visits)
+    (lit, visits, None)
 }
 
 fn timed<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> Result<(T, f64)> {
@@ -287,6 +306,8 @@ struct Row {
     ms_per_mpx_1t: f64,
     ms_per_mpx_2t: f64,
     visits_per_px: f64,
+    /// SMap: share of the samples marked black.
+    marked: Option<f64>,
 }
 
 #[derive(Serialize)]
@@ -358,7 +379,7 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
             case.ctx.width,
             case.ctx.height
         ));
-        let ((reference, _), t_ref) = timed(2, || {
+        let ((reference, _, _), t_ref) = timed(2, || {
             eval(&tr, case, &sv, &Bm::Trace(Method::Reference), None)
         })?;
         say(format!("{}: reference {t_ref:.1} s", case.name));
@@ -379,7 +400,7 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
         });
         for m in &ms {
             let b = Some(&baked);
-            let ((lit, visits), t2) = timed(2, || eval(&tr, case, &sv, m, b))?;
+            let ((lit, visits, marked), t2) = timed(2, || eval(&tr, case, &sv, m, b))?;
             let (_, t1) = timed(1, || eval(&tr, case, &sv, m, b))?;
             let mut err = vec![ErrSum::default(); SUN_EL.len()];
             for (s, (el, _)) in sv.iter().enumerate() {
@@ -410,6 +431,7 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
                 ms_per_mpx_1t: t1 * 1e3 / mpx,
                 ms_per_mpx_2t: t2 * 1e3 / mpx,
                 visits_per_px: visits as f64 / (sv.len() * n * n) as f64,
+                marked,
             });
         }
     }
@@ -461,6 +483,8 @@ struct Summary {
     ms_per_mpx_1t: f64,
     ms_per_mpx_2t: f64,
     visits_per_px: f64,
+    /// SMap: share of the samples marked black over the real DEMs.
+    marked: Option<f64>,
 }
 
 fn summarise(rows: &[Row]) -> Vec<Summary> {
@@ -496,6 +520,10 @@ fn summarise(rows: &[Row]) -> Vec<Summary> {
                 ms_per_mpx_1t: rs.iter().map(|r| r.ms_per_mpx_1t).sum::<f64>() / k,
                 ms_per_mpx_2t: rs.iter().map(|r| r.ms_per_mpx_2t).sum::<f64>() / k,
                 visits_per_px: rs.iter().map(|r| r.visits_per_px).sum::<f64>() / k,
+                marked: rs
+                    .first()
+                    .and_then(|r| r.marked)
+                    .map(|_| rs.iter().filter_map(|r| r.marked).sum::<f64>() / k),
             }
         })
         .collect()
@@ -506,8 +534,8 @@ fn summarise(rows: &[Row]) -> Vec<Summary> {
 const MASK_AZIMUTHS: usize = 36;
 
 /// Times of a hard-shadow mask of `size`² pixels of the embedded scene for one sun per
-/// elevation: extrema, and lookups in raw horizon maps and in Fourier pyramids (their bake
-/// timed apart), on 1 and 2 threads.
+/// elevation: extrema, the SMap (its build for the sun included), and lookups in raw horizon
+/// maps and in Fourier pyramids (their bake timed apart), on 1 and 2 threads.
 fn mask_runs(
     scene: &penumbra::dem::Dem,
     size: usize,
@@ -548,8 +576,16 @@ fn mask_runs(
             dir: c.direction(SUN_AZ[0], el),
             radius_deg: radius,
         };
-        for which in ["extrema", "horizon raw", "horizon fourier F16"] {
+        for which in ["extrema", "smap", "horizon raw", "horizon fourier F16"] {
             let run = || -> u64 {
+                if which == "smap" {
+                    let map = SMap::build(&case.ctx, sun.dir, case.rect, case.terrain_min_m);
+                    return map
+                        .lit_region(&case.ctx)
+                        .iter()
+                        .filter(|&&v| v > 0.5)
+                        .count() as u64;
+                }
                 (0..n)
                     .into_par_iter()
                     .map(|j| {
@@ -622,7 +658,8 @@ fn block_tile(case: &Case) -> HeightTile {
 }
 
 /// Pictures of one sun over a 256² block of the embedded scene: the reference, DP, the
-/// canonical DDA, uniform stepping and extrema, and the DP's and DDA's errors (×4).
+/// canonical DDA, uniform stepping, extrema, extrema-soft and the SMap, and the DP's, DDA's and
+/// extrema-soft's errors (×4).
 fn pictures(
     scene: &penumbra::dem::Dem,
     dir: &Path,
@@ -639,34 +676,35 @@ fn pictures(
         radius_deg: radius,
     };
     let sv = vec![(PICTURE_SUN.1, sun)];
-    let render = |m: Method| eval(&tr, &case, &sv, &Bm::Trace(m), None).0;
-    let reference = render(Method::Reference);
+    let render = |m: &Bm| eval(&tr, &case, &sv, m, None).0;
+    let reference = render(&Bm::Trace(Method::Reference));
     let shown = [
-        ("reference", Method::Reference),
+        ("reference", Bm::Trace(Method::Reference)),
         (
             "dp",
-            Method::Dp {
+            Bm::Trace(Method::Dp {
                 runs: Runs::Auto,
                 dda: false,
-            },
+            }),
         ),
         (
             "dp-dda",
-            Method::Dp {
+            Bm::Trace(Method::Dp {
                 runs: Runs::Auto,
                 dda: true,
-            },
+            }),
         ),
-        ("uniform-100", Method::Uniform { steps: 100 }),
-        ("extrema", Method::Extrema),
-        ("extrema-soft", Method::ExtremaSoft),
+        ("uniform-100", Bm::Trace(Method::Uniform { steps: 100 })),
+        ("extrema", Bm::Trace(Method::Extrema)),
+        ("extrema-soft", Bm::Trace(Method::ExtremaSoft)),
+        ("smap", Bm::SMap),
     ];
     let mut out = Vec::new();
     for (name, m) in shown {
         let lit = if name == "reference" {
             reference.clone()
         } else {
-            render(m)
+            render(&m)
         };
         let p = dir.join(format!("shadows-{name}.png"));
         penumbra::shadow::write_grey_png(&p, n, n, &lit)?;
@@ -773,6 +811,18 @@ fn markdown(
             s.visits_per_px
         );
     }
+    for s in summary {
+        if let Some(f) = s.marked {
+            let _ = writeln!(
+                o,
+                "\n`{}` marks {:.2} % of its samples black (the silhouette seen from the sun: the \
+                 samples standing above every sample sunward of them on their beam), averaged over \
+                 the real DEMs and suns; its time includes building the map for each sun.",
+                s.method,
+                100.0 * f
+            );
+        }
+    }
     let _ = writeln!(o, "\n![error against time](shadows-error.svg)\n");
     let _ = writeln!(
         o,
@@ -838,7 +888,7 @@ fn markdown(
         "One sun per elevation (azimuth {}° at the block's centre). The lookups read horizons \
          baked beforehand ({MASK_AZIMUTHS}-azimuth raw maps and their F16 pyramid, {:.1} s for \
          the block; a lookup reads the same number of values whatever the azimuth count); \
-         extrema searches the terrain itself.\n",
+         extrema searches the terrain itself; the SMap's time includes building it for the sun.\n",
         SUN_AZ[0], mask_bake_s
     );
     let _ = writeln!(
