@@ -277,7 +277,7 @@ enum Source<'a> {
     Raw(Vec<f32>, usize),
     Fourier(crate::fourier::Pyramid),
     Trace(Tracer<'a>, Rect, &'a trace::Method),
-    SMap(smap::SMap, &'a Context, Rect),
+    SMap(Box<smap::SMap>, &'a Context, Rect),
 }
 
 /// Checks that the tileset holds what `method` reads at `level`: an exit-2 error naming what
@@ -371,7 +371,7 @@ pub fn tile_shadows(
             let t0 = std::time::Instant::now();
             let map = smap::SMap::build(&ctx_rect.0, s_dir, ctx_rect.1, tmin);
             smap_stats = Some(SMapStats::of(&map, t0.elapsed().as_secs_f64()));
-            Source::SMap(map, &ctx_rect.0, ctx_rect.1)
+            Source::SMap(Box::new(map), &ctx_rect.0, ctx_rect.1)
         }
     };
     let model = match method {
