@@ -1,0 +1,234 @@
+//! Headless frames of the embedded south-pole scene and of a real DEM (LOLA's 5 m Shoemaker
+//! crater): a low sun gives lit and shadowed terrain, a sun at the zenith none; two runs give
+//! the same bytes; and `--validate` holds the GPU to the CPU twin of its method (mean abs
+//! ≤ 0.01, PER ≤ 0.5 %) and DP to the CPU reference (mean abs ≤ 0.05, PER ≤ 1 %).
+
+use std::path::Path;
+
+use serde_json::Value;
+
+use crate::util::{gpu, json, read_png, run, scene, shoemaker, tmp};
+
+/// A camera 12 km above the scene, 7 km from the pole, looking at it 40° down.
+const SCENE_CAMERA: &str = "--camera=-89.77,30,12000,210,-45,50";
+/// A sun 2.5° above the pole's horizon.
+const LOW_SUN: [&str; 4] = ["--sun-lat", "-2.5", "--sun-lon", "75"];
+
+/// Render `dir` headless into `out` with `extra` flags; the JSON report.
+fn frame(dir: &Path, out: &Path, extra: &[&str]) -> Value {
+    let o = out.join("frame.png");
+    let mut args = vec![
+        dir.to_str().unwrap(),
+        "--headless",
+        "--out",
+        o.to_str().unwrap(),
+        "--size",
+        "160x120",
+        "--frames",
+        "1",
+        "--json",
+    ];
+    args.extend_from_slice(extra);
+    json(&run(&args))
+}
+
+fn u(v: &Value, k: &str) -> u64 {
+    v["pixels"][k].as_u64().unwrap()
+}
+
+fn f(v: &Value, path: &[&str]) -> f64 {
+    let mut x = v;
+    for k in path {
+        x = &x[*k];
+    }
+    x.as_f64().unwrap_or_else(|| panic!("{path:?} in {v}"))
+}
+
+/// The validation numbers hold: GPU vs CPU twin always; vs the reference when `vs_ref`.
+fn check_validation(v: &Value, what: &str, vs_ref: bool) {
+    let same_mean = f(v, &["validation", "same", "mean_abs"]);
+    let same_per = f(v, &["validation", "same", "per_percent"]);
+    let px = f(v, &["validation", "same", "pixels"]);
+    assert!(px > 1000.0, "{what}: only {px} pixels compared");
+    assert!(
+        same_mean <= 0.01 && same_per <= 0.5,
+        "{what}: GPU vs CPU {} mean {same_mean} PER {same_per} %",
+        v["method"]
+    );
+    if vs_ref {
+        let m = f(v, &["validation", "reference", "mean_abs"]);
+        let p = f(v, &["validation", "reference", "per_percent"]);
+        assert!(
+            m <= 0.05 && p <= 1.0,
+            "{what}: GPU vs reference mean {m} PER {p} %"
+        );
+    }
+}
+
+#[test]
+fn a_low_sun_lights_and_shadows_the_scene_and_dp_matches_the_cpu() {
+    if !gpu() {
+        return;
+    }
+    let d = tmp();
+    let lit = d.path().join("lit.exr");
+    let v = frame(
+        scene(),
+        d.path(),
+        &[
+            SCENE_CAMERA,
+            LOW_SUN[0],
+            LOW_SUN[1],
+            LOW_SUN[2],
+            LOW_SUN[3],
+            "--lit",
+            lit.to_str().unwrap(),
+            "--validate",
+        ],
+    );
+    let total = 160 * 120;
+    assert!(u(&v, "surface") > total * 8 / 10, "{v}");
+    assert!(
+        u(&v, "dark") > total / 50,
+        "too little shadow: {}",
+        v["pixels"]
+    );
+    assert!(
+        u(&v, "lit") > total / 20,
+        "too little light: {}",
+        v["pixels"]
+    );
+    assert!(v["method"].as_str().unwrap().starts_with("dp"));
+    check_validation(&v, "embedded scene, dp", true);
+    // The frame: sky black, terrain in many shades.
+    let (w, h, px) = read_png(&d.path().join("frame.png"));
+    assert_eq!((w, h), (160, 120));
+    let mut shades: Vec<u8> = px.iter().map(|p| p[1]).collect();
+    shades.sort();
+    shades.dedup();
+    assert!(shades.len() > 40, "{} shades", shades.len());
+    // The lit fraction EXR and the difference images.
+    assert!(lit.is_file());
+    assert!(d.path().join("frame-diff.png").is_file());
+    assert!(d.path().join("frame-diff-reference.png").is_file());
+    // Timings.
+    assert!(f(&v, &["timings", "wall_ms_median"]) > 0.0);
+}
+
+#[test]
+fn every_method_matches_its_cpu_twin_on_the_scene() {
+    if !gpu() {
+        return;
+    }
+    for (m, extra) in [
+        ("uniform", &["--steps", "50"][..]),
+        ("extrema", &[][..]),
+        ("fourier", &[][..]),
+    ] {
+        let d = tmp();
+        let mut args = vec![
+            SCENE_CAMERA,
+            LOW_SUN[0],
+            LOW_SUN[1],
+            LOW_SUN[2],
+            LOW_SUN[3],
+            "--method",
+            m,
+            "--validate",
+        ];
+        args.extend_from_slice(extra);
+        let v = frame(scene(), d.path(), &args);
+        assert!(
+            u(&v, "dark") > 0 && u(&v, "lit") > 0,
+            "{m}: {}",
+            v["pixels"]
+        );
+        check_validation(&v, m, false);
+        if m == "fourier" {
+            // Drawn at the level that has pyramids.
+            assert!(v["tiles"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .all(|t| t.as_str().unwrap().starts_with("L9/")));
+        }
+    }
+}
+
+#[test]
+fn a_sun_at_the_zenith_casts_no_shadow() {
+    if !gpu() {
+        return;
+    }
+    let d = tmp();
+    // The sub-solar point at the pole: the sun stands 89.4–90° high over the whole scene,
+    // steeper than any slope in it.
+    let v = frame(
+        scene(),
+        d.path(),
+        &[
+            SCENE_CAMERA,
+            "--sun-lat=-90",
+            "--sun-lon",
+            "0",
+            "--validate",
+        ],
+    );
+    assert!(u(&v, "surface") > 10_000, "{v}");
+    assert_eq!(u(&v, "dark"), 0, "{}", v["pixels"]);
+    assert_eq!(u(&v, "partial"), 0, "{}", v["pixels"]);
+    assert!(f(&v, &["sun", "elevation_deg"]) > 89.0);
+}
+
+#[test]
+fn the_same_frame_twice_is_the_same_bytes() {
+    if !gpu() {
+        return;
+    }
+    let (a, b) = (tmp(), tmp());
+    let go = |d: &Path| {
+        let lit = d.join("lit.exr");
+        frame(
+            scene(),
+            d,
+            &[
+                SCENE_CAMERA,
+                LOW_SUN[0],
+                LOW_SUN[1],
+                LOW_SUN[2],
+                LOW_SUN[3],
+                "--lit",
+                lit.to_str().unwrap(),
+            ],
+        );
+        (
+            std::fs::read(d.join("frame.png")).unwrap(),
+            std::fs::read(lit).unwrap(),
+        )
+    };
+    let (pa, la) = go(a.path());
+    let (pb, lb) = go(b.path());
+    assert!(pa == pb, "frames differ");
+    assert!(la == lb, "lit fractions differ");
+}
+
+#[test]
+fn a_real_dem_validates_at_a_grazing_sun() {
+    if !gpu() {
+        return;
+    }
+    let Some(dir) = shoemaker() else {
+        return;
+    };
+    let d = tmp();
+    // Shoemaker's 1.3 km square of 5 m LOLA heights at 88.1°S, seen from 1.5 km up, with the
+    // sun 3° high.
+    let v = frame(
+        dir,
+        d.path(),
+        &["--sun-lat=-1.5", "--sun-lon", "45", "--validate"],
+    );
+    assert!(u(&v, "surface") > 5000, "{v}");
+    assert!(u(&v, "dark") > 0 && u(&v, "lit") > 0, "{}", v["pixels"]);
+    check_validation(&v, "Shoemaker, dp", true);
+}

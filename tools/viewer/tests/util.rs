@@ -1,0 +1,225 @@
+//! What the viewer's tests share: the tilesets they render (baked once per run under the
+//! target folder and reused while complete), the GPU-adapter probe that skips or fails, and
+//! running `penumbra-view`.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+use penumbra::bake::{self, BodyChoice, Input, Plan, Stage};
+use penumbra::fourier::FourierOptions;
+use penumbra::horizon::HorizonOptions;
+use penumbra::mip::MipOptions;
+use penumbra::progress::NoProgress;
+use penumbra::scene::SceneSpec;
+use penumbra::tiling::TileOptions;
+
+/// Whether this is a CI run (`CI` set, and not empty, `0` or `false`).
+pub fn ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| !matches!(v.trim(), "" | "0" | "false"))
+}
+
+/// Skip (print why, return false) or, under CI, fail.
+pub fn skip(why: &str) -> bool {
+    if ci() {
+        panic!("{why}, and CI is set: CI must run this test (.ci/run installs what it needs)");
+    }
+    eprintln!("skipping: {why}");
+    false
+}
+
+/// Whether a GPU adapter (any: lavapipe counts) is there; otherwise skip or fail.
+pub fn gpu() -> bool {
+    static PROBE: OnceLock<Result<String, String>> = OnceLock::new();
+    let p = PROBE.get_or_init(|| match penumbra_view::gpu::Gpu::headless() {
+        Ok(g) => Ok(g.info.name.clone()),
+        Err(e) => Err(e.to_string()),
+    });
+    match p {
+        Ok(_) => true,
+        Err(e) => skip(&format!(
+            "no GPU adapter ({e}); install Mesa's lavapipe (apt-get install mesa-vulkan-drivers)"
+        )),
+    }
+}
+
+/// The `penumbra-view` binary.
+pub fn view() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_penumbra-view"));
+    c.env("XDG_RUNTIME_DIR", std::env::temp_dir());
+    c
+}
+
+/// Run `penumbra-view` with `args`.
+pub fn run(args: &[&str]) -> Output {
+    view().args(args).output().expect("penumbra-view runs")
+}
+
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// The JSON report of a successful run.
+pub fn json(o: &Output) -> serde_json::Value {
+    assert!(
+        o.status.success(),
+        "exit {:?}: {}",
+        o.status.code(),
+        stderr(o)
+    );
+    serde_json::from_slice(&o.stdout).expect("a JSON report")
+}
+
+/// Folder for the fixtures: kept under the target folder between runs.
+fn fixtures() -> PathBuf {
+    Path::new(env!("CARGO_TARGET_TMPDIR")).join("viewer-fixtures")
+}
+
+/// Bake `input` into `dir` with `plan` unless a complete tileset (one with `needs`' product)
+/// is there already.
+fn baked(dir: &Path, input: &Input, plan: &Plan, fourier: bool) -> PathBuf {
+    if let Ok(ts) = penumbra::manifest::Tileset::load(dir) {
+        if ts.products.mip.is_some() && (!fourier || ts.products.fourier.is_some()) {
+            return dir.to_path_buf();
+        }
+    }
+    std::fs::create_dir_all(dir.parent().unwrap()).unwrap();
+    bake::bake(input, dir, plan, &NoProgress).expect("fixture bakes");
+    dir.to_path_buf()
+}
+
+/// The embedded south-pole scene, 1024² px at 20 m: 64-px tiles, levels 0..=9 (106 m at the
+/// finest), Fourier horizon pyramids (from 90 azimuths) at level 9.
+pub fn scene() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let plan = Plan {
+            stages: vec![Stage::Tile, Stage::Mip, Stage::Horizon],
+            tile: TileOptions {
+                tile_size: 64,
+                levels: Some(10),
+                ..TileOptions::default()
+            },
+            mip: MipOptions::default(),
+            horizon: HorizonOptions {
+                levels: Some(vec![9]),
+                azimuths: 90,
+                fourier: Some(FourierOptions::default()),
+                ..HorizonOptions::default()
+            },
+            horizon_level_at_most: None,
+        };
+        let spec = SceneSpec {
+            size: 1024,
+            ..SceneSpec::default()
+        };
+        baked(
+            &fixtures().join("scene-1024-64"),
+            &Input::Embedded(spec),
+            &plan,
+            true,
+        )
+    })
+}
+
+/// The embedded scene without horizons (heights and mipmaps only).
+pub fn scene_without_horizons() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let plan = Plan {
+            stages: vec![Stage::Tile, Stage::Mip],
+            tile: TileOptions {
+                tile_size: 64,
+                levels: Some(8),
+                ..TileOptions::default()
+            },
+            ..Plan::default()
+        };
+        let spec = SceneSpec {
+            size: 1024,
+            ..SceneSpec::default()
+        };
+        baked(
+            &fixtures().join("scene-1024-64-bare"),
+            &Input::Embedded(spec),
+            &plan,
+            false,
+        )
+    })
+}
+
+/// The real DEMs (`$PENUMBRA_SHARED_DATA`, else `../shared/data` beside the repository), or a
+/// skip (a failure under CI).
+pub fn shared_data() -> Option<PathBuf> {
+    let dir = match std::env::var_os("PENUMBRA_SHARED_DATA") {
+        Some(p) => PathBuf::from(p),
+        None => Path::new(env!("CARGO_MANIFEST_DIR"))
+            .ancestors()
+            .nth(2)
+            .expect("tools/viewer lies two levels below the repository root")
+            .join("../shared/data"),
+    };
+    if dir.is_dir() {
+        Some(dir)
+    } else {
+        skip(&format!(
+            "{} not found (real-DEM checks need it)",
+            dir.display()
+        ));
+        None
+    }
+}
+
+/// LOLA's 5 m Shoemaker crater DEM at the lunar south pole (256² px): 64-px tiles, levels
+/// 0..=13 (6.6 m at the finest).
+pub fn shoemaker() -> Option<&'static Path> {
+    static DIR: OnceLock<Option<PathBuf>> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let data = shared_data()?;
+        let dem = data.join("lola_shoemaker_1k/Shoemaker_final_adj_5mpp_surf_1k.tif");
+        if !dem.is_file() {
+            skip(&format!("{} not found", dem.display()));
+            return None;
+        }
+        let plan = Plan {
+            stages: vec![Stage::Tile, Stage::Mip],
+            tile: TileOptions {
+                tile_size: 64,
+                levels: Some(14),
+                ..TileOptions::default()
+            },
+            ..Plan::default()
+        };
+        // The GeoTIFF names no body; its projection is on the 1737.4 km Moon.
+        let input = Input::Dem {
+            path: dem,
+            body: BodyChoice {
+                name: Some("moon".into()),
+                radius_m: None,
+            },
+        };
+        Some(baked(
+            &fixtures().join("shoemaker-64"),
+            &input,
+            &plan,
+            false,
+        ))
+    })
+    .as_deref()
+}
+
+/// A fresh temporary folder.
+pub fn tmp() -> tempfile::TempDir {
+    tempfile::tempdir().unwrap()
+}
+
+/// An RGB PNG's size and pixels.
+pub fn read_png(p: &Path) -> (u32, u32, Vec<[u8; 3]>) {
+    let img = image::ImageReader::open(p)
+        .unwrap()
+        .decode()
+        .unwrap()
+        .to_rgb8();
+    let (w, h) = img.dimensions();
+    (w, h, img.pixels().map(|p| p.0).collect())
+}
