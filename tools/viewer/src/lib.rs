@@ -6,3 +6,6 @@
 //! Modules (to come):
 //! - [`shadow`]: the GPU twins of the CPU shadow methods (WGSL beside the code) and the
 //!   per-tile data they read (context raster, max and min pyramids, Fourier pyramid).
+
+pub mod gpu;
+pub mod shadow;
