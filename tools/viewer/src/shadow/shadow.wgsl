@@ -482,33 +482,40 @@ fn sh_walker(ray: ShRay, m: i32, sa: f32, sb: f32) -> ShWalker {
 fn sh_walk_next(w: ptr<function, ShWalker>) -> ShTexel {
     var t: ShTexel;
     t.ok = false;
-    let l = shadow_params.levels[(*w).level];
+    var wk = *w;
+    // (Indexing with a field of a local var directly trips naga 30's SPIR-V writer.)
+    let lv = wk.level;
+    let l = shadow_params.levels[lv];
     for (var guard = 0; guard < 1000000; guard++) {
-        if !(*w).live || !((*w).s < (*w).sb) {
-            (*w).live = false;
-            return t;
+        if !wk.live || !(wk.s < wk.sb) {
+            wk.live = false;
+            break;
         }
-        let ax = (*w).ax;
-        let ay = (*w).ay;
-        if ax.i < 0 || ay.i < 0 || ax.i >= l.z || ay.i >= l.w {
-            (*w).live = false;
-            return t;
+        if wk.ax.i < 0 || wk.ay.i < 0 || wk.ax.i >= l.z || wk.ay.i >= l.w {
+            wk.live = false;
+            break;
         }
-        let s = (*w).s;
-        let next = min(min(ax.next, ay.next), (*w).sb);
-        (*w).s = next;
-        sh_advance(&(*w).ax, next);
-        sh_advance(&(*w).ay, next);
+        let s = wk.s;
+        let next = min(min(wk.ax.next, wk.ay.next), wk.sb);
+        let tx = wk.ax.i;
+        let ty = wk.ay.i;
+        wk.s = next;
+        var ax = wk.ax;
+        var ay = wk.ay;
+        sh_advance(&ax, next);
+        sh_advance(&ay, next);
+        wk.ax = ax;
+        wk.ay = ay;
         if next > s {
             t.ok = true;
-            t.tx = ax.i;
-            t.ty = ay.i;
+            t.tx = tx;
+            t.ty = ty;
             t.s_in = s;
             t.s_out = next;
-            return t;
+            break;
         }
     }
-    (*w).live = false;
+    *w = wk;
     return t;
 }
 
@@ -602,35 +609,42 @@ fn sh_extrema_dark(ray: ShRay, x: i32, y: i32, phi: f32, t: f32) -> bool {
         return false;
     }
     let top = min(shadow_params.method.z - 1, 7);
+    // One walk per level, the finer ones nested in the texel the coarser one is at.
     var stack: array<ShWalker, 8>;
     stack[top] = sh_walker(ray, top, SH_NEAR_PX, end);
     var cur = top;
+    var dark = false;
     for (var guard = 0; guard < 10000000; guard++) {
-        let tex = sh_walk_next(&stack[cur]);
+        let m = cur;
+        var w = stack[m];
+        let tex = sh_walk_next(&w);
+        stack[m] = w;
         if !tex.ok {
-            if cur == top {
-                return false;
+            if m == top {
+                break;
             }
-            cur += 1;
+            cur = m + 1;
             continue;
         }
-        let e = sh_extrema(cur, tex.tx, tex.ty);
+        let e = sh_extrema(m, tex.tx, tex.ty);
         if sh_max_slope(ray, tex.s_in, tex.s_out, e.x) < t {
             continue;
         }
         if e.y > SH_NODATA && sh_max_slope(ray, tex.s_in, tex.s_out, e.y) >= t {
-            return true;
+            dark = true;
+            break;
         }
-        if cur == 0 {
+        if m == 0 {
             if sh_max_over(ray, tex.s_in, tex.s_out, SH_NEG) >= t {
-                return true;
+                dark = true;
+                break;
             }
             continue;
         }
-        cur -= 1;
-        stack[cur] = sh_walker(ray, cur, tex.s_in, tex.s_out);
+        stack[m - 1] = sh_walker(ray, m - 1, tex.s_in, tex.s_out);
+        cur = m - 1;
     }
-    return false;
+    return dark;
 }
 
 // Jung et al.'s disc occlusion: a horizon of slope a (floored) hides the segment below it.
