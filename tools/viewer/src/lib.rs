@@ -23,6 +23,7 @@
 pub mod camera;
 pub mod core;
 pub mod font;
+pub mod gpu;
 pub mod headless;
 pub mod lod;
 pub mod mesh;
@@ -31,5 +32,6 @@ pub mod output;
 pub mod overlay;
 pub mod render;
 pub mod scene;
+pub mod shadow;
 pub mod validate;
 pub mod window;
