@@ -86,21 +86,31 @@ impl Scene {
         self.store.manifest().body.radius_m
     }
 
-    /// Use another method: the kept tiles are dropped.
-    pub fn set_method(&mut self, method: GpuMethod) {
-        if method != self.method {
-            self.tiles.clear();
-            self.method = method;
+    /// Use another method: kept tiles whose data serves it switch at once (`dp`, `uniform`
+    /// and `extrema` read the same data), the others are dropped and prepared again.
+    pub fn set_method(&mut self, gpu: &Gpu, method: GpuMethod) {
+        if method == self.method {
+            return;
         }
+        self.tiles.retain(|_, t| t.shadow.supports(&method));
+        let s = self.sun.sun();
+        for t in self.tiles.values() {
+            t.shadow.set_sun(gpu, &s, &method);
+        }
+        self.method = method;
     }
 
-    /// Move the sun: every kept tile's shadow follows.
+    /// Move the sun: every kept tile's shadow follows; a tile whose context raster no longer
+    /// reaches far enough for the new sun (a lower sun casts longer shadows) is dropped and
+    /// prepared again when next drawn.
     pub fn set_sun(&mut self, gpu: &Gpu, sun: SunPos) {
         if sun == self.sun {
             return;
         }
         self.sun = sun;
         let s = sun.sun();
+        let store = &self.store;
+        self.tiles.retain(|_, t| t.shadow.margin_ok(store, &s));
         for t in self.tiles.values() {
             t.shadow.set_sun(gpu, &s, &self.method);
         }

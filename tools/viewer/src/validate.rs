@@ -1,7 +1,7 @@
 /*!
 `--validate`: the GPU's lit fractions against the CPU at exactly the texels a headless frame
 shows. The id target says which tile texel each pixel shows; each distinct texel is evaluated
-once on the CPU (in parallel) by the CPU twin of the same method and by the exact `reference`
+once on the CPU (in parallel, tile by tile) by the CPU twin of the same method and by the exact `reference`
 ([`TileShadow::cpu_lit`]), and every pixel is compared with its texel's CPU values.
 
 Numbers (over the pixels that show terrain): the mean and largest absolute lit-fraction
@@ -16,7 +16,6 @@ use std::time::Instant;
 
 use anyhow::Result;
 use penumbra::fourier::sun::Sun;
-use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::render::Readback;
@@ -85,16 +84,32 @@ pub fn validate(
             })
         })
         .collect();
-    let values: Vec<(f32, f32)> = texels
-        .par_iter()
-        .map(|&(t, i, j)| {
-            let sh = &tiles[t as usize].shadow;
-            let (x, y) = (sh.rect.x0 + i as usize, sh.rect.y0 + j as usize);
-            let same = sh.cpu_lit(x, y, sun, CpuTwin::Same(method.clone()));
-            let reference = sh.cpu_lit(x, y, sun, CpuTwin::Reference);
-            (same as f32, reference as f32)
-        })
-        .collect();
+    // Per tile, both CPU twins over that tile's texels (each call runs in parallel).
+    let mut values = vec![(f32::NAN, f32::NAN); texels.len()];
+    let mut by_tile: HashMap<u32, Vec<usize>> = HashMap::new();
+    for (k, t) in texels.iter().enumerate() {
+        by_tile.entry(t.0).or_default().push(k);
+    }
+    let mut order: Vec<_> = by_tile.into_iter().collect();
+    order.sort();
+    for (t, ks) in order {
+        let sh = &tiles[t as usize].shadow;
+        let at: Vec<[i32; 2]> = ks
+            .iter()
+            .map(|&k| {
+                let (_, i, j) = texels[k];
+                [
+                    (sh.rect.x0 + i as usize) as i32,
+                    (sh.rect.y0 + j as usize) as i32,
+                ]
+            })
+            .collect();
+        let same = sh.cpu_lit_many(&at, sun, &CpuTwin::Same(method.clone()));
+        let reference = sh.cpu_lit_many(&at, sun, &CpuTwin::Reference);
+        for (n, &k) in ks.iter().enumerate() {
+            values[k] = (same[n] as f32, reference[n] as f32);
+        }
+    }
     let px = |pick: fn(&(f32, f32)) -> f32| -> Vec<f32> {
         slot.iter()
             .map(|s| s.map_or(f32::NAN, |k| pick(&values[k])))

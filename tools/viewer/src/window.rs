@@ -348,7 +348,7 @@ impl App {
         let (lo, hi) = level_range(&core.scene.store, &m, self.opts.args.level)?;
         core.lod.min_level = lo;
         core.lod.max_level = hi;
-        core.scene.set_method(m);
+        core.scene.set_method(&core.gpu, m);
         Ok(())
     }
 
