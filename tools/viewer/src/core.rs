@@ -115,29 +115,43 @@ pub fn level_range(store: &Store, method: &GpuMethod, level: Option<u8>) -> Resu
     Ok((0, levels - 1))
 }
 
-/// The default camera: above the middle of the finest level's coverage, far enough to see all
-/// of it, looking down at 60°; for a tileset that covers the body, the whole body from above
-/// latitude 0°, longitude 0°.
+/// Most tiles [`default_camera`] reads to find where the data lies.
+const CAMERA_PROBE_TILES: usize = 16;
+
+/// The default camera: looking 60° down at the middle of the data from the south-west, far
+/// enough to see all of it; for a tileset that covers the body, the whole body from above
+/// latitude 0°, longitude 0°. Where the data lies comes from an 8×8 sample of the pixels of
+/// the finest level with at most 16 tiles (tiles extend past a small DEM's edges).
 pub fn default_camera(store: &Store) -> Camera {
     let ts = store.manifest();
     let r = ts.body.radius_m;
-    let finest = ts
-        .coverage
-        .iter()
-        .rev()
-        .find(|c| c.tiles > 0)
-        .map_or(0, |c| c.level);
     let q = crate::lod::Quadtree::new(ts);
-    let tiles = q.tiles_at(finest);
-    let n = ts.layout.tile_size as f64;
-    let mut sum = [0.0; 3];
+    let level = q
+        .levels()
+        .into_iter()
+        .filter(|l| q.tiles_at(*l).len() <= CAMERA_PROBE_TILES)
+        .max()
+        .unwrap_or(0);
+    let n = ts.layout.tile_size as usize;
+    let halo = ts.layout.halo as usize;
     let mut dirs = Vec::new();
-    for t in &tiles {
-        for (a, b) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0), (0.5, 0.5)] {
-            let d = q.dir_at(*t, a * n - 0.5, b * n - 0.5);
-            sum = crate::camera::add(sum, d);
-            dirs.push(d);
+    for t in q.tiles_at(level) {
+        let h = store.height(t).ok().flatten();
+        for b in 0..8 {
+            for a in 0..8 {
+                let (i, j) = (a * (n - 1) / 7, b * (n - 1) / 7);
+                let valid = h
+                    .as_ref()
+                    .is_none_or(|h| h.height[(j + halo) * h.size + i + halo].is_finite());
+                if valid {
+                    dirs.push(q.dir_at(t, i as f64, j as f64));
+                }
+            }
         }
+    }
+    let mut sum = [0.0; 3];
+    for d in &dirs {
+        sum = crate::camera::add(sum, *d);
     }
     let len = norm(sum);
     if dirs.is_empty() || len < 0.5 * dirs.len() as f64 {
@@ -149,22 +163,21 @@ pub fn default_camera(store: &Store) -> Camera {
         .iter()
         .map(|d| cube::angle_between(*d, centre))
         .fold(0.0, f64::max);
-    let (lat, lon) = cube::dir_to_latlon(centre);
     let (lo, hi) = q.terrain_m;
-    // See a radius of `spread` from straight above with a 45° field, then tilt: back off.
-    let ground = spread * r;
-    let alt = (ground / (22.5f64).to_radians().tan() * 1.1).max(200.0);
-    let mut c = Camera::at(
-        r,
-        lat.to_degrees(),
-        lon.to_degrees(),
-        alt + hi.max(0.0),
-        0.0,
-        -90.0,
-        45.0,
-    );
+    let fov = 45.0f64;
+    let ground = (spread * r).max(100.0);
+    let range = ground / (fov / 2.0).to_radians().tan();
     let target = scale(centre, r + (lo + hi) / 2.0);
-    c.orbit(r + (lo + hi) / 2.0, 0.0, -30.0);
+    let eye = crate::camera::add(
+        target,
+        scale(crate::camera::local_dir(centre, 225.0, 60.0), range),
+    );
+    let mut c = Camera {
+        eye,
+        heading_deg: 0.0,
+        pitch_deg: -60.0,
+        fov_y_deg: fov,
+    };
     c.look_at(target);
     c
 }

@@ -189,7 +189,8 @@ impl App {
         };
         surface.configure(&gpu.device, &config);
         let store = self.store.take().expect("started once");
-        let composite = Composite::new(&gpu, format, 2)?;
+        // Glyph pixels: 1:1 in a small window, doubled from 800 px across.
+        let composite = Composite::new(&gpu, format, if config.width >= 800 { 2 } else { 1 })?;
         let core = Core::new(gpu, store, &self.opts)?;
         let targets = Targets::new(&core.gpu, config.width, config.height);
         eprintln!(

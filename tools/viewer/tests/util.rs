@@ -171,7 +171,7 @@ pub fn shared_data() -> Option<PathBuf> {
 }
 
 /// LOLA's 5 m Shoemaker crater DEM at the lunar south pole (256² px): 64-px tiles, levels
-/// 0..=13 (6.6 m at the finest).
+/// 0..=13 (6.6 m at the finest), Fourier horizon pyramids (from 90 azimuths) at level 13.
 pub fn shoemaker() -> Option<&'static Path> {
     static DIR: OnceLock<Option<PathBuf>> = OnceLock::new();
     DIR.get_or_init(|| {
@@ -182,13 +182,20 @@ pub fn shoemaker() -> Option<&'static Path> {
             return None;
         }
         let plan = Plan {
-            stages: vec![Stage::Tile, Stage::Mip],
+            stages: vec![Stage::Tile, Stage::Mip, Stage::Horizon],
             tile: TileOptions {
                 tile_size: 64,
                 levels: Some(14),
                 ..TileOptions::default()
             },
-            ..Plan::default()
+            mip: MipOptions::default(),
+            horizon: HorizonOptions {
+                levels: Some(vec![13]),
+                azimuths: 90,
+                fourier: Some(FourierOptions::default()),
+                ..HorizonOptions::default()
+            },
+            horizon_level_at_most: None,
         };
         // The GeoTIFF names no body; its projection is on the 1737.4 km Moon.
         let input = Input::Dem {
