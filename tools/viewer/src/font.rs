@@ -122,7 +122,7 @@ mod tests {
         let m = rasterise("AB", 2);
         assert_eq!(m.width, 3 * CELL_W * 2);
         assert_eq!(m.data.len(), m.width * m.height);
-        assert!(m.data.iter().any(|&v| v == 255));
+        assert!(m.data.contains(&255));
         // Distinct glyphs for letters that look alike.
         assert_ne!(glyph('O'), glyph('0'));
         assert_ne!(glyph('I'), glyph('1'));

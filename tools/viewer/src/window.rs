@@ -14,7 +14,7 @@ X server without DRI3), the instance is made again for OpenGL with the window sy
 display handle.
 */
 
-use std::path::PathBuf;
+use std::path::Path;
 use std::sync::Arc;
 
 use anyhow::{anyhow, bail, Context as _, Result};
@@ -264,7 +264,7 @@ impl App {
     }
 
     /// Save what the window shows (the composited frame with its status line).
-    fn screenshot(&mut self, path: &PathBuf) -> Result<()> {
+    fn screenshot(&mut self, path: &Path) -> Result<()> {
         let st = self.state.as_mut().expect("running");
         let mut shot = Composite::new(&st.core.gpu, COLOUR_FORMAT, st.composite.scale)?;
         let mut line = st.core.status_line(st.last.as_ref());
