@@ -138,14 +138,17 @@ fn default_diff(out: &std::path::Path) -> PathBuf {
 /// Run a headless render.
 pub fn run(opts: &Options) -> Result<Report> {
     let a = &opts.args;
-    let out = a.out.clone().expect("checked by Options");
+    let out = output::in_folder(a.out.as_deref().expect("checked by Options"));
     output::check_parent(&out, "--out")?;
-    if let Some(l) = &a.lit {
+    let lit = a.lit.as_deref().map(output::in_folder);
+    if let Some(l) = &lit {
         output::check_parent(l, "--lit")?;
     }
-    let diff = a
-        .validate
-        .then(|| a.diff.clone().unwrap_or_else(|| default_diff(&out)));
+    let diff = a.validate.then(|| {
+        a.diff
+            .as_deref()
+            .map_or_else(|| default_diff(&out), output::in_folder)
+    });
     if let Some(d) = &diff {
         output::check_parent(d, "--diff")?;
     }
@@ -174,7 +177,7 @@ pub fn run(opts: &Options) -> Result<Report> {
     }
     let rb = Readback::read(&core.gpu, &targets)?;
     output::write_rgba_as_png(&out, rb.width, rb.height, &rb.colour)?;
-    if let Some(l) = &a.lit {
+    if let Some(l) = &lit {
         penumbra::shadow::write_lit_exr(l, rb.width as usize, rb.height as usize, &rb.lit)?;
     }
     let validation = match &diff {
@@ -222,7 +225,7 @@ pub fn run(opts: &Options) -> Result<Report> {
     Ok(Report {
         tileset: a.dir.clone(),
         out,
-        lit: a.lit.clone(),
+        lit,
         diff,
         width: rb.width,
         height: rb.height,

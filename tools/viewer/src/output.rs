@@ -42,3 +42,12 @@ pub fn check_parent(path: &Path, flag: &str) -> Result<()> {
     }
     Ok(())
 }
+
+/// `path` with `./` in front when it names a file in the current folder, so that every writer
+/// (the library's atomic writes sync the file's folder) sees a folder.
+pub fn in_folder(path: &Path) -> std::path::PathBuf {
+    match path.parent() {
+        Some(p) if p.as_os_str().is_empty() => Path::new(".").join(path),
+        _ => path.to_path_buf(),
+    }
+}

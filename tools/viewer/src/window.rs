@@ -250,7 +250,7 @@ impl App {
         st.window.pre_present_notify();
         st.core.gpu.queue.present(frame);
         self.frames += 1;
-        if let Some(path) = self.opts.args.screenshot.clone() {
+        if let Some(path) = self.opts.args.screenshot.as_deref().map(output::in_folder) {
             if self.frames >= self.opts.frames {
                 self.screenshot(&path)?;
                 el.exit();
