@@ -166,7 +166,7 @@ pub fn default_camera(store: &Store) -> Camera {
     let (lo, hi) = q.terrain_m;
     let fov = 45.0f64;
     let ground = (spread * r).max(100.0);
-    let range = ground / (fov / 2.0).to_radians().tan();
+    let range = 0.75 * ground / (fov / 2.0).to_radians().tan();
     let target = scale(centre, r + (lo + hi) / 2.0);
     let eye = crate::camera::add(
         target,

@@ -31,7 +31,7 @@ pub const ID_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rg32Uint;
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
 /// Light that reaches shadowed terrain (fraction of full sun), so relief stays readable.
-pub const AMBIENT: f32 = 0.04;
+pub const AMBIENT: f32 = 0.015;
 
 /// @group(0): the frame.
 #[repr(C)]
