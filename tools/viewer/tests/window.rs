@@ -1,6 +1,8 @@
 //! The window under Xvfb: `--screenshot PNG --frames 3` opens the window, renders three
-//! frames, saves what the window shows (terrain and the status line) and exits 0. Without
-//! Xvfb the test skips (fails under CI, where `.ci/run` installs it).
+//! frames, saves what the window shows (terrain and the status line) and exits 0; and the X
+//! server's own screenshot (ImageMagick's `import`) of a running viewer shows the frame it
+//! presented. Without Xvfb or `import` the tests skip (fail under CI, where `.ci/run` installs
+//! them).
 
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
@@ -112,4 +114,88 @@ fn the_window_renders_frames_and_saves_a_screenshot() {
     g.sort();
     g.dedup();
     assert!(g.len() > 30, "{} shades", g.len());
+}
+
+#[test]
+fn the_x_server_shows_the_presented_frame() {
+    if !gpu() {
+        return;
+    }
+    if Command::new("import")
+        .arg("-version")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_err()
+    {
+        skip("ImageMagick's import not found (apt-get install imagemagick)");
+        return;
+    }
+    let Some(x) = xvfb() else {
+        return;
+    };
+    let d = tmp();
+    let root = d.path().join("root.png");
+    let mut viewer = view()
+        .args([
+            scene().to_str().unwrap(),
+            "--size",
+            "200x150",
+            "--camera=-89.8,30,9000,210,-60,50",
+            "--sun-lat=-8",
+            "--sun-lon",
+            "75",
+        ])
+        .env("DISPLAY", &x.display)
+        .env_remove("WAYLAND_DISPLAY")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Screenshots of the whole screen until the window's area shows terrain (no window
+    // manager: the window sits at the top-left corner).
+    let t0 = Instant::now();
+    let mut shades = 0;
+    while t0.elapsed() < Duration::from_secs(120) {
+        std::thread::sleep(Duration::from_millis(500));
+        if let Ok(Some(_)) = viewer.try_wait() {
+            break;
+        }
+        let ok = Command::new("import")
+            .args([
+                "-display",
+                &x.display,
+                "-window",
+                "root",
+                root.to_str().unwrap(),
+            ])
+            .status()
+            .is_ok_and(|s| s.success());
+        if !ok {
+            continue;
+        }
+        let (w, _, px) = read_png(&root);
+        let mut g: Vec<u8> = (40..150)
+            .flat_map(|r| (0..200).map(move |c| (r, c)))
+            .map(|(r, c)| px[r * w as usize + c][1])
+            .collect();
+        g.sort();
+        g.dedup();
+        shades = g.len();
+        if shades > 30 {
+            break;
+        }
+    }
+    let running = matches!(viewer.try_wait(), Ok(None));
+    let _ = viewer.kill();
+    let out = viewer.wait_with_output().unwrap();
+    assert!(
+        running,
+        "the viewer exited: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        shades > 30,
+        "the X screen shows {shades} shades in the window's area"
+    );
 }
