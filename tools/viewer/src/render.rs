@@ -1,6 +1,6 @@
 /*!
 The terrain pass: one pipeline that draws every chosen tile's mesh into three targets (the
-shaded colour, the lit fraction and the id of the texel each pixel shows) over a reversed-Z
+shaded colour, the lit fraction (as f32 bits) and the id of the texel each pixel shows) over a reversed-Z
 depth buffer, timed with GPU timestamp queries where the adapter has them; and the readback
 of those targets. The window and the headless mode share all of it: the window only adds the
 composite pass ([`crate::overlay`]) that puts the colour target on its surface.
@@ -24,8 +24,10 @@ use crate::shadow::Shadows;
 
 /// The colour target's format: sRGB, so that shading is linear and the PNG is display-ready.
 pub const COLOUR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
-/// The lit fraction of the texel each pixel shows (−1: no surface).
-pub const LIT_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Float;
+/// The lit fraction of the texel each pixel shows, as the bits of an f32 (negative: no data in
+/// the shadow raster). An integer target: OpenGL ES cannot render to R32Float without an
+/// extension, every backend renders R32Uint.
+pub const LIT_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
 /// Tile index + 1 (0: no surface) and the texel (i | j << 16).
 pub const ID_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rg32Uint;
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
@@ -429,17 +431,11 @@ impl Renderer {
                 b: 0.0,
                 a: 1.0,
             };
-            let none = wgpu::Color {
-                r: -1.0,
-                g: 0.0,
-                b: 0.0,
-                a: 0.0,
-            };
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("terrain"),
                 color_attachments: &[
                     attach(&targets.colour_view, sky),
-                    attach(&targets.lit_view, none),
+                    attach(&targets.lit_view, wgpu::Color::TRANSPARENT),
                     attach(&targets.id_view, wgpu::Color::TRANSPARENT),
                 ],
                 depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
@@ -608,7 +604,7 @@ impl Readback {
             .chunks_exact(4)
             .zip(&texel)
             .map(|(b, t)| {
-                let v: f32 = bytemuck::pod_read_unaligned(b);
+                let v = f32::from_bits(bytemuck::pod_read_unaligned(b));
                 if t.is_some() && v >= 0.0 {
                     v
                 } else {

@@ -2,9 +2,10 @@
 // albedo when the tileset has it, and the soft shadow of the selected method (`shadow_lit`,
 // declared by the shadow module's WGSL that follows this file, in @group(1)).
 //
-// Three targets: the shaded colour, the lit fraction of the nearest tile texel (R32Float;
-// −1 where no surface was drawn) and which texel it was (tile index + 1, i | j << 16) for
-// validating the GPU against the CPU at exactly those texels.
+// Three targets: the shaded colour, the lit fraction of the nearest tile texel (the bits of
+// an f32 in R32Uint, which every backend can render; negative: no shadow data) and which
+// texel it was (tile index + 1, i | j << 16) for validating the GPU against the CPU at
+// exactly those texels.
 
 struct Frame {
     // Eye-relative body frame → clip: the view rotation and a reversed-Z infinite perspective.
@@ -52,7 +53,7 @@ fn vs_main(v: VsIn) -> VsOut {
 
 struct FsOut {
     @location(0) colour: vec4<f32>,
-    @location(1) lit: f32,
+    @location(1) lit: u32,
     @location(2) id: vec2<u32>,
 };
 
@@ -85,7 +86,7 @@ fn fs_main(in: VsOut) -> FsOut {
     } else {
         out.colour = vec4<f32>(base * (ambient + (1.0 - ambient) * lambert * lit), 1.0);
     }
-    out.lit = lit;
+    out.lit = bitcast<u32>(lit);
     out.id = vec2<u32>(u32(tile.info.x + 1), u32(t.x) | (u32(t.y) << 16u));
     return out;
 }
