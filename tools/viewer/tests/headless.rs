@@ -184,6 +184,52 @@ fn dp_on_the_gpu_stays_within_the_reference_bounds_at_an_8_degree_sun() {
 }
 
 #[test]
+fn level_changes_leave_no_cracks() {
+    if !gpu() {
+        return;
+    }
+    let d = tmp();
+    // Coarse refinement: tiles of levels 7, 8 and 9 side by side in one view.
+    let v = frame(
+        scene(),
+        d.path(),
+        &[
+            SCENE_CAMERA,
+            "--sun-lat=-8",
+            "--sun-lon",
+            "75",
+            "--max-texel-px",
+            "8",
+        ],
+    );
+    let mut levels: Vec<&str> = v["tiles"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t.as_str().unwrap().split('/').next().unwrap())
+        .collect();
+    levels.sort();
+    levels.dedup();
+    assert!(levels.len() >= 2, "one level only: {levels:?}");
+    // Sky is pure black, terrain never is (ambient light): below the first terrain pixel of a
+    // column, a black pixel is a crack.
+    let (w, h, px) = read_png(&d.path().join("frame.png"));
+    let mut cracks = 0;
+    for c in 0..w as usize {
+        let col: Vec<bool> = (0..h as usize)
+            .map(|r| px[r * w as usize + c] != [0, 0, 0])
+            .collect();
+        if let Some(first) = col.iter().position(|&t| t) {
+            cracks += col[first..].iter().filter(|&&t| !t).count();
+        }
+    }
+    assert_eq!(
+        cracks, 0,
+        "{cracks} sky pixels inside the terrain (levels {levels:?})"
+    );
+}
+
+#[test]
 fn a_sun_at_the_zenith_casts_no_shadow() {
     if !gpu() {
         return;
