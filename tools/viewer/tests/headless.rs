@@ -321,3 +321,24 @@ fn a_real_dem_validates_every_method_at_a_low_sun() {
         check_validation(&v, &format!("Shoemaker, {m}"), vs_ref);
     }
 }
+
+#[test]
+fn albedo_colours_the_terrain() {
+    if !gpu() {
+        return;
+    }
+    let d = tmp();
+    // The whole globe from above 0°, 0° with the sun behind the eye: west red, east blue.
+    let v = frame(
+        crate::util::albedo_globe(),
+        d.path(),
+        &["--sun-lat", "0", "--sun-lon", "0", "--method", "extrema"],
+    );
+    assert!(u(&v, "surface") > 5000, "{v}");
+    let (w, h, px) = read_png(&d.path().join("frame.png"));
+    let row = h as usize / 2;
+    let at = |c: usize| px[row * w as usize + c];
+    let (west, east) = (at(w as usize / 2 - 20), at(w as usize / 2 + 20));
+    assert!(west[0] > 2 * west[2] && west[0] > 80, "west {west:?}");
+    assert!(east[2] > 2 * east[0] && east[2] > 80, "east {east:?}");
+}

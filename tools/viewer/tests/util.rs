@@ -31,9 +31,15 @@ pub fn skip(why: &str) -> bool {
 /// Whether a GPU adapter (any: lavapipe counts) is there; otherwise skip or fail.
 pub fn gpu() -> bool {
     static PROBE: OnceLock<Result<String, String>> = OnceLock::new();
-    let p = PROBE.get_or_init(|| match penumbra_view::gpu::Gpu::headless() {
-        Ok(g) => Ok(g.info.name.clone()),
-        Err(e) => Err(e.to_string()),
+    let p = PROBE.get_or_init(|| {
+        // Mesa in this process wants a runtime folder too (else it prints that it has none).
+        if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+            std::env::set_var("XDG_RUNTIME_DIR", runtime_dir());
+        }
+        match penumbra_view::gpu::Gpu::headless() {
+            Ok(g) => Ok(g.info.name.clone()),
+            Err(e) => Err(e.to_string()),
+        }
     });
     match p {
         Ok(_) => true,
@@ -43,11 +49,24 @@ pub fn gpu() -> bool {
     }
 }
 
-/// The `penumbra-view` binary.
+/// The `penumbra-view` binary, with a private runtime folder (Mesa and the window system
+/// want one; a shared /tmp is refused as "invalid").
 pub fn view() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_penumbra-view"));
-    c.env("XDG_RUNTIME_DIR", std::env::temp_dir());
+    c.env("XDG_RUNTIME_DIR", runtime_dir());
     c
+}
+
+/// A private runtime folder (mode 0700) under the target folder.
+fn runtime_dir() -> &'static Path {
+    static RUNTIME: OnceLock<PathBuf> = OnceLock::new();
+    RUNTIME.get_or_init(|| {
+        use std::os::unix::fs::PermissionsExt;
+        let d = fixtures().join("runtime");
+        std::fs::create_dir_all(&d).unwrap();
+        std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o700)).unwrap();
+        d
+    })
 }
 
 /// Run `penumbra-view` with `args`.
@@ -229,4 +248,74 @@ pub fn read_png(p: &Path) -> (u32, u32, Vec<[u8; 3]>) {
         .to_rgb8();
     let (w, h) = img.dimensions();
     (w, h, img.pixels().map(|p| p.0).collect())
+}
+
+/// A small global tileset (the Moon's radius, gentle analytic relief) with an albedo image
+/// whose western hemisphere is red and eastern blue: 32-px tiles, levels 0..=1.
+pub fn albedo_globe() -> &'static Path {
+    use penumbra::dem::{Crs, Dem, DemParts, GeoRef, Samples};
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let root = fixtures().join("albedo-globe");
+        let out = root.join("tiles");
+        if penumbra::manifest::Tileset::load(&out).is_ok_and(|t| t.products.albedo.is_some()) {
+            return out;
+        }
+        let _ = std::fs::remove_dir_all(&root);
+        std::fs::create_dir_all(&root).unwrap();
+        let png = root.join("albedo.png");
+        let img = image::RgbImage::from_fn(64, 32, |x, _| {
+            if x < 32 {
+                image::Rgb([200, 40, 30])
+            } else {
+                image::Rgb([30, 60, 200])
+            }
+        });
+        img.save(&png).unwrap();
+        let (w, h) = (128usize, 64usize);
+        let d = 360.0 / w as f64;
+        let mut v = Vec::with_capacity(w * h);
+        for r in 0..h {
+            for c in 0..w {
+                let (lat, lon) = (90.0 - (r as f64 + 0.5) * d, -180.0 + (c as f64 + 0.5) * d);
+                v.push(
+                    (2000.0 * (lat.to_radians() * 3.0).sin() * (lon.to_radians() * 2.0).cos())
+                        as f32,
+                );
+            }
+        }
+        let dem = Dem::new(
+            DemParts {
+                width: w,
+                height: h,
+                samples: Samples::Owned(v),
+                scale: 1.0,
+                offset: 0.0,
+                nodata: None,
+                georef: GeoRef {
+                    crs: Crs::Geographic,
+                    x0: -180.0 + d / 2.0,
+                    y0: 90.0 - d / 2.0,
+                    dx: d,
+                    dy: d,
+                },
+                datum_radius_m: None,
+                target: None,
+                sources: vec![],
+                format: "analytic globe".into(),
+            },
+            64,
+        )
+        .unwrap();
+        let body = penumbra::body::Body::preset("moon").unwrap();
+        let opts = TileOptions {
+            tile_size: 32,
+            levels: Some(2),
+            albedo: Some((png, -180.0)),
+            ..TileOptions::default()
+        };
+        penumbra::tiling::tile_dem(&dem, &body, &out, &opts, None, &NoProgress).unwrap();
+        penumbra::mip::build_mips(&out, &MipOptions::default(), &NoProgress).unwrap();
+        out
+    })
 }

@@ -169,6 +169,7 @@ fn the_x_server_shows_the_presented_frame() {
                 "root",
                 root.to_str().unwrap(),
             ])
+            .stderr(Stdio::null())
             .status()
             .is_ok_and(|s| s.success());
         if !ok {
