@@ -37,8 +37,8 @@ pub struct TileMesh {
     pub centre: Vec3,
     /// `(grid + 1)²` surface vertices, then `4·grid + 4`… skirt vertices (see [`indices`]).
     pub vertices: Vec<Vertex>,
-    /// Per interior texel, row-major: unit normal (body frame) and 1 where the texel has data,
-    /// 0 where it has none.
+    /// Per texel of the interior and a one-texel border, `(n + 2)²` row-major (texel (i, j) at
+    /// (i + 1, j + 1)): unit normal (body frame) and 1 where the texel has data, 0 where not.
     pub normals: Vec<[f32; 4]>,
     /// Lowest and highest interior height (m; NaN when the tile has no data).
     pub height_range: (f32, f32),
@@ -169,17 +169,19 @@ pub fn indices(g: usize) -> Vec<u32> {
     idx
 }
 
-/// Per interior texel the outward unit normal from the central differences of the pixel
-/// positions (the halo gives the tile's edge texels their outer neighbours), as the CPU's
-/// shaded relief computes it; [0, 0, 0, 0] where the texel has no data, and the radial
-/// direction where a neighbour has none.
+/// Per texel of the interior and a one-texel border around it (`(n + 2)²`, row-major, texel
+/// (i, j) at (i + 1, j + 1)) the outward unit normal from the central differences of the pixel
+/// positions (the halo gives the edge texels their outer neighbours), as the CPU's shaded
+/// relief computes it; one-sided where a neighbour is missing, radial where both are;
+/// [0, 0, 0, 0] where the texel has no data. The border lets the shader interpolate normals
+/// across a tile's edge as its neighbour does (no shading seam between tiles).
 fn texel_normals(
     layout: &Layout,
     radius_m: f64,
     h: &HeightTile,
     dir: &dyn Fn(f64, f64) -> Vec3,
 ) -> Vec<[f32; 4]> {
-    let n = layout.tile_size as usize;
+    let n = layout.tile_size as i64;
     let halo = layout.halo as i64;
     let size = h.size as i64;
     let pos = |i: i64, j: i64| -> Option<Vec3> {
@@ -191,24 +193,25 @@ fn texel_normals(
         v.is_finite()
             .then(|| scale(dir(i as f64, j as f64), radius_m + v as f64))
     };
-    let mut out = vec![[0.0f32; 4]; n * n];
-    for j in 0..n as i64 {
-        for i in 0..n as i64 {
+    let side = (n + 2) as usize;
+    let mut out = vec![[0.0f32; 4]; side * side];
+    for j in -1..=n {
+        for i in -1..=n {
             let Some(p) = pos(i, j) else { continue };
-            let nrm = match (pos(i + 1, j), pos(i - 1, j), pos(i, j - 1), pos(i, j + 1)) {
-                (Some(e), Some(w), Some(nn), Some(s)) => {
-                    let c = cross(sub(e, w), sub(nn, s));
-                    let c = if dot(c, p) < 0.0 { scale(c, -1.0) } else { c };
-                    let l = norm(c);
-                    if l > 0.0 {
-                        scale(c, 1.0 / l)
-                    } else {
-                        scale(p, 1.0 / norm(p))
-                    }
-                }
-                _ => scale(p, 1.0 / norm(p)),
+            let e = pos(i + 1, j).unwrap_or(p);
+            let w = pos(i - 1, j).unwrap_or(p);
+            let nn = pos(i, j - 1).unwrap_or(p);
+            let s = pos(i, j + 1).unwrap_or(p);
+            let c = cross(sub(e, w), sub(nn, s));
+            let c = if dot(c, p) < 0.0 { scale(c, -1.0) } else { c };
+            let l = norm(c);
+            let nrm = if l > 0.0 {
+                scale(c, 1.0 / l)
+            } else {
+                scale(p, 1.0 / norm(p))
             };
-            out[j as usize * n + i as usize] = [nrm[0] as f32, nrm[1] as f32, nrm[2] as f32, 1.0];
+            out[(j + 1) as usize * side + (i + 1) as usize] =
+                [nrm[0] as f32, nrm[1] as f32, nrm[2] as f32, 1.0];
         }
     }
     out
@@ -254,9 +257,9 @@ mod tests {
             let pb = add(mb.centre, [vb[0] as f64, vb[1] as f64, vb[2] as f64]);
             assert!(norm(sub(pa, pb)) < 1e-3, "row {row}");
         }
-        // Flat terrain: every normal is radial, every texel has data.
+        // Flat terrain: every normal is radial, every texel has data (border included).
         for (k, nv) in ma.normals.iter().enumerate() {
-            let (i, j) = ((k % 16) as f64, (k / 16) as f64);
+            let (i, j) = ((k % 18) as f64 - 1.0, (k / 18) as f64 - 1.0);
             let (s, t) = lay.global_st(2, 16.0 + i, 16.0 + j);
             let d = lay.st_to_dir(Face::Px, s, t);
             let c = nv[0] as f64 * d[0] + nv[1] as f64 * d[1] + nv[2] as f64 * d[2];

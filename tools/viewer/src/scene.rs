@@ -211,7 +211,7 @@ impl Scene {
         let normals = device
             .create_texture_with_data(
                 &gpu.queue,
-                &tex2d("normals", m.n as u32, wgpu::TextureFormat::Rgba16Float),
+                &tex2d("normals", m.n as u32 + 2, wgpu::TextureFormat::Rgba16Float),
                 wgpu::util::TextureDataOrder::LayerMajor,
                 bytemuck::cast_slice(&half),
             )

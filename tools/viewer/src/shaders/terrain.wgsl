@@ -63,14 +63,15 @@ fn fs_main(in: VsOut) -> FsOut {
     let nf = f32(n);
     // The nearest interior texel: its shadow is the one shown and validated.
     let t = clamp(vec2<i32>(floor(in.ij + vec2<f32>(0.5))), vec2<i32>(0), vec2<i32>(n - 1));
-    if (textureLoad(normals, t, 0).w < 0.5) {
+    // The normals texture has a one-texel border: texel (i, j) is at (i + 1, j + 1).
+    if (textureLoad(normals, t + vec2<i32>(1), 0).w < 0.5) {
         discard;
     }
     var lit = 1.0;
     if (frame.params.y > 0.5) {
         lit = shadow_lit(vec2<i32>(tile.info.z + t.x, tile.info.w + t.y));
     }
-    let nrm_s = textureSampleLevel(normals, linear_clamp, (in.ij + vec2<f32>(0.5)) / nf, 0.0);
+    let nrm_s = textureSampleLevel(normals, linear_clamp, (in.ij + vec2<f32>(1.5)) / (nf + 2.0), 0.0);
     let nrm = normalize(nrm_s.xyz);
     let lambert = max(dot(nrm, frame.sun_dir.xyz), 0.0);
     var base = vec3<f32>(0.72);
