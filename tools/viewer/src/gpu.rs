@@ -54,9 +54,8 @@ impl Gpu {
     /// and flags come from the environment (`WGPU_BACKEND`, …). A software adapter is accepted
     /// when there is no other.
     pub fn headless() -> Result<Gpu, GpuError> {
-        let instance = wgpu::Instance::new(
-            wgpu::InstanceDescriptor::new_without_display_handle_from_env(),
-        );
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let adapter = request_adapter(&instance, None)?;
         Gpu::from_adapter(instance, adapter)
     }
@@ -82,9 +81,8 @@ impl Gpu {
             memory_hints: wgpu::MemoryHints::Performance,
             trace: wgpu::Trace::Off,
         };
-        let (device, queue) = pollster::block_on(adapter.request_device(&desc)).map_err(|e| {
-            GpuError::Device(format!("{} ({:?}): {e}", info.name, info.backend))
-        })?;
+        let (device, queue) = pollster::block_on(adapter.request_device(&desc))
+            .map_err(|e| GpuError::Device(format!("{} ({:?}): {e}", info.name, info.backend)))?;
         Ok(Gpu {
             instance,
             adapter,

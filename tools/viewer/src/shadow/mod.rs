@@ -675,8 +675,7 @@ impl TileShadow {
         let (s, t) = lay.pixel_st(self.tile, i, j);
         let (u, v) = (lay.projection.s_to_u(s), lay.projection.s_to_u(t));
         let frame = Frame::at(self.tile.face, u, v);
-        let floor =
-            penumbra::fourier::stage::floor_deg(self.ctx.radius_m, self.tmin_tileset, h0);
+        let floor = penumbra::fourier::stage::floor_deg(self.ctx.radius_m, self.tmin_tileset, h0);
         let mut coef = Vec::new();
         pyr.coefficients_at(i as f64 + 0.5, j as f64 + 0.5, &mut coef);
         sun::lit_fraction(&frame, sun, Model::Exact, &|phi| {
