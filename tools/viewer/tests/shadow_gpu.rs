@@ -384,6 +384,171 @@ fn fourier_without_pyramids_says_what_to_run() {
     assert!(g.iter().all(|&v| v == 0.0 || v == 1.0 || v < 0.0));
 }
 
+/// `shadow_lit` in a fragment shader with the bind group at `@group(1)` (the renderer's
+/// situation): one fragment per texel of the tile's interior, into an R32Float target.
+fn render_lit(gpu: &Gpu, shadows: &Shadows, t: &TileShadow) -> Vec<f32> {
+    let (w, h) = (t.rect.w as u32, t.rect.h as u32);
+    assert_eq!(w * 4 % 256, 0, "rows of whole 256-byte copies");
+    let src = format!(
+        "{}\n{}",
+        Shadows::wgsl(),
+        r#"
+@vertex fn vs(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
+    return vec4<f32>(f32(i32(i & 1u) * 4 - 1), f32(i32(i >> 1u) * 4 - 1), 0.0, 1.0);
+}
+@fragment fn fs(@builtin(position) q: vec4<f32>) -> @location(0) vec4<f32> {
+    return vec4<f32>(shadow_lit(vec2<i32>(q.xy) + shadow_params.rect.xy), 0.0, 0.0, 1.0);
+}
+"#
+    );
+    let dev = &gpu.device;
+    let module = dev.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("shadow fragment test"),
+        source: wgpu::ShaderSource::Wgsl(src.into()),
+    });
+    let layout = dev.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: None,
+        bind_group_layouts: &[None, Some(shadows.layout())],
+        immediate_size: 0,
+    });
+    let format = wgpu::TextureFormat::R32Float;
+    let pipeline = dev.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: None,
+        layout: Some(&layout),
+        vertex: wgpu::VertexState {
+            module: &module,
+            entry_point: Some("vs"),
+            compilation_options: Default::default(),
+            buffers: &[],
+        },
+        primitive: wgpu::PrimitiveState::default(),
+        depth_stencil: None,
+        multisample: wgpu::MultisampleState::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: &module,
+            entry_point: Some("fs"),
+            compilation_options: Default::default(),
+            targets: &[Some(format.into())],
+        }),
+        multiview_mask: None,
+        cache: None,
+    });
+    let size = wgpu::Extent3d {
+        width: w,
+        height: h,
+        depth_or_array_layers: 1,
+    };
+    let target = dev.create_texture(&wgpu::TextureDescriptor {
+        label: None,
+        size,
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    });
+    let view = target.create_view(&Default::default());
+    let readback = dev.create_buffer(&wgpu::BufferDescriptor {
+        label: None,
+        size: (w * h * 4) as u64,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut enc = dev.create_command_encoder(&Default::default());
+    {
+        let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: None,
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: None,
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(1, &t.bind_group, &[]);
+        pass.draw(0..3, 0..1);
+    }
+    enc.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo {
+            texture: &target,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        wgpu::TexelCopyBufferInfo {
+            buffer: &readback,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(w * 4),
+                rows_per_image: Some(h),
+            },
+        },
+        size,
+    );
+    gpu.queue.submit([enc.finish()]);
+    readback.map_async(wgpu::MapMode::Read, .., |r| r.unwrap());
+    dev.poll(wgpu::PollType::Wait {
+        submission_index: None,
+        timeout: None,
+    })
+    .unwrap();
+    let out = bytemuck::cast_slice::<u8, f32>(&readback.get_mapped_range(..).unwrap()).to_vec();
+    out
+}
+
+#[test]
+fn the_fragment_shader_draws_what_the_compute_harness_finds() {
+    let Some(gpu) = gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("tiles");
+    let level = bake_small(embedded(), &out, 64, Some(EMBEDDED_LEVELS), false);
+    let store = Store::open(&out).unwrap();
+    let tile = middle_tile(&store, level);
+    let shadows = Shadows::new(&gpu);
+    let sun = sun_over(&store, tile, 140.0, 3.0);
+    let t = shadows
+        .prepare_tile(
+            &gpu,
+            &store,
+            tile,
+            &sun,
+            &GpuMethod::Dp { runs: Runs::Auto },
+            256,
+        )
+        .unwrap();
+    for m in [GpuMethod::Dp { runs: Runs::Auto }, GpuMethod::Extrema] {
+        t.set_sun(&gpu, &sun, &m);
+        let drawn = render_lit(&gpu, &shadows, &t);
+        let found = evaluate(&gpu, &shadows, &t, &interior(&t)).unwrap();
+        let mut c = Cmp::default();
+        c.add(
+            &drawn,
+            &found
+                .iter()
+                .map(|&v| if v < 0.0 { f64::NAN } else { v as f64 })
+                .collect::<Vec<_>>(),
+        );
+        eprintln!(
+            "{}: fragment vs compute: mean {:.2e} max {:.2e} over {} texels, {} with data on one side",
+            m.label(),
+            c.mean(),
+            c.max,
+            c.n,
+            c.data_mismatch
+        );
+        assert!(c.n > 0 && c.data_mismatch == 0 && c.mean() <= 1e-4 && c.per() <= 0.001);
+    }
+}
+
 #[test]
 fn method_names_parse() {
     assert_eq!(
