@@ -11,3 +11,5 @@ mod headless;
 mod bad_input;
 // The window under Xvfb: a few frames and a screenshot; no window system: exit 2.
 mod window;
+// The GPU shadow methods against the CPU methods, texel by texel (the shadow module's own).
+mod shadow_gpu;

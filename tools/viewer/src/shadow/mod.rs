@@ -159,8 +159,7 @@ struct Params {
 /// Per device: the layout of the shadow bind group (`@group(1)`) and what tiles share.
 pub struct Shadows {
     layout: wgpu::BindGroupLayout,
-    /// A 1×1 texture bound where a tile has no data of that kind.
-    empty_r32: wgpu::TextureView,
+    /// 1×1 textures bound where a tile has no data of that kind (no pyramid, no Fourier).
     empty_rg32: wgpu::TextureView,
     empty_rgba32: wgpu::TextureView,
     max_texture: u32,
@@ -231,7 +230,7 @@ fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
     }
 }
 
-/// A float texture of `w × h` texels of `c` channels from `data`.
+/// A `format` texture of `w × h` texels from `data` (row-major, channels interleaved).
 fn float_texture(
     gpu: &Gpu,
     label: &str,
@@ -300,7 +299,6 @@ impl Shadows {
         let neg = NEG.to_le_bytes();
         Shadows {
             layout,
-            empty_r32: empty_view(gpu, wgpu::TextureFormat::R32Float, &neg),
             empty_rg32: empty_view(gpu, wgpu::TextureFormat::Rg32Float, &[neg, neg].concat()),
             empty_rgba32: empty_view(gpu, wgpu::TextureFormat::Rgba32Float, &[0u8; 16]),
             max_texture: gpu.device.limits().max_texture_dimension_2d,
@@ -489,7 +487,6 @@ impl Shadows {
             }
             None => self.empty_rgba32.clone(),
         };
-        let _ = &self.empty_r32;
 
         let mut params = base;
         fill_sun(&mut params, sun, method, tmin_trace, tmin_tileset);

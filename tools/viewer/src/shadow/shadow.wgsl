@@ -668,19 +668,17 @@ fn sh_occlusion(a: f32, floor_deg: f32, el: f32, r: f32) -> f32 {
 // ---------------------------------------------------------------------------------------------
 // Fourier: the tile's horizon pyramid and the exact disc model (256 strips).
 
-var<private> sh_coef: array<vec2<f32>, 32>;
+alias ShCoef = array<vec2<f32>, 32>;
 
-fn sh_fourier_coefficients(i: i32, j: i32) {
+fn sh_fourier_coefficients(coef: ptr<function, ShCoef>, i: i32, j: i32) {
     let p = shadow_params;
     let n = f32(p.rect.z);
     let k = p.method.w;
-    var slot = 0;
-    for (var g = 0; g < 16; g++) {
-        if slot >= k {
-            break;
-        }
+    // Constant trip counts (all 32 slots, zero past k): lavapipe corrupted the array when
+    // the loops ran k times.
+    for (var g = 0; g < 8; g++) {
         let gr = p.groups[g];
-        let res = gr.y;
+        let res = max(gr.y, 1);
         let r = f32(res);
         let fx = (f32(i) + 0.5) / n * r - 0.5;
         let fy = (f32(j) + 0.5) / n * r - 0.5;
@@ -693,39 +691,36 @@ fn sh_fourier_coefficients(i: i32, j: i32) {
         let ya = clamp(i32(y0), 0, res - 1) + gr.x;
         let yb = clamp(i32(y0) + 1, 0, res - 1) + gr.x;
         for (var half = 0; half < 2; half++) {
-            let t00 = textureLoad(shadow_fourier, vec2<i32>(2 * xa + half, ya), 0);
-            let t10 = textureLoad(shadow_fourier, vec2<i32>(2 * xb + half, ya), 0);
-            let t01 = textureLoad(shadow_fourier, vec2<i32>(2 * xa + half, yb), 0);
-            let t11 = textureLoad(shadow_fourier, vec2<i32>(2 * xb + half, yb), 0);
-            let top = t00 * (1.0 - ax) + t10 * ax;
-            let bot = t01 * (1.0 - ax) + t11 * ax;
-            let v = top * (1.0 - ay) + bot * ay;
+            let slot = 4 * g + 2 * half;
+            var v = vec4<f32>(0.0);
             if slot < k {
-                sh_coef[slot] = v.xy;
+                let t00 = textureLoad(shadow_fourier, vec2<i32>(2 * xa + half, ya), 0);
+                let t10 = textureLoad(shadow_fourier, vec2<i32>(2 * xb + half, ya), 0);
+                let t01 = textureLoad(shadow_fourier, vec2<i32>(2 * xa + half, yb), 0);
+                let t11 = textureLoad(shadow_fourier, vec2<i32>(2 * xb + half, yb), 0);
+                let top = t00 * (1.0 - ax) + t10 * ax;
+                let bot = t01 * (1.0 - ax) + t11 * ax;
+                v = top * (1.0 - ay) + bot * ay;
             }
-            if slot + 1 < k {
-                sh_coef[slot + 1] = v.zw;
-            }
-            slot += 2;
+            (*coef)[slot] = select(vec2<f32>(0.0), v.xy, slot < k);
+            (*coef)[slot + 1] = select(vec2<f32>(0.0), v.zw, slot + 1 < k);
         }
     }
 }
 
 // α(θ) = Σ Re c_k cos kθ − Im c_k sin kθ (degrees).
-fn sh_series(theta: f32) -> f32 {
-    let k = shadow_params.method.w;
+fn sh_series(coef: ptr<function, ShCoef>, theta: f32) -> f32 {
     let c1 = cos(theta);
     let s1 = sin(theta);
     var cs = 1.0;
     var sn = 0.0;
-    var sum = 0.0;
-    for (var i = 0; i < k; i++) {
-        if i > 0 {
-            let nc = cs * c1 - sn * s1;
-            sn = sn * c1 + cs * s1;
-            cs = nc;
-        }
-        sum += sh_coef[i].x * cs - sh_coef[i].y * sn;
+    var sum = (*coef)[0].x;
+    for (var i = 1; i < SH_MAX_K; i++) {
+        let nc = cs * c1 - sn * s1;
+        sn = sn * c1 + cs * s1;
+        cs = nc;
+        let c = (*coef)[i];
+        sum += c.x * cs - c.y * sn;
     }
     return sum;
 }
@@ -774,15 +769,16 @@ struct ShDisc {
 }
 
 // Elevation of disc point (x, y) above the horizon, degrees.
-fn sh_disc_g(d: ShDisc, x: f32, y: f32) -> f32 {
+fn sh_disc_g(coef: ptr<function, ShCoef>, d: ShDisc, x: f32, y: f32) -> f32 {
     let dir = normalize(d.s + d.tan_r * (x * d.eh + y * d.ev));
-    let hor = clamp(max(sh_series(sh_plane_azimuth(d.up, dir)), d.floor_deg), -90.0, 90.0);
+    let hor = clamp(max(sh_series(coef, sh_plane_azimuth(d.up, dir)), d.floor_deg), -90.0, 90.0);
     return sh_elevation_deg(d.up, dir) - hor;
 }
 
 fn sh_fourier(p: vec2<i32>, h0: f32, up: vec3<f32>) -> f32 {
     let prm = shadow_params;
-    sh_fourier_coefficients(p.x - prm.rect.x, p.y - prm.rect.y);
+    var coef: ShCoef;
+    sh_fourier_coefficients(&coef, p.x - prm.rect.x, p.y - prm.rect.y);
     let s = normalize(prm.sun.xyz);
     let r_deg = prm.sun.w;
     let floor_deg = sh_floor_deg(h0);
@@ -801,7 +797,7 @@ fn sh_fourier(p: vec2<i32>, h0: f32, up: vec3<f32>) -> f32 {
     d.ev = normalize(cross(d.eh, s));
     d.tan_r = tan(r_deg / SH_DEG);
     let phi0 = sh_plane_azimuth(up, cross(up, d.eh));
-    let a0 = clamp(max(sh_series(phi0), floor_deg), -90.0, 90.0);
+    let a0 = clamp(max(sh_series(&coef, phi0), floor_deg), -90.0, 90.0);
     if r_deg <= 0.0 {
         if el > a0 {
             return 1.0;
@@ -815,8 +811,8 @@ fn sh_fourier(p: vec2<i32>, h0: f32, up: vec3<f32>) -> f32 {
     // change over the disc's azimuths (from 8 rim points, with 50 % to spare).
     if el + r_deg < 89.0 {
         var lip = 0.0;
-        for (var i = 1; i < prm.method.w; i++) {
-            lip += f32(i) * length(sh_coef[i]);
+        for (var i = 1; i < SH_MAX_K; i++) {
+            lip += f32(i) * length(coef[i]);
         }
         var span = 0.0;
         for (var i = 0; i < 8; i++) {
@@ -845,33 +841,31 @@ fn sh_fourier(p: vec2<i32>, h0: f32, up: vec3<f32>) -> f32 {
         let b = a + wdt;
         let x = 0.5 * (a + b);
         let h = sqrt(max(1.0 - x * x, 0.0));
-        let lit_b = sh_disc_g(d, x, -h) > 0.0;
-        let lit_t = sh_disc_g(d, x, h) > 0.0;
+        let lit_b = sh_disc_g(&coef, d, x, -h) > 0.0;
+        let lit_t = sh_disc_g(&coef, d, x, h) > 0.0;
         if lit_b == lit_t {
             if lit_b {
                 lit += sh_strip_area_above(a, b, -1.0);
             }
-            continue;
-        }
-        var lo = -h;
-        var hi = h;
-        for (var it = 0; it < 24; it++) {
-            let mid = 0.5 * (lo + hi);
-            if mid <= lo || mid >= hi {
-                break;
-            }
-            if (sh_disc_g(d, x, mid) > 0.0) == lit_b {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        let cm = 0.5 * (lo + hi);
-        let above = sh_strip_area_above(a, b, cm);
-        if lit_t {
-            lit += above;
         } else {
-            lit += sh_strip_area_above(a, b, -1.0) - above;
+            // One crossing in (−h, h): bisect for it (to f32's resolution), keeping `lo` on
+            // the bottom's side.
+            var lo = -h;
+            var hi = h;
+            for (var it = 0; it < 24; it++) {
+                let mid = 0.5 * (lo + hi);
+                if (sh_disc_g(&coef, d, x, mid) > 0.0) == lit_b {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            let above = sh_strip_area_above(a, b, 0.5 * (lo + hi));
+            if lit_t {
+                lit += above;
+            } else {
+                lit += sh_strip_area_above(a, b, -1.0) - above;
+            }
         }
     }
     return clamp(lit / SH_PI, 0.0, 1.0);
