@@ -227,6 +227,13 @@ impl Extrema {
         (l.max[o], l.min[o])
     }
 
+    /// Level `m` as (width, height, max, min), row-major (−∞: no terrain / no lower bound),
+    /// for copies elsewhere (the viewer's GPU twins upload it).
+    pub fn level(&self, m: usize) -> (usize, usize, &[f32], &[f32]) {
+        let l = &self.levels[m];
+        (l.w, l.h, &l.max, &l.min)
+    }
+
     /// Bytes held.
     pub fn bytes(&self) -> usize {
         self.levels.iter().map(|l| 8 * l.w * l.h).sum()

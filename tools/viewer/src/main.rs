@@ -1,6 +1,28 @@
-//! `penumbra-view`: see the crate documentation of `penumbra_view`.
+//! `penumbra-view`: see the crate documentation of `penumbra_view` and docs/viewer.md.
 
-fn main() {
-    eprintln!("penumbra-view: not built yet (issue 12)");
-    std::process::exit(2);
+use std::process::ExitCode;
+
+use anyhow::Result;
+use clap::Parser;
+use penumbra_view::options::{Args, Options};
+use penumbra_view::{headless, window};
+
+fn run(args: Args) -> Result<()> {
+    penumbra_cli::set_threads(args.threads)?;
+    let opts = Options::resolve(args)?;
+    if opts.args.headless {
+        let report = headless::run(&opts)?;
+        if opts.args.json {
+            println!("{}", serde_json::to_string_pretty(&report)?);
+        } else {
+            headless::print_text(&report);
+        }
+        Ok(())
+    } else {
+        window::run(opts)
+    }
+}
+
+fn main() -> ExitCode {
+    penumbra_cli::exit_code("penumbra-view", run(Args::parse()))
 }

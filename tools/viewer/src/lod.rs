@@ -1,0 +1,374 @@
+/*!
+Which tiles to draw: a quadtree walk over the cube faces that refines a tile while its texels
+look larger than [`LodParams::max_texel_px`] on screen, skipping tiles outside the view
+frustum or behind the body's horizon.
+
+Tiles are bounded without reading them: a sphere around the tile's corners and centre at the
+tileset's lowest and highest terrain. A tile the tileset lacks (no data in its interior) is
+walked through when finer tiles lie below it (a small DEM has no tiles at coarse levels) and
+dropped otherwise. The walk refines the tile of largest screen error first, so a tile budget
+keeps the detail where the eye is.
+*/
+
+use std::collections::{BTreeSet, BinaryHeap, HashSet};
+
+use penumbra::cube::{dot, Face, Vec3};
+use penumbra::layout::{Layout, TileId};
+use penumbra::manifest::Tileset;
+
+use crate::camera::{add, norm, scale, sub, Camera};
+
+/// How the walk chooses.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LodParams {
+    /// Refine while a texel spans more than this many screen pixels.
+    pub max_texel_px: f64,
+    /// Most tiles drawn (refinement stops when another split would exceed it).
+    pub max_tiles: usize,
+    /// Coarsest and finest level drawn: coarser tiles are always split, finer ones never
+    /// drawn.
+    pub min_level: u8,
+    pub max_level: u8,
+}
+
+/// A tile's bounding sphere (body frame, m).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bounds {
+    pub centre: Vec3,
+    pub radius: f64,
+}
+
+/// The tiles of a tileset and their ancestors, to walk the quadtree without reading tiles.
+pub struct Quadtree {
+    layout: Layout,
+    radius_m: f64,
+    /// Lowest and highest terrain of the tileset (m above the reference sphere).
+    pub terrain_m: (f64, f64),
+    present: BTreeSet<TileId>,
+    /// Every present tile and every ancestor of one.
+    reachable: HashSet<TileId>,
+}
+
+/// A tile visible in a frame, with its screen error.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Chosen {
+    pub tile: TileId,
+    /// Screen pixels a texel spans at the tile's nearest point.
+    pub texel_px: f64,
+}
+
+/// The view the walk culls against.
+#[derive(Clone, Copy, Debug)]
+pub struct View {
+    pub camera: Camera,
+    pub width: u32,
+    pub height: u32,
+    pub near: f64,
+}
+
+impl Quadtree {
+    /// The quadtree of `ts`'s coverage.
+    pub fn new(ts: &Tileset) -> Quadtree {
+        let present = ts.tile_set();
+        let mut reachable = HashSet::new();
+        for t in &present {
+            let mut c = Some(*t);
+            while let Some(id) = c {
+                if !reachable.insert(id) {
+                    break;
+                }
+                c = id.parent();
+            }
+        }
+        let terrain_m = ts
+            .products
+            .height
+            .as_ref()
+            .map_or((0.0, 0.0), |h| (h.min_m, h.max_m));
+        let terrain_m = if terrain_m.0.is_finite() && terrain_m.1.is_finite() {
+            terrain_m
+        } else {
+            (0.0, 0.0)
+        };
+        Quadtree {
+            layout: ts.layout,
+            radius_m: ts.body.radius_m,
+            terrain_m,
+            present,
+            reachable,
+        }
+    }
+
+    /// Whether the tileset holds `id`.
+    pub fn has(&self, id: TileId) -> bool {
+        self.present.contains(&id)
+    }
+
+    /// The levels that hold at least one tile.
+    pub fn levels(&self) -> BTreeSet<u8> {
+        self.present.iter().map(|t| t.level).collect()
+    }
+
+    /// The present tiles of `level`.
+    pub fn tiles_at(&self, level: u8) -> Vec<TileId> {
+        self.present
+            .iter()
+            .filter(|t| t.level == level)
+            .copied()
+            .collect()
+    }
+
+    /// The bounding sphere of `id`: its corners, edge midpoints and centre at the tileset's
+    /// lowest and highest terrain, with 1 % to spare for the sphere's bulge between them.
+    pub fn bounds(&self, id: TileId) -> Bounds {
+        let n = self.layout.tile_size as f64;
+        let mut pts = Vec::with_capacity(18);
+        for (a, b) in [
+            (0.0, 0.0),
+            (0.5, 0.0),
+            (1.0, 0.0),
+            (0.0, 0.5),
+            (0.5, 0.5),
+            (1.0, 0.5),
+            (0.0, 1.0),
+            (0.5, 1.0),
+            (1.0, 1.0),
+        ] {
+            let d = self.dir_at(id, a * n - 0.5, b * n - 0.5);
+            for h in [self.terrain_m.0, self.terrain_m.1] {
+                pts.push(scale(d, self.radius_m + h));
+            }
+        }
+        let mut c = [0.0; 3];
+        for p in &pts {
+            c = add(c, *p);
+        }
+        let c = scale(c, 1.0 / pts.len() as f64);
+        let r = pts.iter().map(|p| norm(sub(*p, c))).fold(0.0, f64::max);
+        Bounds {
+            centre: c,
+            radius: r * 1.01 + 1.0,
+        }
+    }
+
+    /// Unit direction of fractional tile pixel (i, j) of `id` (pixel centres at integers; the
+    /// tile's edges at −½ and n − ½).
+    pub fn dir_at(&self, id: TileId, i: f64, j: f64) -> Vec3 {
+        let n = self.layout.tile_size as f64;
+        let (s, t) = self
+            .layout
+            .global_st(id.level, id.x as f64 * n + i, id.y as f64 * n + j);
+        self.layout.st_to_dir(id.face, s, t)
+    }
+
+    /// Whether `id`'s bounding sphere is behind the horizon of the sphere of the lowest
+    /// terrain, seen from `eye`, or outside the view frustum.
+    fn culled(&self, id: TileId, b: &Bounds, v: &View) -> bool {
+        let eye = v.camera.eye;
+        let rel = sub(b.centre, eye);
+        // Frustum (view space: x right, y up, z = −forward).
+        let basis = v.camera.basis();
+        let (x, y, z) = (
+            dot(rel, basis.right),
+            dot(rel, basis.up),
+            -dot(rel, basis.forward),
+        );
+        let f = 1.0 / (v.camera.fov_y_deg.to_radians() / 2.0).tan();
+        let fx = f * v.height as f64 / v.width as f64;
+        if z - (-v.near) > b.radius {
+            return true;
+        }
+        let nx = (fx * fx + 1.0).sqrt();
+        let ny = (f * f + 1.0).sqrt();
+        if (x * fx + z) / nx > b.radius || (-x * fx + z) / nx > b.radius {
+            return true;
+        }
+        if (y * f + z) / ny > b.radius || (-y * f + z) / ny > b.radius {
+            return true;
+        }
+        // Horizon: every sample point of the tile at its highest terrain hidden by the sphere
+        // of the lowest terrain (Cesium's horizon-culling test, per point).
+        let rm = self.radius_m + self.terrain_m.0;
+        let e2 = dot(eye, eye);
+        let vh2 = e2 - rm * rm;
+        if vh2 <= 0.0 {
+            return false; // the eye is below the lowest terrain: nothing is hidden by it
+        }
+        let n = self.layout.tile_size as f64;
+        let top = self.radius_m + self.terrain_m.1;
+        for a in [0.0, 0.5, 1.0] {
+            for c in [0.0, 0.5, 1.0] {
+                let p = scale(self.dir_at(id, a * n - 0.5, c * n - 0.5), top);
+                let vt = sub(p, eye);
+                let vt_dot_vc = -dot(vt, eye);
+                let hidden = vt_dot_vc > vh2 && vt_dot_vc * vt_dot_vc / dot(vt, vt) > vh2;
+                if !hidden {
+                    return false;
+                }
+            }
+        }
+        true
+    }
+
+    /// Screen pixels a texel of `id` spans at its bounding sphere's nearest point.
+    fn texel_px(&self, id: TileId, b: &Bounds, v: &View) -> f64 {
+        let d = (norm(sub(b.centre, v.camera.eye)) - b.radius).max(v.near);
+        let texel = self.layout.centre_pixel_m(id.level, self.radius_m);
+        texel / d * v.camera.px_per_rad(v.height)
+    }
+
+    /// The tiles to draw for `view`, sorted by tile id.
+    pub fn select(&self, view: &View, p: &LodParams) -> Vec<Chosen> {
+        /// A tile in the walk's queue, ordered by screen error.
+        #[derive(PartialEq)]
+        struct Item(f64, TileId);
+        impl Eq for Item {}
+        impl PartialOrd for Item {
+            fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
+                Some(self.cmp(o))
+            }
+        }
+        impl Ord for Item {
+            fn cmp(&self, o: &Self) -> std::cmp::Ordering {
+                self.0.total_cmp(&o.0).then(o.1.cmp(&self.1))
+            }
+        }
+        let max_level = p.max_level.min(self.layout.levels.saturating_sub(1));
+        let mut heap = BinaryHeap::new();
+        let mut done = Vec::new();
+        let visit = |id: TileId, heap: &mut BinaryHeap<Item>| {
+            if !self.reachable.contains(&id) || id.level > max_level {
+                return;
+            }
+            let b = self.bounds(id);
+            if self.culled(id, &b, view) {
+                return;
+            }
+            heap.push(Item(self.texel_px(id, &b, view), id));
+        };
+        for face in Face::ALL {
+            visit(
+                TileId {
+                    level: 0,
+                    face,
+                    x: 0,
+                    y: 0,
+                },
+                &mut heap,
+            );
+        }
+        // Tiles drawn so far, and in the queue (a queued tile that is present counts).
+        while let Some(Item(err, id)) = heap.pop() {
+            let must = !self.has(id) || id.level < p.min_level;
+            let count = done.len() + heap.len() + 1;
+            let may = id.level < max_level
+                && (must || (err > p.max_texel_px && count + 3 <= p.max_tiles));
+            if may {
+                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    visit(
+                        TileId {
+                            level: id.level + 1,
+                            face: id.face,
+                            x: id.x * 2 + dx,
+                            y: id.y * 2 + dy,
+                        },
+                        &mut heap,
+                    );
+                }
+            } else if self.has(id) && id.level >= p.min_level {
+                done.push(Chosen {
+                    tile: id,
+                    texel_px: err,
+                });
+            }
+        }
+        done.sort_by_key(|c| c.tile);
+        done
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use penumbra::cube::Projection;
+
+    fn tree(levels: u8) -> Quadtree {
+        let layout = Layout {
+            projection: Projection::Gnomonic,
+            tile_size: 64,
+            halo: 2,
+            levels,
+        };
+        let mut present = BTreeSet::new();
+        for level in 0..levels {
+            let k = 1u32 << level;
+            for face in Face::ALL {
+                for y in 0..k {
+                    for x in 0..k {
+                        present.insert(TileId { level, face, x, y });
+                    }
+                }
+            }
+        }
+        let reachable = present.iter().copied().collect();
+        Quadtree {
+            layout,
+            radius_m: 1_737_400.0,
+            terrain_m: (-1000.0, 1000.0),
+            present,
+            reachable,
+        }
+    }
+
+    fn view(alt: f64, pitch: f64) -> View {
+        View {
+            camera: Camera::at(1_737_400.0, -89.0, 0.0, alt, 0.0, pitch, 45.0),
+            width: 256,
+            height: 256,
+            near: 1.0,
+        }
+    }
+
+    #[test]
+    fn a_close_eye_gets_fine_tiles_under_it_and_the_far_side_is_culled() {
+        let q = tree(8);
+        let p = LodParams {
+            max_texel_px: 1.0,
+            max_tiles: 200,
+            min_level: 0,
+            max_level: 7,
+        };
+        let near = q.select(&view(5_000.0, -90.0), &p);
+        assert!(!near.is_empty());
+        assert!(near.iter().all(|c| c.tile.face == Face::Nz), "{near:?}");
+        assert_eq!(near.iter().map(|c| c.tile.level).max(), Some(7));
+        let far = q.select(&view(5_000_000.0, -90.0), &p);
+        assert!(far.iter().all(|c| c.tile.level <= 3), "{far:?}");
+        // No face the eye cannot see (the north face is behind the body).
+        assert!(far.iter().all(|c| c.tile.face != Face::Pz));
+        assert!(near.len() <= 200 && far.len() <= 200);
+    }
+
+    #[test]
+    fn the_budget_and_the_level_range_hold() {
+        let q = tree(8);
+        let p = LodParams {
+            max_texel_px: 0.01,
+            max_tiles: 24,
+            min_level: 2,
+            max_level: 5,
+        };
+        let s = q.select(&view(20_000.0, -30.0), &p);
+        assert!(s.len() <= 24 + 3, "{}", s.len());
+        assert!(s.iter().all(|c| (2..=5).contains(&c.tile.level)));
+        let fixed = LodParams {
+            min_level: 4,
+            max_level: 4,
+            ..p
+        };
+        assert!(q
+            .select(&view(20_000.0, -30.0), &fixed)
+            .iter()
+            .all(|c| c.tile.level == 4));
+    }
+}

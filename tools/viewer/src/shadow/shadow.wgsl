@@ -1,0 +1,920 @@
+// The GPU twins of penumbra's CPU shadow methods (src/shadow/trace.rs, and the Fourier lookup
+// of src/shadow/mod.rs), over one tile's context raster on its face's extended gnomonic plane.
+//
+// `shadow_lit(p)`: lit fraction of the sun's disc at raster texel p (hard methods: 0 or 1);
+// negative over no data. f32 throughout, so the geometry is written without cancellation:
+// heights relative to the observer's, 1 − cos ψ as b²/(n(n + a)), acos near 1 through asin.
+
+struct ShadowParams {
+    // Face normal and gnomonic plane axes (xyz).
+    face_n: vec4<f32>,
+    face_u: vec4<f32>,
+    face_v: vec4<f32>,
+    // Unit sun direction, body frame (xyz); w: its angular radius (degrees, in [0, 60]).
+    sun: vec4<f32>,
+    // Raster origin in global face pixels (x, y), raster width and height.
+    raster: vec4<i32>,
+    // Face pixels S, body radius (m), lowest terrain (m) for the floor, highest terrain of the
+    // raster (m).
+    geo: vec4<f32>,
+    // Method (0 dp, 1 uniform, 2 extrema, 3 fourier), uniform steps or fixed DP runs (0: auto),
+    // pyramid levels, Fourier coefficients.
+    method: vec4<i32>,
+    // The tile's interior in the raster: x0, y0, w, h.
+    rect: vec4<i32>,
+    // N′ of the fixed DP runs, four per vec4.
+    runs: array<vec4<i32>, 4>,
+    // Level m of the min/max pyramid in the atlas: x, y offset, width, height.
+    levels: array<vec4<i32>, 16>,
+    // Fourier group g in its atlas: row offset, resolution, coefficients in it, unused.
+    groups: array<vec4<i32>, 16>,
+}
+
+@group(1) @binding(0) var<uniform> shadow_params: ShadowParams;
+// Context heights (m); no data as -1e30.
+@group(1) @binding(1) var shadow_heights: texture_2d<f32>;
+// Min/max pyramid levels side by side: (max, min), -1e30 standing for −∞.
+@group(1) @binding(2) var shadow_extrema: texture_2d<f32>;
+// Fourier coefficients: texel (2x, row) holds slots 0, 1 (re, im, re, im), (2x + 1, row) 2, 3.
+@group(1) @binding(3) var shadow_fourier: texture_2d<f32>;
+
+const SH_NEG: f32 = -1.0e30;
+const SH_BIG: f32 = 1.0e30;
+const SH_NODATA: f32 = -1.0e29;
+const SH_NEAR_PX: f32 = 1.5;
+const SH_PI: f32 = 3.14159265358979;
+const SH_TAU: f32 = 6.28318530717959;
+const SH_DEG: f32 = 57.2957795130823;
+const SH_MAX_K: i32 = 32;
+const SH_STRIPS: i32 = 256;
+
+struct ShRay {
+    x0: f32,
+    y0: f32,
+    cx: f32,
+    cy: f32,
+    h0: f32,
+    r0: f32,
+    a0: f32,
+    a1: f32,
+    b1: f32,
+    kappa: f32,
+}
+
+struct ShAxis {
+    i: i32,
+    step: i32,
+    next: f32,
+    delta: f32,
+}
+
+struct ShWalker {
+    ax: ShAxis,
+    ay: ShAxis,
+    s: f32,
+    sb: f32,
+    level: i32,
+    live: bool,
+}
+
+// One texel a walker hands out: its index and the ray's span inside it.
+struct ShTexel {
+    ok: bool,
+    tx: i32,
+    ty: i32,
+    s_in: f32,
+    s_out: f32,
+}
+
+fn sh_height(x: i32, y: i32) -> f32 {
+    let p = shadow_params.raster;
+    if x < 0 || y < 0 || x >= p.z || y >= p.w {
+        return SH_NEG;
+    }
+    return textureLoad(shadow_heights, vec2<i32>(x, y), 0).x;
+}
+
+fn sh_valid(h: f32) -> bool {
+    return h > SH_NODATA;
+}
+
+// (max, min) of texel (x, y) of pyramid level m; (−∞, −∞) outside.
+fn sh_extrema(m: i32, x: i32, y: i32) -> vec2<f32> {
+    let l = shadow_params.levels[m];
+    if x < 0 || y < 0 || x >= l.z || y >= l.w {
+        return vec2<f32>(SH_NEG, SH_NEG);
+    }
+    return textureLoad(shadow_extrema, vec2<i32>(l.x + x, l.y + y), 0).xy;
+}
+
+// Unit up vector of raster texel (x, y) and the length of its plane point.
+fn sh_plane_point(x: i32, y: i32) -> vec3<f32> {
+    let p = shadow_params;
+    let s = p.geo.x;
+    let u = -1.0 + 2.0 * (f32(p.raster.x + x) + 0.5) / s;
+    let v = 1.0 - 2.0 * (f32(p.raster.y + y) + 0.5) / s;
+    return p.face_n.xyz + u * p.face_u.xyz + v * p.face_v.xyz;
+}
+
+// Plane azimuth (radians, [0, 2π)) of direction d's tangent part at `up`.
+fn sh_plane_azimuth(up: vec3<f32>, d: vec3<f32>) -> f32 {
+    let p = shadow_params;
+    let np = dot(p.face_n.xyz, up);
+    let nt = dot(p.face_n.xyz, d);
+    let x = dot(p.face_u.xyz, d) * np - dot(p.face_u.xyz, up) * nt;
+    let y = dot(p.face_v.xyz, d) * np - dot(p.face_v.xyz, up) * nt;
+    var a = atan2(y, x);
+    if a < 0.0 {
+        a += SH_TAU;
+    }
+    return a;
+}
+
+// Elevation (degrees) of unit direction d above the horizontal at `up`.
+fn sh_elevation_deg(up: vec3<f32>, d: vec3<f32>) -> f32 {
+    let z = dot(d, up);
+    return atan2(z, length(d - z * up)) * SH_DEG;
+}
+
+fn sh_tan_deg(d: f32) -> f32 {
+    if d >= 90.0 {
+        return SH_BIG;
+    }
+    if d <= -90.0 {
+        return SH_NEG;
+    }
+    return tan(d / SH_DEG);
+}
+
+// acos(q) for q ≤ 1 given 1 − q (accurate near q = 1).
+fn sh_acos_1m(one_minus_q: f32) -> f32 {
+    return 2.0 * asin(sqrt(clamp(0.5 * one_minus_q, 0.0, 1.0)));
+}
+
+// The floor (degrees): the tangent to the sphere of the lowest terrain.
+fn sh_floor_deg(h0: f32) -> f32 {
+    let p = shadow_params;
+    let tmin = p.geo.z;
+    let hh = max(h0, tmin);
+    return -sh_acos_1m((hh - tmin) / (p.geo.y + hh)) * SH_DEG;
+}
+
+fn sh_segment_fraction(d: f32) -> f32 {
+    if d <= -1.0 {
+        return 1.0;
+    }
+    if d >= 1.0 {
+        return 0.0;
+    }
+    return clamp((acos(d) - d * sqrt(max(1.0 - d * d, 0.0))) / SH_PI, 0.0, 1.0);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The ray: the plane line (x0, y0) + s·(cx, cy), s in plane pixels, a great circle.
+
+fn sh_ray(x: i32, y: i32, h0: f32, phi: f32) -> ShRay {
+    let p = shadow_params;
+    let pp = sh_plane_point(x, y);
+    let n0 = length(pp);
+    let ph = pp / n0;
+    let c = cos(phi);
+    let s = sin(phi);
+    let k = 2.0 / p.geo.x;
+    let w = k * (c * p.face_u.xyz + s * p.face_v.xyz);
+    var r: ShRay;
+    r.x0 = f32(x);
+    r.y0 = f32(y);
+    r.cx = c;
+    r.cy = -s;
+    // The CPU makes components below 1e-12 exactly 0 (a ray along a row or column); in f32
+    // cos and sin of a multiple of π/2 are only within 1e-7 of 0.
+    if abs(r.cx) <= 2e-7 {
+        r.cx = 0.0;
+    }
+    if abs(r.cy) <= 2e-7 {
+        r.cy = 0.0;
+    }
+    r.h0 = h0;
+    r.r0 = p.geo.y + h0;
+    r.a0 = n0;
+    r.a1 = dot(w, ph);
+    r.b1 = length(cross(w, ph));
+    let gm = r.r0 * r.b1 / n0;
+    r.kappa = gm * gm / (2.0 * r.r0);
+    return r;
+}
+
+// Slope (tan of elevation) of terrain dh above the observer's height at distance s > 0:
+// (r·a − r0·n)/(r·b) = (dh·a − r0·b²/(n + a))/(r·b).
+fn sh_slope_rel(ray: ShRay, s: f32, dh: f32) -> f32 {
+    let a = ray.a0 + s * ray.a1;
+    let b = s * ray.b1;
+    let n = sqrt(a * a + b * b);
+    let r = ray.r0 + dh;
+    return (dh * a - ray.r0 * b * b / (n + a)) / (r * b);
+}
+
+fn sh_snap(x: f32, hi: f32) -> f32 {
+    if x < 0.0 && x > -1e-4 {
+        return 0.0;
+    }
+    if x > hi && x < hi + 1e-4 {
+        return hi;
+    }
+    return x;
+}
+
+// Bilinear height relative to the observer at fractional texel (x, y) (no-data taps left out);
+// SH_NEG when none is left or outside.
+fn sh_bilinear_rel(xi_: f32, yi_: f32, h0: f32) -> f32 {
+    let wm = f32(shadow_params.raster.z - 1);
+    let hm = f32(shadow_params.raster.w - 1);
+    let x = sh_snap(xi_, wm);
+    let y = sh_snap(yi_, hm);
+    if !(x >= 0.0 && y >= 0.0 && x <= wm && y <= hm) {
+        return SH_NEG;
+    }
+    let fx0 = floor(x);
+    let fy0 = floor(y);
+    let xi = i32(fx0);
+    let yi = i32(fy0);
+    let fx = x - fx0;
+    let fy = y - fy0;
+    var acc = 0.0;
+    var wsum = 0.0;
+    let ws = array<f32, 4>((1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy);
+    let dx = array<i32, 4>(0, 1, 0, 1);
+    let dy = array<i32, 4>(0, 0, 1, 1);
+    for (var k = 0; k < 4; k++) {
+        let w = ws[k];
+        if w == 0.0 {
+            continue;
+        }
+        let v = sh_height(xi + dx[k], yi + dy[k]);
+        if !sh_valid(v) {
+            continue;
+        }
+        acc += w * (v - h0);
+        wsum += w;
+    }
+    if wsum > 0.0 {
+        return acc / wsum;
+    }
+    return SH_NEG;
+}
+
+fn sh_slope_at(ray: ShRay, s: f32) -> f32 {
+    let v = sh_bilinear_rel(ray.x0 + s * ray.cx, ray.y0 + s * ray.cy, ray.h0);
+    if v == SH_NEG {
+        return SH_NEG;
+    }
+    return sh_slope_rel(ray, s, v);
+}
+
+fn sh_axis(x: f32, d: f32, s0: f32) -> ShAxis {
+    let fl = floor(x);
+    var a: ShAxis;
+    if d > 1e-12 {
+        a.i = i32(fl);
+        a.step = 1;
+        a.next = (fl + 1.0 - x) / d + s0;
+        a.delta = 1.0 / d;
+    } else if d < -1e-12 {
+        var c = fl;
+        if fl == x {
+            c = fl - 1.0;
+        }
+        a.i = i32(c);
+        a.step = -1;
+        a.next = (x - c) / -d + s0;
+        a.delta = -1.0 / d;
+    } else {
+        a.i = i32(fl);
+        a.step = 0;
+        a.next = SH_BIG;
+        a.delta = SH_BIG;
+    }
+    return a;
+}
+
+fn sh_advance(a: ptr<function, ShAxis>, s: f32) {
+    if (*a).next <= s {
+        (*a).i += (*a).step;
+        (*a).next += (*a).delta;
+    }
+}
+
+// The largest slope over the continuous bilinear surface along the ray for s in
+// [s_from, s_to], cell by cell (the CPU's Ray::max_over).
+fn sh_max_over(ray: ShRay, s_from: f32, s_to: f32, floor_: f32) -> f32 {
+    var best = floor_;
+    let nx = shadow_params.raster.z;
+    let ny = shadow_params.raster.w;
+    let w1 = f32(nx - 1);
+    let h1 = f32(ny - 1);
+    let x = ray.x0 + s_from * ray.cx;
+    let y = ray.y0 + s_from * ray.cy;
+    if !(x >= 0.0 && y >= 0.0 && x <= w1 && y <= h1) || s_from >= s_to {
+        return best;
+    }
+    var ax = sh_axis(x, ray.cx, s_from);
+    var ay = sh_axis(y, ray.cy, s_from);
+    if s_from > 0.0 {
+        best = max(best, sh_slope_at(ray, s_from));
+    }
+    var s = s_from;
+    for (var guard = 0; guard < 1000000; guard++) {
+        if !(s < s_to && ax.i >= 0 && ay.i >= 0 && ax.i < nx && ay.i < ny) {
+            break;
+        }
+        let ix = ax.i;
+        let iy = ay.i;
+        let s_next = min(min(ax.next, ay.next), s_to);
+        let h00 = sh_height(ix, iy);
+        let h10 = sh_height(ix + 1, iy);
+        let h01 = sh_height(ix, iy + 1);
+        let h11 = sh_height(ix + 1, iy + 1);
+        if sh_valid(h00) && sh_valid(h10) && sh_valid(h01) && sh_valid(h11) {
+            let r00 = h00 - ray.h0;
+            let a = h10 - h00;
+            let b = h01 - h00;
+            let c = (h11 - h10) - (h01 - h00);
+            let ex = ray.x0 - f32(ix);
+            let ey = ray.y0 - f32(iy);
+            let c0 = r00 + a * ex + b * ey + c * ex * ey;
+            let c1 = a * ray.cx + b * ray.cy + c * (ex * ray.cy + ey * ray.cx);
+            let c2 = c * ray.cx * ray.cy;
+            best = max(best, sh_slope_rel(ray, s_next, c0 + s_next * (c1 + s_next * c2)));
+            let cc = c2 - ray.kappa;
+            if c0 != 0.0 && cc != 0.0 && c0 / cc > 0.0 {
+                let st = sqrt(c0 / cc);
+                if st > s && st < s_next {
+                    best = max(best, sh_slope_rel(ray, st, c0 + st * (c1 + st * c2)));
+                }
+            }
+        } else {
+            best = max(best, sh_slope_at(ray, s_next));
+        }
+        s = s_next;
+        sh_advance(&ax, s);
+        sh_advance(&ay, s);
+    }
+    return best;
+}
+
+// Distance (plane pixels) at which the ray leaves the raster.
+fn sh_raster_exit(ray: ShRay) -> f32 {
+    let w1 = f32(shadow_params.raster.z - 1);
+    let h1 = f32(shadow_params.raster.w - 1);
+    var ex = SH_BIG;
+    if ray.cx > 1e-12 {
+        ex = (w1 - ray.x0) / ray.cx;
+    } else if ray.cx < -1e-12 {
+        ex = ray.x0 / -ray.cx;
+    }
+    var ey = SH_BIG;
+    if ray.cy > 1e-12 {
+        ey = (h1 - ray.y0) / ray.cy;
+    } else if ray.cy < -1e-12 {
+        ey = ray.y0 / -ray.cy;
+    }
+    return max(min(ex, ey), 0.0);
+}
+
+// Distance beyond which no terrain of the raster can reach slope t.
+fn sh_exit(ray: ShRay, t: f32) -> f32 {
+    let edge = sh_raster_exit(ray);
+    let hmax = shadow_params.geo.w;
+    if hmax <= SH_NODATA {
+        return edge;
+    }
+    let e = atan(t);
+    let rmax = shadow_params.geo.y + hmax;
+    // 1 − r0·cos e / rmax, without cancellation.
+    let se = sin(0.5 * e);
+    let one_minus_c = ((hmax - ray.h0) + ray.r0 * 2.0 * se * se) / rmax;
+    if one_minus_c <= 0.0 {
+        return edge;
+    }
+    let psi = sh_acos_1m(one_minus_c) - e;
+    if psi <= 0.0 {
+        return 0.0;
+    }
+    if psi >= 0.5 * SH_PI {
+        return edge;
+    }
+    let tp = tan(psi);
+    let den = ray.b1 - ray.a1 * tp;
+    if den <= 0.0 {
+        return edge;
+    }
+    return min(ray.a0 * tp / den, edge);
+}
+
+// The largest slope terrain no higher than h can have over s in [sa, sb].
+fn sh_max_slope(ray: ShRay, sa: f32, sb: f32, h: f32) -> f32 {
+    if h <= SH_NODATA {
+        return SH_NEG;
+    }
+    let dh = h - ray.h0;
+    if dh >= 0.0 {
+        return sh_slope_rel(ray, sa, dh);
+    }
+    let q = 1.0 + dh / ray.r0;
+    let tp = sqrt(max((-dh / ray.r0) * (1.0 + q), 0.0)) / q;
+    let den = ray.b1 - ray.a1 * tp;
+    var s_star = SH_BIG;
+    if den > 0.0 {
+        s_star = ray.a0 * tp / den;
+    }
+    return sh_slope_rel(ray, clamp(s_star, sa, sb), dh);
+}
+
+// The exact horizon slope near the observer: its directional derivative and the cells out to
+// NEAR_PX.
+fn sh_near(ray: ShRay, x: i32, y: i32, phi: f32) -> f32 {
+    let cx = cos(phi);
+    let cy = -sin(phi);
+    let h0 = ray.h0;
+    var dh = 0.0;
+    var ok = true;
+    if abs(cx) > 1e-12 {
+        let hx = sh_height(x + i32(sign(cx)), y);
+        ok = ok && sh_valid(hx);
+        dh += (hx - h0) * abs(cx);
+    }
+    if abs(cy) > 1e-12 {
+        let hy = sh_height(x, y + i32(sign(cy)));
+        ok = ok && sh_valid(hy);
+        dh += (hy - h0) * abs(cy);
+    }
+    var best = SH_NEG;
+    if ok {
+        best = dh / (ray.r0 * ray.b1 / ray.a0);
+    }
+    return sh_max_over(ray, 0.0, SH_NEAR_PX, best);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Walks over the texels of a pyramid level the ray crosses.
+
+fn sh_walker(ray: ShRay, m: i32, sa: f32, sb: f32) -> ShWalker {
+    var w: ShWalker;
+    let q = f32(1 << u32(m));
+    let x = ray.x0 + sa * ray.cx;
+    let y = ray.y0 + sa * ray.cy;
+    w.level = m;
+    w.s = sa;
+    w.sb = sb;
+    w.live = x >= 0.0 && y >= 0.0;
+    w.ax = sh_axis(x / q, ray.cx / q, sa);
+    w.ay = sh_axis(y / q, ray.cy / q, sa);
+    let l = shadow_params.levels[m];
+    if ray.cx == 0.0 && w.ax.i == l.z {
+        w.ax.i -= 1;
+    }
+    if ray.cy == 0.0 && w.ay.i == l.w {
+        w.ay.i -= 1;
+    }
+    return w;
+}
+
+fn sh_walk_next(w: ptr<function, ShWalker>) -> ShTexel {
+    var t: ShTexel;
+    t.ok = false;
+    var wk = *w;
+    // (Indexing with a field of a local var directly trips naga 30's SPIR-V writer.)
+    let lv = wk.level;
+    let l = shadow_params.levels[lv];
+    for (var guard = 0; guard < 1000000; guard++) {
+        if !wk.live || !(wk.s < wk.sb) {
+            wk.live = false;
+            break;
+        }
+        if wk.ax.i < 0 || wk.ay.i < 0 || wk.ax.i >= l.z || wk.ay.i >= l.w {
+            wk.live = false;
+            break;
+        }
+        let s = wk.s;
+        let next = min(min(wk.ax.next, wk.ay.next), wk.sb);
+        let tx = wk.ax.i;
+        let ty = wk.ay.i;
+        wk.s = next;
+        var ax = wk.ax;
+        var ay = wk.ay;
+        sh_advance(&ax, next);
+        sh_advance(&ay, next);
+        wk.ax = ax;
+        wk.ay = ay;
+        if next > s {
+            t.ok = true;
+            t.tx = tx;
+            t.ty = ty;
+            t.s_in = s;
+            t.s_out = next;
+            break;
+        }
+    }
+    *w = wk;
+    return t;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The methods.
+
+fn sh_uniform(ray: ShRay, steps: i32, lo: f32) -> f32 {
+    let end = sh_exit(ray, lo);
+    var best = SH_NEG;
+    if end <= 0.0 || steps <= 0 {
+        return best;
+    }
+    let ds = end / f32(steps);
+    for (var k = 1; k <= steps; k++) {
+        best = max(best, sh_slope_at(ray, f32(k) * ds));
+    }
+    return best;
+}
+
+// One run of Jung et al.'s Algorithm 1 over s in [a, b] from level m0.
+fn sh_dp_run(ray: ShRay, a: f32, b: f32, m0: i32, floor_: f32) -> f32 {
+    var sa = a;
+    var sb = b;
+    for (var m = m0; m >= 0; m--) {
+        var cb = floor_;
+        var found = false;
+        var ca = 0.0;
+        var cz = 0.0;
+        var w = sh_walker(ray, m, sa, sb);
+        for (var guard = 0; guard < 100000; guard++) {
+            let t = sh_walk_next(&w);
+            if !t.ok {
+                break;
+            }
+            let hmax = sh_extrema(m, t.tx, t.ty).x;
+            let bound = sh_max_slope(ray, t.s_in, t.s_out, hmax);
+            if bound > cb {
+                cb = bound;
+                ca = t.s_in;
+                cz = t.s_out;
+                found = true;
+            }
+        }
+        if !found {
+            return SH_NEG;
+        }
+        sa = ca;
+        sb = cz;
+    }
+    return sh_max_over(ray, sa, sb, SH_NEG);
+}
+
+fn sh_dp(ray: ShRay, x: i32, y: i32, phi: f32, lo: f32, hi: f32) -> f32 {
+    let p = shadow_params;
+    var best = sh_near(ray, x, y, phi);
+    let end = sh_exit(ray, lo);
+    let major = max(abs(ray.cx), abs(ray.cy));
+    let top = p.method.z - 1;
+    let nruns = p.method.y;
+    var a = SH_NEAR_PX;
+    for (var k = 0; k <= 4096; k++) {
+        if a >= end || best >= hi {
+            break;
+        }
+        var levels = 5;
+        if nruns > 0 {
+            if k >= nruns {
+                break;
+            }
+            levels = p.runs[k / 4][k % 4];
+        } else {
+            let covered = max(a * major, 1.0);
+            levels = max(i32(firstLeadingBit(u32(covered))) + 1, 5);
+        }
+        let m0 = min(levels - 1, top);
+        let len = f32(1 << u32(m0)) / major;
+        let b = a + len;
+        best = max(best, sh_dp_run(ray, a, min(b, end), m0, max(best, lo)));
+        a = b;
+    }
+    return best;
+}
+
+// Timokhin & Mikhaylyuk's traversal: whether the terrain reaches slope t along the ray.
+fn sh_extrema_dark(ray: ShRay, x: i32, y: i32, phi: f32, t: f32) -> bool {
+    if sh_near(ray, x, y, phi) >= t {
+        return true;
+    }
+    let end = sh_exit(ray, t);
+    if end <= SH_NEAR_PX {
+        return false;
+    }
+    let top = min(shadow_params.method.z - 1, 7);
+    // One walk per level, the finer ones nested in the texel the coarser one is at.
+    var stack: array<ShWalker, 8>;
+    stack[top] = sh_walker(ray, top, SH_NEAR_PX, end);
+    var cur = top;
+    var dark = false;
+    for (var guard = 0; guard < 10000000; guard++) {
+        let m = cur;
+        var w = stack[m];
+        let tex = sh_walk_next(&w);
+        stack[m] = w;
+        if !tex.ok {
+            if m == top {
+                break;
+            }
+            cur = m + 1;
+            continue;
+        }
+        let e = sh_extrema(m, tex.tx, tex.ty);
+        if sh_max_slope(ray, tex.s_in, tex.s_out, e.x) < t {
+            continue;
+        }
+        if e.y > SH_NODATA && sh_max_slope(ray, tex.s_in, tex.s_out, e.y) >= t {
+            dark = true;
+            break;
+        }
+        if m == 0 {
+            if sh_max_over(ray, tex.s_in, tex.s_out, SH_NEG) >= t {
+                dark = true;
+                break;
+            }
+            continue;
+        }
+        stack[m - 1] = sh_walker(ray, m - 1, tex.s_in, tex.s_out);
+        cur = m - 1;
+    }
+    return dark;
+}
+
+// Jung et al.'s disc occlusion: a horizon of slope a (floored) hides the segment below it.
+fn sh_occlusion(a: f32, floor_deg: f32, el: f32, r: f32) -> f32 {
+    var alpha = floor_deg;
+    if a > SH_NODATA {
+        alpha = max(atan(a) * SH_DEG, floor_deg);
+    }
+    if r <= 0.0 {
+        if el > alpha {
+            return 1.0;
+        }
+        if el < alpha {
+            return 0.0;
+        }
+        return 0.5;
+    }
+    return sh_segment_fraction((alpha - el) / r);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Fourier: the tile's horizon pyramid and the exact disc model (256 strips).
+
+alias ShCoef = array<vec2<f32>, 32>;
+
+fn sh_fourier_coefficients(coef: ptr<function, ShCoef>, i: i32, j: i32) {
+    let p = shadow_params;
+    let n = f32(p.rect.z);
+    let k = p.method.w;
+    // Constant trip counts (all 32 slots, zero past k): lavapipe corrupted the array when
+    // the loops ran k times.
+    for (var g = 0; g < 8; g++) {
+        let gr = p.groups[g];
+        let res = max(gr.y, 1);
+        let r = f32(res);
+        let fx = (f32(i) + 0.5) / n * r - 0.5;
+        let fy = (f32(j) + 0.5) / n * r - 0.5;
+        let x0 = floor(fx);
+        let y0 = floor(fy);
+        let ax = fx - x0;
+        let ay = fy - y0;
+        let xa = clamp(i32(x0), 0, res - 1);
+        let xb = clamp(i32(x0) + 1, 0, res - 1);
+        let ya = clamp(i32(y0), 0, res - 1) + gr.x;
+        let yb = clamp(i32(y0) + 1, 0, res - 1) + gr.x;
+        for (var half = 0; half < 2; half++) {
+            let slot = 4 * g + 2 * half;
+            var v = vec4<f32>(0.0);
+            if slot < k {
+                let t00 = textureLoad(shadow_fourier, vec2<i32>(2 * xa + half, ya), 0);
+                let t10 = textureLoad(shadow_fourier, vec2<i32>(2 * xb + half, ya), 0);
+                let t01 = textureLoad(shadow_fourier, vec2<i32>(2 * xa + half, yb), 0);
+                let t11 = textureLoad(shadow_fourier, vec2<i32>(2 * xb + half, yb), 0);
+                let top = t00 * (1.0 - ax) + t10 * ax;
+                let bot = t01 * (1.0 - ax) + t11 * ax;
+                v = top * (1.0 - ay) + bot * ay;
+            }
+            (*coef)[slot] = select(vec2<f32>(0.0), v.xy, slot < k);
+            (*coef)[slot + 1] = select(vec2<f32>(0.0), v.zw, slot + 1 < k);
+        }
+    }
+}
+
+// α(θ) = Σ Re c_k cos kθ − Im c_k sin kθ (degrees).
+fn sh_series(coef: ptr<function, ShCoef>, theta: f32) -> f32 {
+    let c1 = cos(theta);
+    let s1 = sin(theta);
+    var cs = 1.0;
+    var sn = 0.0;
+    var sum = (*coef)[0].x;
+    for (var i = 1; i < SH_MAX_K; i++) {
+        let nc = cs * c1 - sn * s1;
+        sn = sn * c1 + cs * s1;
+        cs = nc;
+        let c = (*coef)[i];
+        sum += c.x * cs - c.y * sn;
+    }
+    return sum;
+}
+
+fn sh_half_chord_integral(x_: f32) -> f32 {
+    let x = clamp(x_, -1.0, 1.0);
+    return 0.5 * (x * sqrt(max(1.0 - x * x, 0.0)) + asin(x));
+}
+
+// Area of the part of the unit disc with a ≤ x ≤ b and y ≥ c.
+fn sh_strip_area_above(a_: f32, b_: f32, c_: f32) -> f32 {
+    let a = clamp(a_, -1.0, 1.0);
+    let b = clamp(b_, -1.0, 1.0);
+    if b <= a {
+        return 0.0;
+    }
+    var c = c_;
+    var flip = false;
+    if c < 0.0 {
+        c = -c;
+        flip = true;
+    }
+    var above = 0.0;
+    if c < 1.0 {
+        let xc = sqrt(1.0 - c * c);
+        let lo = max(a, -xc);
+        let hi = min(b, xc);
+        if hi > lo {
+            above = max(sh_half_chord_integral(hi) - sh_half_chord_integral(lo) - c * (hi - lo), 0.0);
+        }
+    }
+    if flip {
+        let whole = 2.0 * (sh_half_chord_integral(b) - sh_half_chord_integral(a));
+        return max(whole - above, 0.0);
+    }
+    return above;
+}
+
+struct ShDisc {
+    up: vec3<f32>,
+    s: vec3<f32>,
+    eh: vec3<f32>,
+    ev: vec3<f32>,
+    tan_r: f32,
+    floor_deg: f32,
+}
+
+// Elevation of disc point (x, y) above the horizon, degrees.
+fn sh_disc_g(coef: ptr<function, ShCoef>, d: ShDisc, x: f32, y: f32) -> f32 {
+    let dir = normalize(d.s + d.tan_r * (x * d.eh + y * d.ev));
+    let hor = clamp(max(sh_series(coef, sh_plane_azimuth(d.up, dir)), d.floor_deg), -90.0, 90.0);
+    return sh_elevation_deg(d.up, dir) - hor;
+}
+
+fn sh_fourier(p: vec2<i32>, h0: f32, up: vec3<f32>) -> f32 {
+    let prm = shadow_params;
+    var coef: ShCoef;
+    sh_fourier_coefficients(&coef, p.x - prm.rect.x, p.y - prm.rect.y);
+    let s = normalize(prm.sun.xyz);
+    let r_deg = prm.sun.w;
+    let floor_deg = sh_floor_deg(h0);
+    let el = sh_elevation_deg(up, s);
+    var d: ShDisc;
+    d.up = up;
+    d.s = s;
+    d.floor_deg = floor_deg;
+    let c = cross(s, up);
+    if dot(c, c) > 1e-30 {
+        d.eh = normalize(c);
+    } else {
+        // The zenith: any horizontal axis does.
+        d.eh = normalize(cross(up, prm.face_u.xyz));
+    }
+    d.ev = normalize(cross(d.eh, s));
+    d.tan_r = tan(r_deg / SH_DEG);
+    let phi0 = sh_plane_azimuth(up, cross(up, d.eh));
+    let a0 = clamp(max(sh_series(&coef, phi0), floor_deg), -90.0, 90.0);
+    if r_deg <= 0.0 {
+        if el > a0 {
+            return 1.0;
+        }
+        if el < a0 {
+            return 0.0;
+        }
+        return 0.5;
+    }
+    // A cheap answer where the horizon cannot cross the disc: |α'| ≤ Σ k|c_k| bounds its
+    // change over the disc's azimuths (from 8 rim points, with 50 % to spare).
+    if el + r_deg < 89.0 {
+        var lip = 0.0;
+        for (var i = 1; i < SH_MAX_K; i++) {
+            lip += f32(i) * length(coef[i]);
+        }
+        var span = 0.0;
+        for (var i = 0; i < 8; i++) {
+            let th = SH_TAU * f32(i) / 8.0;
+            let dir = normalize(s + d.tan_r * (cos(th) * d.eh + sin(th) * d.ev));
+            var off = sh_plane_azimuth(up, dir) - phi0;
+            if off > SH_PI {
+                off -= SH_TAU;
+            } else if off < -SH_PI {
+                off += SH_TAU;
+            }
+            span = max(span, abs(off));
+        }
+        let reach = lip * (1.5 * span + 1e-4);
+        if max(a0 + reach, floor_deg) < el - r_deg - 1e-3 {
+            return 1.0;
+        }
+        if max(a0 - reach, floor_deg) > el + r_deg + 1e-3 {
+            return 0.0;
+        }
+    }
+    var lit = 0.0;
+    let wdt = 2.0 / f32(SH_STRIPS);
+    for (var i = 0; i < SH_STRIPS; i++) {
+        let a = -1.0 + wdt * f32(i);
+        let b = a + wdt;
+        let x = 0.5 * (a + b);
+        let h = sqrt(max(1.0 - x * x, 0.0));
+        let lit_b = sh_disc_g(&coef, d, x, -h) > 0.0;
+        let lit_t = sh_disc_g(&coef, d, x, h) > 0.0;
+        if lit_b == lit_t {
+            if lit_b {
+                lit += sh_strip_area_above(a, b, -1.0);
+            }
+        } else {
+            // One crossing in (−h, h): bisect for it (to f32's resolution), keeping `lo` on
+            // the bottom's side.
+            var lo = -h;
+            var hi = h;
+            for (var it = 0; it < 24; it++) {
+                let mid = 0.5 * (lo + hi);
+                if (sh_disc_g(&coef, d, x, mid) > 0.0) == lit_b {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            let above = sh_strip_area_above(a, b, 0.5 * (lo + hi));
+            if lit_t {
+                lit += above;
+            } else {
+                lit += sh_strip_area_above(a, b, -1.0) - above;
+            }
+        }
+    }
+    return clamp(lit / SH_PI, 0.0, 1.0);
+}
+
+// ---------------------------------------------------------------------------------------------
+
+// Lit fraction of the sun's disc at raster texel p: [0, 1], negative over no data.
+fn shadow_lit(p: vec2<i32>) -> f32 {
+    let prm = shadow_params;
+    let h0 = sh_height(p.x, p.y);
+    if !sh_valid(h0) {
+        return -1.0;
+    }
+    let up = normalize(sh_plane_point(p.x, p.y));
+    let method = prm.method.x;
+    if method < 0 {
+        // The tile holds no data for the method set.
+        return -2.0;
+    }
+    if method == 3 {
+        return sh_fourier(p, h0, up);
+    }
+    let s = normalize(prm.sun.xyz);
+    let el = sh_elevation_deg(up, s);
+    let phi = sh_plane_azimuth(up, s);
+    let r = prm.sun.w;
+    let floor_deg = sh_floor_deg(h0);
+    if method == 2 {
+        if el <= floor_deg {
+            return 0.0;
+        }
+        let ray = sh_ray(p.x, p.y, h0, phi);
+        if sh_extrema_dark(ray, p.x, p.y, phi, sh_tan_deg(el)) {
+            return 0.0;
+        }
+        return 1.0;
+    }
+    if el + r <= floor_deg {
+        return 0.0;
+    }
+    let lo = sh_tan_deg(el - r);
+    let hi = sh_tan_deg(el + r);
+    let ray = sh_ray(p.x, p.y, h0, phi);
+    var a = SH_NEG;
+    if method == 1 {
+        a = sh_uniform(ray, prm.method.y, lo);
+    } else {
+        a = sh_dp(ray, p.x, p.y, phi, lo, hi);
+    }
+    return sh_occlusion(a, floor_deg, el, r);
+}
