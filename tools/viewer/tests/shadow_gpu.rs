@@ -385,10 +385,10 @@ fn fourier_without_pyramids_says_what_to_run() {
 }
 
 /// `shadow_lit` in a fragment shader with the bind group at `@group(1)` (the renderer's
-/// situation): one fragment per texel of the tile's interior, into an R32Float target.
+/// situation): one fragment per texel of the tile's interior, into an R32Float target (R16Float
+/// where that is not renderable).
 fn render_lit(gpu: &Gpu, shadows: &Shadows, t: &TileShadow) -> Vec<f32> {
     let (w, h) = (t.rect.w as u32, t.rect.h as u32);
-    assert_eq!(w * 4 % 256, 0, "rows of whole 256-byte copies");
     let src = format!(
         "{}\n{}",
         Shadows::wgsl(),
@@ -411,7 +411,20 @@ fn render_lit(gpu: &Gpu, shadows: &Shadows, t: &TileShadow) -> Vec<f32> {
         bind_group_layouts: &[None, Some(shadows.layout())],
         immediate_size: 0,
     });
-    let format = wgpu::TextureFormat::R32Float;
+    // R32Float where it is renderable (Vulkan), else half floats (GL).
+    let renderable = |f| {
+        gpu.adapter
+            .get_texture_format_features(f)
+            .allowed_usages
+            .contains(wgpu::TextureUsages::RENDER_ATTACHMENT)
+    };
+    let format = if renderable(wgpu::TextureFormat::R32Float) {
+        wgpu::TextureFormat::R32Float
+    } else {
+        wgpu::TextureFormat::R16Float
+    };
+    let texel = format.block_copy_size(None).unwrap();
+    let row = (w * texel).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
     let pipeline = dev.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
         label: None,
         layout: Some(&layout),
@@ -451,7 +464,7 @@ fn render_lit(gpu: &Gpu, shadows: &Shadows, t: &TileShadow) -> Vec<f32> {
     let view = target.create_view(&Default::default());
     let readback = dev.create_buffer(&wgpu::BufferDescriptor {
         label: None,
-        size: (w * h * 4) as u64,
+        size: (row * h) as u64,
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
@@ -488,7 +501,7 @@ fn render_lit(gpu: &Gpu, shadows: &Shadows, t: &TileShadow) -> Vec<f32> {
             buffer: &readback,
             layout: wgpu::TexelCopyBufferLayout {
                 offset: 0,
-                bytes_per_row: Some(w * 4),
+                bytes_per_row: Some(row),
                 rows_per_image: Some(h),
             },
         },
@@ -501,8 +514,15 @@ fn render_lit(gpu: &Gpu, shadows: &Shadows, t: &TileShadow) -> Vec<f32> {
         timeout: None,
     })
     .unwrap();
-    let out = bytemuck::cast_slice::<u8, f32>(&readback.get_mapped_range(..).unwrap()).to_vec();
-    out
+    let bytes = readback.get_mapped_range(..).unwrap();
+    bytes
+        .chunks_exact(row as usize)
+        .flat_map(|r| r[..(w * texel) as usize].chunks_exact(texel as usize))
+        .map(|b| match b.len() {
+            4 => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+            _ => half::f16::from_le_bytes([b[0], b[1]]).to_f32(),
+        })
+        .collect()
 }
 
 #[test]
@@ -545,7 +565,8 @@ fn the_fragment_shader_draws_what_the_compute_harness_finds() {
             c.n,
             c.data_mismatch
         );
-        assert!(c.n > 0 && c.data_mismatch == 0 && c.mean() <= 1e-4 && c.per() <= 0.001);
+        // Exact through R32Float; R16Float rounds to 2⁻¹¹.
+        assert!(c.n > 0 && c.data_mismatch == 0 && c.mean() <= 1e-3 && c.per() <= 0.001);
     }
 }
 
