@@ -618,6 +618,7 @@ impl TileShadow {
             CpuTwin::Same(m) => match m.cpu() {
                 ShadowMethod::Trace(t) => Some(t),
                 ShadowMethod::Horizon(..) => None,
+                ShadowMethod::SMap => unreachable!("no GPU method's twin is the SMap"),
             },
         };
         let inside = |p: &[i32; 2]| {
