@@ -123,3 +123,39 @@ fn request_adapter(
     why.dedup();
     Err(GpuError::NoAdapter(why.join("; ")))
 }
+
+impl Gpu {
+    /// A read-only 2-D texture (`TEXTURE_BINDING`, one mip level) of `w × h` texels of `format`
+    /// from `bytes` (row-major), and its default view.
+    pub fn texture_view(
+        &self,
+        label: &str,
+        format: wgpu::TextureFormat,
+        w: u32,
+        h: u32,
+        bytes: &[u8],
+    ) -> wgpu::TextureView {
+        use wgpu::util::DeviceExt;
+        self.device
+            .create_texture_with_data(
+                &self.queue,
+                &wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size: wgpu::Extent3d {
+                        width: w,
+                        height: h,
+                        depth_or_array_layers: 1,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
+                },
+                wgpu::util::TextureDataOrder::LayerMajor,
+                bytes,
+            )
+            .create_view(&wgpu::TextureViewDescriptor::default())
+    }
+}

@@ -194,42 +194,25 @@ impl Scene {
             .flatten()
             .map(|&v| half::f16::from_f32(v).to_bits())
             .collect();
-        let tex2d = |label, w: u32, format| wgpu::TextureDescriptor {
-            label: Some(label),
-            size: wgpu::Extent3d {
-                width: w,
-                height: w,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING,
-            view_formats: &[],
-        };
-        let normals = device
-            .create_texture_with_data(
-                &gpu.queue,
-                &tex2d("normals", m.n as u32 + 2, wgpu::TextureFormat::Rgba16Float),
-                wgpu::util::TextureDataOrder::LayerMajor,
-                bytemuck::cast_slice(&half),
-            )
-            .create_view(&Default::default());
+        let side = m.n as u32 + 2;
+        let normals = gpu.texture_view(
+            "normals",
+            wgpu::TextureFormat::Rgba16Float,
+            side,
+            side,
+            bytemuck::cast_slice(&half),
+        );
         let albedo = self.albedo(id)?;
         let stored = lay.stored_size();
         let (albedo_view, albedo_params) = match albedo {
             Some(rgba) => (
-                Some(
-                    device
-                        .create_texture_with_data(
-                            &gpu.queue,
-                            &tex2d("albedo", stored as u32, wgpu::TextureFormat::Rgba8UnormSrgb),
-                            wgpu::util::TextureDataOrder::LayerMajor,
-                            &rgba,
-                        )
-                        .create_view(&Default::default()),
-                ),
+                Some(gpu.texture_view(
+                    "albedo",
+                    wgpu::TextureFormat::Rgba8UnormSrgb,
+                    stored as u32,
+                    stored as u32,
+                    &rgba,
+                )),
                 [1.0, lay.halo as f32, stored as f32, 0.0],
             ),
             None => (None, [0.0, lay.halo as f32, stored as f32, 0.0]),

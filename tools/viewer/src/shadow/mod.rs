@@ -194,27 +194,7 @@ pub struct TileShadow {
 }
 
 fn empty_view(gpu: &Gpu, format: wgpu::TextureFormat, bytes: &[u8]) -> wgpu::TextureView {
-    gpu.device
-        .create_texture_with_data(
-            &gpu.queue,
-            &wgpu::TextureDescriptor {
-                label: Some("shadow empty"),
-                size: wgpu::Extent3d {
-                    width: 1,
-                    height: 1,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            },
-            wgpu::util::TextureDataOrder::LayerMajor,
-            bytes,
-        )
-        .create_view(&wgpu::TextureViewDescriptor::default())
+    gpu.texture_view("shadow empty", format, 1, 1, bytes)
 }
 
 fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
@@ -239,27 +219,13 @@ fn float_texture(
     h: usize,
     data: &[f32],
 ) -> wgpu::TextureView {
-    gpu.device
-        .create_texture_with_data(
-            &gpu.queue,
-            &wgpu::TextureDescriptor {
-                label: Some(label),
-                size: wgpu::Extent3d {
-                    width: w as u32,
-                    height: h as u32,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            },
-            wgpu::util::TextureDataOrder::LayerMajor,
-            bytemuck::cast_slice(data),
-        )
-        .create_view(&wgpu::TextureViewDescriptor::default())
+    gpu.texture_view(
+        label,
+        format,
+        w as u32,
+        h as u32,
+        bytemuck::cast_slice(data),
+    )
 }
 
 fn finite_or_neg(v: f32) -> f32 {
