@@ -315,6 +315,44 @@ fn a_second_writer_is_refused_at_once_and_the_first_wins() {
     );
 }
 
+/// A program that embeds the library and spawns other programs while it writes (a test harness
+/// is one): a child caught between fork and exec must not keep the tileset locked after the
+/// writer lets go. With flock(2) the child's copy of the descriptor held the lock, and the
+/// next writer was refused (a CI failure of `mip::a_corrupt_height_tile_is_an_error_naming_it`).
+#[cfg(unix)]
+#[test]
+fn a_child_spawned_while_the_lock_is_held_does_not_keep_it() {
+    use std::os::unix::process::CommandExt;
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("tiles");
+    ok(&[BAKE, &["--out", out.to_str().unwrap()]].concat());
+    let writer = penumbra::tileset::writer::Writer::begin(&out).unwrap();
+    // `spawn` returns once the child has exec'd, so it runs on another thread; the child
+    // lingers before exec with every descriptor of this process.
+    let child = std::thread::spawn(|| {
+        let mut c = Command::new("true");
+        // SAFETY: the hook only sleeps (nanosleep is async-signal-safe).
+        unsafe {
+            c.pre_exec(|| {
+                std::thread::sleep(Duration::from_secs(3));
+                Ok(())
+            });
+        }
+        c.status().unwrap()
+    });
+    std::thread::sleep(Duration::from_millis(500));
+    drop(writer);
+    let t0 = Instant::now();
+    let again = bake(&out, &[]).output().unwrap();
+    let lingered = t0.elapsed() < Duration::from_millis(2500);
+    assert!(child.join().unwrap().success());
+    assert!(
+        again.status.success(),
+        "refused while the child lingered ({lingered}): {}",
+        String::from_utf8_lossy(&again.stderr)
+    );
+}
+
 fn first_pid(lock: &Path) -> String {
     std::fs::read_to_string(lock).unwrap().trim().to_string()
 }

@@ -3,6 +3,14 @@
 //! the holder's pid so that a refused writer can say who holds it. The file itself is never
 //! removed (removing a lock file lets two writers lock two different files).
 //!
+//! On Unix the writer lock is a POSIX record lock (`fcntl(F_SETLK)`), which belongs to the
+//! process, not to the open file: a child spawned while it is held (a program that embeds the
+//! library and runs other programs, or a test harness) does not inherit it. An flock(2) lock, as
+//! `File::try_lock` takes, lives on in every copy of the descriptor: a child caught between
+//! fork and exec kept a released tileset locked, and the next writer was refused. Record locks
+//! go when the process closes any descriptor of the file, so this module is the only place that
+//! opens it, once per lock held.
+//!
 //! Readers take a shared lock on `.penumbra/commit.lock` for as long as they read; a writer
 //! takes it exclusively only while it swaps finished products into place, so a reader sees the
 //! tileset before or after a commit, never halfway.
@@ -55,7 +63,7 @@ impl WriteLock {
             .truncate(false)
             .open(&path)
             .at(&path)?;
-        match f.try_lock() {
+        match try_lock_process(&f) {
             Ok(()) => {}
             Err(TryLockError::WouldBlock) => {
                 let mut holder = String::new();
@@ -85,6 +93,34 @@ impl WriteLock {
         held.push((key, Arc::downgrade(&f)));
         Ok(WriteLock { _file: f })
     }
+}
+
+/// Take an exclusive lock on the whole of `f` for this process, or fail at once.
+#[cfg(unix)]
+fn try_lock_process(f: &File) -> std::result::Result<(), TryLockError> {
+    use std::os::fd::AsRawFd;
+    // SAFETY: an all-zero `flock` is a valid value of the plain C struct; the fields that
+    // matter are set below.
+    let mut fl: libc::flock = unsafe { std::mem::zeroed() };
+    fl.l_type = libc::F_WRLCK as _;
+    fl.l_whence = libc::SEEK_SET as _;
+    fl.l_start = 0;
+    fl.l_len = 0; // to the end of the file, however long it grows
+    // SAFETY: `f` is an open descriptor for the duration of the call and `fl` a valid flock.
+    let r = unsafe { libc::fcntl(f.as_raw_fd(), libc::F_SETLK, &fl) };
+    if r == 0 {
+        return Ok(());
+    }
+    let e = std::io::Error::last_os_error();
+    match e.raw_os_error() {
+        Some(libc::EACCES) | Some(libc::EAGAIN) => Err(TryLockError::WouldBlock),
+        _ => Err(TryLockError::Error(e)),
+    }
+}
+
+#[cfg(not(unix))]
+fn try_lock_process(f: &File) -> std::result::Result<(), TryLockError> {
+    f.try_lock()
 }
 
 /// Shared (reader) or exclusive (committing writer) hold on the commit lock.
