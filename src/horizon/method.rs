@@ -6,6 +6,7 @@ use rayon::prelude::*;
 
 use super::geometry::{pixel_geometry, plane_azimuth, Azimuth, Context, Rect};
 use super::near;
+use super::pyramid;
 use super::reference::reference;
 use super::sweep::{finish, sweep, Scratch};
 
@@ -18,6 +19,11 @@ pub enum Method {
     /// per line.
     #[default]
     Fast,
+    /// Exact, as `Reference`, but each ray walked over a maximum pyramid of the context that
+    /// skips whatever provably cannot rise above the best slope found so far, seeded with the
+    /// neighbours' horizons ([`super::pyramid`]): the reference's answer at a fraction of its
+    /// time.
+    Exact,
     /// Brute force: each pixel's own ray walked cell by cell to the end of the context, the
     /// maximum over the continuous bilinear surface.
     Reference,
@@ -28,8 +34,9 @@ impl std::str::FromStr for Method {
     fn from_str(s: &str) -> std::result::Result<Self, String> {
         match s {
             "fast" => Ok(Method::Fast),
+            "exact" => Ok(Method::Exact),
             "reference" => Ok(Method::Reference),
-            _ => Err(format!("unknown method '{s}' (fast, reference)")),
+            _ => Err(format!("unknown method '{s}' (fast, exact, reference)")),
         }
     }
 }
@@ -38,6 +45,7 @@ impl Method {
     pub fn name(self) -> &'static str {
         match self {
             Method::Fast => "fast",
+            Method::Exact => "exact",
             Method::Reference => "reference",
         }
     }
@@ -72,6 +80,16 @@ pub fn horizons_with(
         return out;
     }
     match method {
+        Method::Exact => {
+            let geo = pixel_geometry(ctx, rect);
+            let pyr = pyramid::MaxPyramid::new(ctx);
+            let none = vec![f64::NEG_INFINITY; plane];
+            out.par_chunks_mut(plane).enumerate().for_each(|(k, dst)| {
+                let az = Azimuth::new(ctx, plane_azimuth(k, a));
+                let mut st = pyramid::WalkStats::default();
+                pyramid::finish(ctx, &pyr, rect, &az, 0.0, &geo, &none, dst, &mut st);
+            })
+        }
         Method::Fast => {
             let geo = pixel_geometry(ctx, rect);
             let nodata = near::NoData::new(ctx);

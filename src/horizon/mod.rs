@@ -12,6 +12,7 @@ mod geometry;
 pub mod io;
 mod method;
 mod near;
+mod pyramid;
 mod reference;
 pub(crate) mod stage;
 mod sweep;

@@ -310,11 +310,11 @@ pub fn check(ts: &Tileset, path: &Path) -> Result<()> {
                 format!("'{}' is not f16 or f32", h.precision),
             ));
         }
-        if !matches!(h.method.as_str(), "fast" | "reference") {
+        if h.method.parse::<crate::horizon::Method>().is_err() {
             return Err(bad(
                 path,
                 "products.horizon.method",
-                format!("'{}' is not fast or reference", h.method),
+                format!("'{}' is not fast, exact or reference", h.method),
             ));
         }
         if let Some(n) = h.near_px {
@@ -441,11 +441,11 @@ fn fourier(path: &Path, ts: &Tileset, f: &crate::manifest::FourierProduct) -> Re
             format!("'{}' is not raw or streamed", f.source),
         ));
     }
-    if !matches!(f.horizon_method.as_str(), "fast" | "reference") {
+    if f.horizon_method.parse::<crate::horizon::Method>().is_err() {
         return Err(bad(
             path,
             "products.fourier.horizon_method",
-            format!("'{}' is not fast or reference", f.horizon_method),
+            format!("'{}' is not fast, exact or reference", f.horizon_method),
         ));
     }
     if let Some(n) = f.horizon_near_px {

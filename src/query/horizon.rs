@@ -185,11 +185,7 @@ fn profile(
         }
         let mut c = Vec::new();
         p.coefficients_at(i as f64 + 0.5, j as f64 + 0.5, &mut c);
-        let method = if f.horizon_method == "reference" {
-            Method::Reference
-        } else {
-            Method::Fast
-        };
+        let method = f.horizon_method.parse().unwrap_or(Method::Fast);
         return Ok((Profile::Series(c), "fourier", method, 0, 0));
     }
     let (method, azimuths) = match from {
@@ -226,11 +222,7 @@ fn profile(
         let e: Vec<f32> = (0..h.azimuths)
             .map(|k| planes[k * n * n + j * n + i])
             .collect();
-        let m = if h.method == "reference" {
-            Method::Reference
-        } else {
-            Method::Fast
-        };
+        let m = h.method.parse().unwrap_or(Method::Fast);
         return Ok((Profile::Samples(e), "stored", m, 0, 0));
     }
     let (tmin, tmax) = terrain_range(ts).ok_or_else(|| {

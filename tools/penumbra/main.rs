@@ -262,7 +262,7 @@ enum QueryCommand {
         /// With --from auto|reference: azimuth samples of a computed horizon.
         #[arg(long, default_value_t = 360)]
         azimuths: usize,
-        /// With --from auto|reference: fast or reference horizon computation.
+        /// With --from auto|reference: fast, exact or reference horizon computation.
         #[arg(long, default_value = "fast")]
         horizon_method: Method,
         /// Largest context margin searched around the pixel's tile, in pixels of its level.
@@ -391,8 +391,9 @@ struct HorizonFlags {
     /// Azimuth samples per pixel (plane azimuths 360·k/A from the face's +U axis).
     #[arg(long, default_value_t = 360)]
     azimuths: usize,
-    /// fast (exact within --near-px, upper-hull sweep beyond) or reference (exact
-    /// cell-by-cell search of every pixel's ray; ≈ 35× slower).
+    /// fast (exact within --near-px, upper-hull sweep beyond), exact (the reference's answer:
+    /// every ray walked over a maximum pyramid that skips what cannot win; ≈ 2–4× slower than
+    /// fast) or reference (brute-force cell-by-cell search of every ray; ≈ 35× slower).
     #[arg(long, default_value = "fast")]
     method: Method,
     /// Largest context margin around a tile, in pixels of its level.
