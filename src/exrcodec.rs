@@ -369,6 +369,12 @@ fn chunk_len(c: &Chunk) -> usize {
 /// A decoded file: every channel's levels (largest first) converted to f32.
 #[derive(Clone, Debug)]
 pub struct Decoded {
+    /// The layer name stored in the header, if any.
+    pub layer_name: Option<String>,
+    /// The file's compression.
+    pub compression: Compression,
+    /// Whether the file is tiled with mip levels (even when it has a single one, 1×1).
+    pub mip_mapped: bool,
     /// (width, height) of each level, largest first.
     pub level_sizes: Vec<(usize, usize)>,
     /// Channel name, stored sample type, levels.
@@ -594,6 +600,19 @@ pub fn decode(bytes: &[u8], largest_only: bool) -> Result<Decoded, String> {
         .map(|((c, t), levels)| (c.name.to_string(), t, levels))
         .collect();
     Ok(Decoded {
+        layer_name: header
+            .own_attributes
+            .layer_name
+            .as_ref()
+            .map(|n| n.to_string()),
+        compression,
+        mip_mapped: matches!(
+            header.blocks,
+            BlockDescription::Tiles(TileDescription {
+                level_mode: LevelMode::MipMap,
+                ..
+            })
+        ),
         level_sizes: sizes[..keep_levels].to_vec(),
         channels,
     })

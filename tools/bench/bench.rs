@@ -67,6 +67,15 @@ pub enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Rewrite every EXR of a folder as the `exr` crate's writer (Penumbra's before
+    /// src/exrcodec.rs) would have stored the same samples, copying other files: hashing the
+    /// copy against tools/golden/hashes.txt proves a codec change kept every sample.
+    ExrCrateRewrite {
+        /// Folder to read (e.g. target/golden after `tools/golden/run.sh check`).
+        from: PathBuf,
+        /// Folder to write.
+        to: PathBuf,
+    },
     /// Peak RSS and wall time of `penumbra mip` and `penumbra horizon` on the same DEM tiled
     /// with more and more levels (issue #13, item 3): each run is a fresh child process under
     /// GNU time. Memory should not depend on the level count.
@@ -413,6 +422,9 @@ pub fn run(cmd: BenchCommand, quiet: bool) -> Result<()> {
             json,
             quiet,
         ),
+        BenchCommand::ExrCrateRewrite { from, to } => {
+            crate::codec::run_exr_crate_rewrite(&from, &to)
+        }
         BenchCommand::MipMemory {
             data,
             work,

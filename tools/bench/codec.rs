@@ -27,6 +27,7 @@ enum Stored {
 /// One file's content, as the stage stores it.
 #[derive(Clone)]
 struct Item {
+    name: String,
     size: (usize, usize),
     mip: bool,
     channels: Vec<(String, Stored)>,
@@ -88,11 +89,16 @@ impl Item {
                 Blocks::ScanLines
             },
         };
-        exrcodec::encode("bench", self.size, &channels, &enc).map_err(anyhow::Error::msg)
+        exrcodec::encode(&self.name, self.size, &channels, &enc).map_err(anyhow::Error::msg)
     }
 
     /// What the `exr` crate's writer made of it (ZIP, level 4, one block after another).
     fn encode_exr_crate(&self) -> Result<Vec<u8>> {
+        self.encode_exr_crate_with(true)
+    }
+
+    /// What the `exr` crate's writer made of it, ZIP or uncompressed.
+    fn encode_exr_crate_with(&self, zip: bool) -> Result<Vec<u8>> {
         use exr::prelude::*;
         let list = self
             .channels
@@ -118,18 +124,22 @@ impl Item {
                 }
             })
             .collect();
-        let encoding = if self.mip {
-            Encoding {
-                compression: Compression::ZIP16,
+        let encoding = match (self.mip, zip) {
+            (true, _) => Encoding {
+                compression: if zip {
+                    Compression::ZIP16
+                } else {
+                    Compression::Uncompressed
+                },
                 blocks: Blocks::Tiles(Vec2(64, 64)),
                 line_order: LineOrder::Increasing,
-            }
-        } else {
-            Encoding::SMALL_LOSSLESS
+            },
+            (false, true) => Encoding::SMALL_LOSSLESS,
+            (false, false) => Encoding::UNCOMPRESSED,
         };
         let layer = Layer::new(
             self.size,
-            LayerAttributes::named("bench"),
+            LayerAttributes::named(self.name.as_str()),
             encoding,
             AnyChannels::sort(SmallVec::from_vec(list)),
         );
@@ -249,6 +259,67 @@ fn spread<T: Clone>(v: &[T], max: usize) -> Vec<T> {
     (0..max).map(|i| v[i * v.len() / max].clone()).collect()
 }
 
+/// A file's content (every level), and whether it is ZIP-compressed.
+fn load_item(p: &Path) -> Result<(Item, bool)> {
+    let bytes = std::fs::read(p)?;
+    let d = exrcodec::decode(&bytes, false)
+        .map_err(anyhow::Error::msg)
+        .with_context(|| p.display().to_string())?;
+    let channels = d
+        .channels
+        .iter()
+        .map(|(n, t, l)| {
+            let s = match t {
+                exr::meta::attribute::SampleType::F16 => Stored::F16(
+                    l.iter()
+                        .map(|v| v.iter().map(|&x| f16::from_f32(x)).collect())
+                        .collect(),
+                ),
+                _ => Stored::F32(l.clone()),
+            };
+            (n.clone(), s)
+        })
+        .collect();
+    let item = Item {
+        name: d.layer_name.clone().unwrap_or_default(),
+        size: d.size(),
+        mip: d.mip_mapped,
+        channels,
+    };
+    Ok((
+        item,
+        d.compression != exr::compression::Compression::Uncompressed,
+    ))
+}
+
+/// Rewrite every EXR under `from` into the same place under `to` as the `exr` crate's writer
+/// (what Penumbra used before src/exrcodec.rs) would have written the same samples, and copy
+/// the other files. Hashing the result against tools/golden/hashes.txt proves that a codec
+/// change kept every stored sample (the codec at level 4 writes exactly the exr crate's bytes).
+pub fn run_exr_crate_rewrite(from: &Path, to: &Path) -> Result<()> {
+    let mut stack = vec![from.to_path_buf()];
+    let mut n = 0;
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d)? {
+            let p = e?.path();
+            let rel = p.strip_prefix(from)?;
+            let q = to.join(rel);
+            if p.is_dir() {
+                std::fs::create_dir_all(&q)?;
+                stack.push(p);
+            } else if p.extension().is_some_and(|x| x == "exr") {
+                let (item, zip) = load_item(&p)?;
+                std::fs::write(&q, item.encode_exr_crate_with(zip)?)?;
+                n += 1;
+            } else {
+                std::fs::copy(&p, &q)?;
+            }
+        }
+    }
+    eprintln!("rewrote {n} EXR files with the exr crate's writer");
+    Ok(())
+}
+
 /// The products of one DEM: height tiles, f32 mip files, horizon maps (each a list of items).
 fn load_products(dir: &Path, max: usize) -> Result<Vec<(&'static str, Vec<Item>)>> {
     let mut files = Vec::new();
@@ -256,32 +327,8 @@ fn load_products(dir: &Path, max: usize) -> Result<Vec<(&'static str, Vec<Item>)
     files.sort();
     let (mut height, mut mip, mut horizon) = (Vec::new(), Vec::new(), Vec::new());
     for p in files {
-        let bytes = std::fs::read(&p)?;
-        let d = exrcodec::decode(&bytes, false)
-            .map_err(anyhow::Error::msg)
-            .with_context(|| p.display().to_string())?;
-        let names: Vec<&str> = d.channels.iter().map(|(n, _, _)| n.as_str()).collect();
-        let size = d.size();
-        let channels = d
-            .channels
-            .iter()
-            .map(|(n, t, l)| {
-                let s = match t {
-                    exr::meta::attribute::SampleType::F16 => Stored::F16(
-                        l.iter()
-                            .map(|v| v.iter().map(|&x| f16::from_f32(x)).collect())
-                            .collect(),
-                    ),
-                    _ => Stored::F32(l.clone()),
-                };
-                (n.clone(), s)
-            })
-            .collect();
-        let item = Item {
-            size,
-            mip: d.level_sizes.len() > 1,
-            channels,
-        };
+        let (item, _) = load_item(&p)?;
+        let names: Vec<&str> = item.channels.iter().map(|(n, _)| n.as_str()).collect();
         match names.as_slice() {
             ["height", "mask"] => height.push(item),
             ["max"] | ["max", "min"] if item.mip => mip.push(item),
