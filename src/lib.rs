@@ -11,6 +11,7 @@ pub mod body;
 pub mod cube;
 pub mod dem;
 pub mod error;
+pub mod exrcodec;
 pub mod fourier;
 pub mod fsio;
 pub mod horizon;

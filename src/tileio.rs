@@ -2,12 +2,14 @@
 //! written through [`crate::fsio::write_atomic`] (temp file, fsync, rename), so a reader or a
 //! crashed run never sees half a file.
 
+use std::borrow::Cow;
 use std::io::Write;
 use std::path::Path;
 
-use exr::prelude::*;
+use exr::prelude::f16;
 
 use crate::error::{Error, IoContext, Result};
+use crate::exrcodec::{self, Channel, Samples};
 
 pub use crate::fsio::{write_atomic, write_atomic_bytes};
 
@@ -58,8 +60,10 @@ impl HeightTile {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum TileCompression {
-    /// ZIP over 16 scanlines (OpenEXR's predictor + deflate): 1.5–3.5× smaller than raw on
-    /// real DEMs; deflate is the largest single cost of tiling (PIZ was slower and no smaller).
+    /// ZIP over 16 scanlines (OpenEXR's predictor + deflate; 64² tiles for mip files): 1.5–3.5×
+    /// smaller than raw on real DEMs. [`crate::exrcodec`] deflates at a low level with all
+    /// blocks of a file in parallel, so it costs a few percent of a stage (PIZ was slower and
+    /// no smaller).
     #[default]
     Zip,
     /// Uncompressed: fastest to write and to read.
@@ -78,12 +82,52 @@ impl std::str::FromStr for TileCompression {
 }
 
 /// Write a height tile as a single-part scanline EXR, channels `height` (f32) and `mask`
-/// (f16 holding 0, 1 or 2).
+/// (f16 holding 0, 1 or 2), ZIP blocks of 16 lines (see [`crate::exrcodec`]).
 pub fn write_height_tile(
     path: &Path,
     tile: &HeightTile,
     compression: TileCompression,
 ) -> Result<()> {
+    let bytes = encode_height_tile(tile, compression, exrcodec::ZipLevel::DEFAULT)
+        .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
+    write_atomic(path, |f| f.write_all(&bytes).at(path))
+}
+
+/// The bytes of a height tile file (what [`write_height_tile`] stores), at a given deflate level.
+pub fn encode_height_tile(
+    tile: &HeightTile,
+    compression: TileCompression,
+    level: exrcodec::ZipLevel,
+) -> std::result::Result<Vec<u8>, String> {
+    let mask: Vec<f16> = tile.mask.iter().map(|&m| f16::from_f32(m as f32)).collect();
+    exrcodec::encode(
+        "penumbra-height",
+        (tile.size, tile.size),
+        &[
+            Channel {
+                name: "height",
+                levels: vec![Samples::F32(Cow::Borrowed(&tile.height))],
+            },
+            Channel {
+                name: "mask",
+                levels: vec![Samples::F16(Cow::Owned(mask))],
+            },
+        ],
+        &exrcodec::Encoding {
+            level,
+            ..exrcodec::Encoding::scanlines(compression)
+        },
+    )
+}
+
+/// The bytes the `exr` crate's own writer produced for a height tile before
+/// [`crate::exrcodec`] (ZIP at level 4, one block after another). Kept to prove that the codec
+/// stores the same samples, and as the baseline of `penumbra-bench codec`.
+pub fn encode_height_tile_exr_crate(
+    tile: &HeightTile,
+    compression: TileCompression,
+) -> std::result::Result<Vec<u8>, String> {
+    use exr::prelude::*;
     let size = (tile.size, tile.size);
     let mask: Vec<f16> = tile.mask.iter().map(|&m| f16::from_f32(m as f32)).collect();
     let channels = AnyChannels::sort(SmallVec::from_vec(vec![
@@ -100,60 +144,39 @@ pub fn write_height_tile(
         channels,
     );
     let image = Image::from_layer(layer);
-    write_atomic(path, |f| {
-        let mut buf = std::io::Cursor::new(Vec::with_capacity(tile.size * tile.size * 3));
-        image
-            .write()
-            .non_parallel()
-            .to_buffered(&mut buf)
-            .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
-        f.write_all(buf.get_ref()).at(path)
-    })
+    let mut buf = std::io::Cursor::new(Vec::with_capacity(tile.size * tile.size * 3));
+    image
+        .write()
+        .non_parallel()
+        .to_buffered(&mut buf)
+        .map_err(|e| e.to_string())?;
+    Ok(buf.into_inner())
 }
 
-/// Read a height tile written by [`write_height_tile`].
+/// Read a height tile written by [`write_height_tile`] (or by the `exr` crate's writer before
+/// it, or by any OpenEXR writer: blocks in other compressions are decoded by `exr`).
 pub fn read_height_tile(path: &Path) -> Result<HeightTile> {
     let bytes = std::fs::read(path).at(path)?;
-    let image = read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .non_parallel()
-        .from_buffered(std::io::Cursor::new(bytes))
-        .map_err(|e| {
-            Error::invalid(
-                path,
-                format!("not a readable EXR height tile ({e}); delete it and rerun the stage"),
-            )
-        })?;
-    let layer = &image.layer_data;
-    let (w, h) = (layer.size.width(), layer.size.height());
+    decode_height_tile(&bytes).map_err(|e| Error::invalid(path, e))
+}
+
+/// Decode the bytes of a height tile file; the error says what is wrong (without the path).
+pub fn decode_height_tile(bytes: &[u8]) -> std::result::Result<HeightTile, String> {
+    let mut image = exrcodec::decode(bytes, true).map_err(|e| {
+        format!("not a readable EXR height tile ({e}); delete it and rerun the stage")
+    })?;
+    let (w, h) = image.size();
     if w != h {
-        return Err(Error::invalid(
-            path,
-            format!("height tile is {w}×{h}, not square"),
-        ));
+        return Err(format!("height tile is {w}×{h}, not square"));
     }
-    let mut height = None;
-    let mut mask = None;
-    for ch in &layer.channel_data.list {
-        match ch.name.to_string().as_str() {
-            "height" => height = Some(ch.sample_data.values_as_f32().collect::<Vec<f32>>()),
-            "mask" => {
-                mask = Some(
-                    ch.sample_data
-                        .values_as_f32()
-                        .map(|m| m.clamp(0.0, 255.0) as u8)
-                        .collect::<Vec<u8>>(),
-                )
-            }
-            _ => {}
-        }
-    }
-    let height = height.ok_or_else(|| Error::invalid(path, "EXR has no 'height' channel"))?;
-    let mask = mask.unwrap_or_else(|| vec![0; height.len()]);
+    let height = image
+        .take("height")
+        .and_then(|mut l| l.drain(..).next())
+        .ok_or_else(|| "EXR has no 'height' channel".to_string())?;
+    let mask = match image.take("mask").and_then(|mut l| l.drain(..).next()) {
+        Some(m) => m.iter().map(|m| m.clamp(0.0, 255.0) as u8).collect(),
+        None => vec![0; height.len()],
+    };
     Ok(HeightTile {
         size: w,
         height,

@@ -17,6 +17,8 @@ mod readers;
 mod realdata;
 // Hundreds of damaged crops of the real DEMs through `penumbra tile`: exit 0 or 2, old tileset kept.
 mod corpus;
+// The EXR codec against independent readers (OpenEXR's Python bindings, the exr crate).
+mod codec;
 // Max and min/max mipmaps: bounds of the interpolated surface, reference twin, CLI.
 mod mip;
 // Horizon maps: fast sweep against brute force, analytic terrains, stiff cases, the CLI.

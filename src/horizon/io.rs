@@ -4,9 +4,12 @@
 use std::io::Write;
 use std::path::Path;
 
-use exr::prelude::*;
+use std::borrow::Cow;
+
+use exr::prelude::f16;
 
 use crate::error::{Error, IoContext, Result};
+use crate::exrcodec::{self, Channel, Samples, ZipLevel};
 use crate::tileio::{self, TileCompression};
 use serde::Serialize;
 
@@ -49,6 +52,51 @@ pub fn write_horizon_exr(
     precision: HorizonPrecision,
     compression: TileCompression,
 ) -> Result<()> {
+    let bytes = encode_horizon_exr(n, a, elev, precision, compression, ZipLevel::DEFAULT)
+        .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
+    tileio::write_atomic(path, |f| f.write_all(&bytes).at(path))
+}
+
+/// The bytes of a horizon file (what [`write_horizon_exr`] stores) at a given deflate level.
+pub fn encode_horizon_exr(
+    n: usize,
+    a: usize,
+    elev: &[f32],
+    precision: HorizonPrecision,
+    compression: TileCompression,
+    level: ZipLevel,
+) -> std::result::Result<Vec<u8>, String> {
+    assert_eq!(elev.len(), n * n * a);
+    let samples = match precision {
+        HorizonPrecision::F32 => Samples::F32(Cow::Borrowed(elev)),
+        HorizonPrecision::F16 => {
+            Samples::F16(Cow::Owned(elev.iter().map(|&v| f16::from_f32(v)).collect()))
+        }
+    };
+    exrcodec::encode(
+        "penumbra-horizon",
+        (n, n * a),
+        &[Channel {
+            name: "elevation",
+            levels: vec![samples],
+        }],
+        &exrcodec::Encoding {
+            level,
+            ..exrcodec::Encoding::scanlines(compression)
+        },
+    )
+}
+
+/// The bytes the `exr` crate's own writer produced for a horizon file before
+/// [`crate::exrcodec`]; kept for the equality tests and `penumbra-bench codec`.
+pub fn encode_horizon_exr_exr_crate(
+    n: usize,
+    a: usize,
+    elev: &[f32],
+    precision: HorizonPrecision,
+    compression: TileCompression,
+) -> std::result::Result<Vec<u8>, String> {
+    use exr::prelude::*;
     assert_eq!(elev.len(), n * n * a);
     let samples = match precision {
         HorizonPrecision::F32 => FlatSamples::F32(elev.to_vec()),
@@ -66,46 +114,42 @@ pub fn write_horizon_exr(
             samples,
         )])),
     );
-    let image = Image::from_layer(layer);
-    tileio::write_atomic(path, |f| {
-        let mut buf = std::io::Cursor::new(Vec::with_capacity(n * n * a * 2));
-        image
-            .write()
-            .to_buffered(&mut buf)
-            .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
-        f.write_all(buf.get_ref()).at(path)
-    })
+    let mut buf = std::io::Cursor::new(Vec::with_capacity(n * n * a * 2));
+    Image::from_layer(layer)
+        .write()
+        .non_parallel()
+        .to_buffered(&mut buf)
+        .map_err(|e| e.to_string())?;
+    Ok(buf.into_inner())
 }
 
 /// Read a file of [`write_horizon_exr`] for tiles of `n` pixels: the `a` planes as f32.
 pub fn read_horizon_exr(path: &Path, n: usize) -> Result<(usize, Vec<f32>)> {
     let bytes = std::fs::read(path).at(path)?;
-    let bad = |msg: String| {
+    decode_horizon_exr(&bytes, n).map_err(|msg| {
         Error::invalid(
             path,
             format!("{msg}; delete it and rerun `penumbra horizon`"),
         )
-    };
-    let image = read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_buffered(std::io::Cursor::new(bytes))
-        .map_err(|e| bad(format!("not a readable horizon EXR ({e})")))?;
-    let layer = &image.layer_data;
-    let (w, h) = (layer.size.width(), layer.size.height());
+    })
+}
+
+/// Decode the bytes of a horizon file; the error says what is wrong (without the path).
+pub fn decode_horizon_exr(
+    bytes: &[u8],
+    n: usize,
+) -> std::result::Result<(usize, Vec<f32>), String> {
+    let mut image =
+        exrcodec::decode(bytes, true).map_err(|e| format!("not a readable horizon EXR ({e})"))?;
+    let (w, h) = image.size();
     if w != n || h % n != 0 || h == 0 {
-        return Err(bad(format!(
+        return Err(format!(
             "horizon map is {w}×{h}, not {n} wide and a multiple of {n} high"
-        )));
+        ));
     }
-    let ch = layer
-        .channel_data
-        .list
-        .iter()
-        .find(|c| c.name.to_string() == "elevation")
-        .ok_or_else(|| bad("no 'elevation' channel".into()))?;
-    Ok((h / n, ch.sample_data.values_as_f32().collect()))
+    let elev = image
+        .take("elevation")
+        .and_then(|mut l| l.drain(..).next())
+        .ok_or_else(|| "no 'elevation' channel".to_string())?;
+    Ok((h / n, elev))
 }

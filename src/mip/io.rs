@@ -4,49 +4,68 @@ use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::Path;
 
-use exr::prelude::{
-    AnyChannel, AnyChannels, Blocks, Compression, Encoding, FlatSamples, Image, Layer,
-    LayerAttributes, Levels, LineOrder, ReadChannels, ReadLayers, SmallVec, Vec2, WritableImage,
-};
+use std::borrow::Cow;
+
+use crate::exrcodec::{self, Blocks, Channel, Samples, ZipLevel};
 
 use super::kernels::{f16_down, f16_up, level_sizes};
 use super::schema::Precision;
 use crate::error::{Error, IoContext, Result};
 use crate::tileio::{self, TileCompression};
 
-fn encoding(compression: TileCompression) -> Encoding {
-    Encoding {
-        compression: match compression {
-            TileCompression::Zip => Compression::ZIP16,
-            TileCompression::None => Compression::Uncompressed,
-        },
-        blocks: Blocks::Tiles(Vec2(64, 64)),
-        line_order: LineOrder::Increasing,
+/// Deflate level of a mip file: f16 files compress noticeably better at level 2 for little
+/// extra time; f32 files gain almost nothing above level 1 (docs/benchmarks.md, "EXR codec").
+pub fn zip_level(precision: Precision) -> ZipLevel {
+    match precision {
+        Precision::F32 => ZipLevel::DEFAULT,
+        Precision::F16 => ZipLevel::F16_MIP,
     }
 }
 
-fn channel(
-    name: &str,
-    levels: &[Vec<f32>],
-    precision: Precision,
-    is_max: bool,
-) -> AnyChannel<Levels<FlatSamples>> {
-    let data = levels
+fn samples(levels: &[Vec<f32>], precision: Precision, is_max: bool) -> Vec<Samples<'_>> {
+    levels
         .iter()
         .map(|l| match precision {
-            Precision::F32 => FlatSamples::F32(l.clone()),
-            Precision::F16 => FlatSamples::F16(
+            Precision::F32 => Samples::F32(Cow::Borrowed(l.as_slice())),
+            Precision::F16 => Samples::F16(Cow::Owned(
                 l.iter()
                     .map(|&v| if is_max { f16_up(v) } else { f16_down(v) })
                     .collect(),
-            ),
+            )),
         })
-        .collect();
-    AnyChannel::new(
+        .collect()
+}
+
+/// The bytes of a mip-mapped EXR (what [`write_mip_exr`] stores) at a given deflate level:
+/// tiled, 64² tiles, all levels rounding up, ZIP per tile.
+#[allow(clippy::too_many_arguments)]
+pub fn encode_mip_exr(
+    size: usize,
+    min: Option<&[Vec<f32>]>,
+    max: &[Vec<f32>],
+    precision: Precision,
+    compression: TileCompression,
+    level: ZipLevel,
+    name: &str,
+) -> std::result::Result<Vec<u8>, String> {
+    let mut list = vec![Channel {
+        name: "max",
+        levels: samples(max, precision, true),
+    }];
+    if let Some(m) = min {
+        list.push(Channel {
+            name: "min",
+            levels: samples(m, precision, false),
+        });
+    }
+    exrcodec::encode(
         name,
-        Levels::Mip {
-            rounding_mode: exr::math::RoundingMode::Up,
-            level_data: data,
+        (size, size),
+        &list,
+        &exrcodec::Encoding {
+            compression,
+            level,
+            blocks: Blocks::MipTiles(64),
         },
     )
 }
@@ -61,26 +80,78 @@ pub fn write_mip_exr(
     compression: TileCompression,
     name: &str,
 ) -> Result<()> {
-    let mut list = vec![channel("max", max, precision, true)];
+    let bytes = encode_mip_exr(
+        size,
+        min,
+        max,
+        precision,
+        compression,
+        zip_level(precision),
+        name,
+    )
+    .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
+    tileio::write_atomic(path, |f| f.write_all(&bytes).at(path))
+}
+
+/// The bytes the `exr` crate's own writer produced for a mip file before
+/// [`crate::exrcodec`]; kept for the equality tests and `penumbra-bench codec`.
+pub fn encode_mip_exr_exr_crate(
+    size: usize,
+    min: Option<&[Vec<f32>]>,
+    max: &[Vec<f32>],
+    precision: Precision,
+    compression: TileCompression,
+    name: &str,
+) -> std::result::Result<Vec<u8>, String> {
+    use exr::prelude::{
+        AnyChannel, AnyChannels, Blocks, Compression, Encoding, FlatSamples, Image, Layer,
+        LayerAttributes, Levels, LineOrder, SmallVec, Vec2, WritableImage,
+    };
+    let channel = |name: &str, levels: &[Vec<f32>], is_max: bool| {
+        let data = levels
+            .iter()
+            .map(|l| match precision {
+                Precision::F32 => FlatSamples::F32(l.clone()),
+                Precision::F16 => FlatSamples::F16(
+                    l.iter()
+                        .map(|&v| if is_max { f16_up(v) } else { f16_down(v) })
+                        .collect(),
+                ),
+            })
+            .collect();
+        AnyChannel::new(
+            name,
+            Levels::Mip {
+                rounding_mode: exr::math::RoundingMode::Up,
+                level_data: data,
+            },
+        )
+    };
+    let mut list = vec![channel("max", max, true)];
     if let Some(m) = min {
-        list.push(channel("min", m, precision, false));
+        list.push(channel("min", m, false));
     }
+    let encoding = Encoding {
+        compression: match compression {
+            TileCompression::Zip => Compression::ZIP16,
+            TileCompression::None => Compression::Uncompressed,
+        },
+        blocks: Blocks::Tiles(Vec2(64, 64)),
+        line_order: LineOrder::Increasing,
+    };
     let layer = Layer::new(
         (size, size),
         LayerAttributes::named(name),
-        encoding(compression),
+        encoding,
         AnyChannels::sort(SmallVec::from_vec(list)),
     );
-    let image = Image::from_layer(layer);
-    tileio::write_atomic(path, |f| {
-        let mut buf = std::io::Cursor::new(Vec::with_capacity(size * size * 8));
-        image
-            .write()
-            .non_parallel()
-            .to_buffered(&mut buf)
-            .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
-        f.write_all(buf.get_ref()).at(path)
-    })
+    let mut buf = std::io::Cursor::new(Vec::with_capacity(size * size * 8));
+    Image::from_layer(layer)
+        .write()
+        .non_parallel()
+        .to_buffered(&mut buf)
+        .map_err(|e| e.to_string())?;
+    Ok(buf.into_inner())
 }
 
 /// The channels of a mip-mapped EXR, each as its levels (largest first) in f32.
@@ -101,42 +172,29 @@ impl MipFile {
 /// Read a file written by [`write_mip_exr`].
 pub fn read_mip_exr(path: &Path) -> Result<MipFile> {
     let bytes = std::fs::read(path).at(path)?;
-    let bad =
-        |msg: String| Error::invalid(path, format!("{msg}; delete it and rerun `penumbra mip`"));
-    let image = exr::prelude::read()
-        .no_deep_data()
-        .all_resolution_levels()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .non_parallel()
-        .from_buffered(std::io::Cursor::new(bytes))
-        .map_err(|e| bad(format!("not a readable mipmap EXR ({e})")))?;
-    let layer = &image.layer_data;
-    let (w, h) = (layer.size.width(), layer.size.height());
+    decode_mip_exr(&bytes)
+        .map_err(|msg| Error::invalid(path, format!("{msg}; delete it and rerun `penumbra mip`")))
+}
+
+/// Decode the bytes of a mip file; the error says what is wrong (without the path).
+pub fn decode_mip_exr(bytes: &[u8]) -> std::result::Result<MipFile, String> {
+    let image =
+        exrcodec::decode(bytes, false).map_err(|e| format!("not a readable mipmap EXR ({e})"))?;
+    let (w, h) = image.size();
     if w != h {
-        return Err(bad(format!("mipmap is {w}×{h}, not square")));
+        return Err(format!("mipmap is {w}×{h}, not square"));
     }
     let sizes = level_sizes(w);
     let mut channels = BTreeMap::new();
-    for ch in &layer.channel_data.list {
-        let levels: Vec<Vec<f32>> = match &ch.sample_data {
-            Levels::Singular(s) => vec![s.values_as_f32().collect()],
-            Levels::Mip { level_data, .. } => level_data
-                .iter()
-                .map(|s| s.values_as_f32().collect())
-                .collect(),
-            Levels::Rip { .. } => return Err(bad("rip-mapped, not mip-mapped".into())),
-        };
+    for (name, _, levels) in image.channels {
         if levels.len() != sizes.len() || levels.iter().zip(&sizes).any(|(l, &s)| l.len() != s * s)
         {
-            return Err(bad(format!(
-                "channel '{}' does not hold the {} mip levels of a {w}² image",
-                ch.name,
+            return Err(format!(
+                "channel '{name}' does not hold the {} mip levels of a {w}² image",
                 sizes.len()
-            )));
+            ));
         }
-        channels.insert(ch.name.to_string(), levels);
+        channels.insert(name, levels);
     }
     Ok(MipFile { sizes, channels })
 }

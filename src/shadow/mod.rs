@@ -568,27 +568,21 @@ pub fn write_grey_png(path: &Path, w: usize, h: usize, v: &[f32]) -> Result<()> 
 /// Write a row-major `w`×`h` lit-fraction image as a single-part EXR with one f32 channel
 /// `lit` (NaN: no data), atomically.
 pub fn write_lit_exr(path: &Path, w: usize, h: usize, v: &[f32]) -> Result<()> {
-    use exr::prelude::*;
+    use crate::exrcodec::{self, Channel, Samples};
     use std::io::Write;
     assert_eq!(v.len(), w * h);
-    let layer = Layer::new(
+    let bytes = exrcodec::encode(
+        "penumbra-lit-fraction",
         (w, h),
-        LayerAttributes::named("penumbra-lit-fraction"),
-        Encoding::SMALL_LOSSLESS,
-        AnyChannels::sort(SmallVec::from_vec(vec![AnyChannel::new(
-            "lit",
-            FlatSamples::F32(v.to_vec()),
-        )])),
-    );
-    let image = Image::from_layer(layer);
+        &[Channel {
+            name: "lit",
+            levels: vec![Samples::F32(std::borrow::Cow::Borrowed(v))],
+        }],
+        &exrcodec::Encoding::scanlines(crate::tileio::TileCompression::Zip),
+    )
+    .map_err(|e| crate::error::Error::invalid(path, format!("EXR encoding failed: {e}")))?;
     crate::fsio::write_atomic(path, |f| {
-        let mut buf = std::io::Cursor::new(Vec::with_capacity(w * h * 4));
-        image
-            .write()
-            .non_parallel()
-            .to_buffered(&mut buf)
-            .map_err(|e| crate::error::Error::invalid(path, format!("EXR encoding failed: {e}")))?;
-        f.write_all(buf.get_ref())
+        f.write_all(&bytes)
             .map_err(|e| crate::error::Error::io(path, e))
     })
 }

@@ -105,7 +105,8 @@ fn try_lock_process(f: &File) -> std::result::Result<(), TryLockError> {
     fl.l_type = libc::F_WRLCK as _;
     fl.l_whence = libc::SEEK_SET as _;
     fl.l_start = 0;
-    fl.l_len = 0; // to the end of the file, however long it grows
+    // l_len 0: to the end of the file, however long it grows.
+    fl.l_len = 0;
     // SAFETY: `f` is an open descriptor for the duration of the call and `fl` a valid flock.
     let r = unsafe { libc::fcntl(f.as_raw_fd(), libc::F_SETLK, &fl) };
     if r == 0 {

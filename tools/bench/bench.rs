@@ -43,6 +43,39 @@ pub enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Size and one-core speed of each EXR compression option (the `exr` crate's writer and
+    /// reader as before, src/exrcodec.rs at several deflate levels, uncompressed) on the height
+    /// tiles, mip files and horizon maps of LDEM_4 and SRTM N19W156, against memcpy (issue 14).
+    Codec {
+        /// Folder holding the shared DEMs.
+        #[arg(long, default_value = "../shared/data")]
+        data: PathBuf,
+        /// Scratch folder for the tilesets (removed afterwards).
+        #[arg(long)]
+        work: Option<PathBuf>,
+        /// Repetitions per measurement (the best is reported).
+        #[arg(long, default_value_t = 3)]
+        reps: usize,
+        /// At most this many files per product (spread over the set).
+        #[arg(long, default_value_t = 48)]
+        max_files: usize,
+        /// Deflate levels of the codec to measure.
+        #[arg(long, value_delimiter = ',', default_values_t = [1u8, 2, 4, 6])]
+        levels: Vec<u8>,
+        #[arg(long)]
+        markdown: bool,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Rewrite every EXR of a folder as the `exr` crate's writer (Penumbra's before
+    /// src/exrcodec.rs) would have stored the same samples, copying other files: hashing the
+    /// copy against tools/golden/hashes.txt proves a codec change kept every sample.
+    ExrCrateRewrite {
+        /// Folder to read (e.g. target/golden after `tools/golden/run.sh check`).
+        from: PathBuf,
+        /// Folder to write.
+        to: PathBuf,
+    },
     /// Peak RSS and wall time of `penumbra mip` and `penumbra horizon` on the same DEM tiled
     /// with more and more levels (issue #13, item 3): each run is a fresh child process under
     /// GNU time. Memory should not depend on the level count.
@@ -371,6 +404,27 @@ pub fn run(cmd: BenchCommand, quiet: bool) -> Result<()> {
             markdown,
             json,
         } => run_mip(&data, work, reps.max(1), markdown, json, quiet),
+        BenchCommand::Codec {
+            data,
+            work,
+            reps,
+            max_files,
+            levels,
+            markdown,
+            json,
+        } => crate::codec::run_codec(
+            &data,
+            work,
+            reps.max(1),
+            max_files.max(1),
+            &levels,
+            markdown,
+            json,
+            quiet,
+        ),
+        BenchCommand::ExrCrateRewrite { from, to } => {
+            crate::codec::run_exr_crate_rewrite(&from, &to)
+        }
         BenchCommand::MipMemory {
             data,
             work,
@@ -561,7 +615,7 @@ fn run_tiling(
 /// The `penumbra` binary whose `tile` the benchmarks time in a child process: the one built
 /// beside this executable (both in target/release/), so the figures are for this checkout's
 /// build, not for whatever `penumbra` is installed.
-fn penumbra_exe() -> Result<PathBuf> {
+pub(crate) fn penumbra_exe() -> Result<PathBuf> {
     let exe = std::env::current_exe()?
         .with_file_name(format!("penumbra{}", std::env::consts::EXE_SUFFIX));
     if !exe.is_file() {
@@ -574,7 +628,7 @@ fn penumbra_exe() -> Result<PathBuf> {
     Ok(exe)
 }
 
-fn tempfile_dir(work: Option<PathBuf>) -> Result<PathBuf> {
+pub(crate) fn tempfile_dir(work: Option<PathBuf>) -> Result<PathBuf> {
     let base = work.unwrap_or_else(std::env::temp_dir);
     let p = base.join(format!("penumbra-bench-{}", std::process::id()));
     std::fs::create_dir_all(&p).with_context(|| format!("creating {}", p.display()))?;
@@ -754,7 +808,7 @@ fn walk_count(dir: &Path, keep: &dyn Fn(&Path) -> bool) -> u64 {
 // bench mip
 
 /// Best wall time of `reps` runs of `f`, in seconds.
-fn best_of(reps: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
+pub(crate) fn best_of(reps: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
     let mut best = f64::INFINITY;
     for _ in 0..reps {
         let t0 = std::time::Instant::now();
@@ -813,7 +867,7 @@ fn mip_row(case: &str, threads: usize, bytes: f64, t: f64, memcpy_gb_s: f64) -> 
     }
 }
 
-fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> Result<T> {
+pub(crate) fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> Result<T> {
     Ok(rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()?

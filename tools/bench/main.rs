@@ -4,6 +4,7 @@
 //! no benchmark drivers.
 
 mod bench;
+mod codec;
 mod fourier;
 mod shadows;
 

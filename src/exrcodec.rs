@@ -1,0 +1,796 @@
+//! The one EXR codec behind every tile Penumbra writes and reads (height tiles, mip files,
+//! horizon maps, lit-fraction maps).
+//!
+//! The `exr` crate still writes and parses the header and the offset table (so the files stay
+//! plain single-part OpenEXR that any reader opens), but the pixel blocks are packed and
+//! compressed here: OpenEXR's ZIP is "interleave the bytes, delta-predict, zlib", and `exr`'s
+//! writer runs that through miniz_oxide at level 4, one block after another, which was 87% of the
+//! mip stage. Here the same transform is deflated at a low level (1–2; see
+//! [`ZipLevel`] and docs/benchmarks.md, "EXR codec") and all blocks of a file are compressed in
+//! parallel. Reading inflates the blocks in parallel with zune-inflate (the inflater `exr`
+//! itself uses), undoes the predictor and the interleave, and converts to f32. Blocks in any
+//! other compression (RLE, PIZ, … written by other tools) are decoded by `exr`'s own block
+//! decompressor, so every file the old `exr`-based reader opened still opens.
+//!
+//! The stored samples are the same bits whatever the level: only the deflate stream differs.
+//! Output bytes do not depend on the thread count (blocks are compressed independently and
+//! written in offset-table order).
+
+use std::borrow::Cow;
+use std::io::Cursor;
+
+use exr::block::chunk::{Chunk, CompressedBlock, CompressedScanLineBlock, CompressedTileBlock};
+use exr::block::UncompressedBlock;
+use exr::compression::Compression;
+use exr::math::{RoundingMode, Vec2};
+use exr::meta::attribute::{
+    ChannelDescription, ChannelList, IntegerBounds, LevelMode, LineOrder, SampleType,
+    TileDescription,
+};
+use exr::meta::header::{Header, ImageAttributes, LayerAttributes};
+use exr::meta::{compute_level_count, compute_level_size, BlockDescription};
+use exr::prelude::f16;
+use rayon::prelude::*;
+
+use crate::tileio::TileCompression;
+
+/// Deflate level of the ZIP blocks (miniz_oxide's 0–10 scale). Lower is faster; the table in
+/// docs/benchmarks.md ("EXR codec") measured each on the shared DEMs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ZipLevel(pub u8);
+
+impl ZipLevel {
+    /// Height tiles (f32 height + f16 mask), horizon maps, f32 mip files: level 1 is within a
+    /// few percent of level 4's size at 3–4× its speed.
+    pub const DEFAULT: ZipLevel = ZipLevel(1);
+    /// f16 mip files: level 2 shrinks them noticeably more than level 1 for little time.
+    pub const F16_MIP: ZipLevel = ZipLevel(2);
+    /// What the `exr` crate's writer used (and this codec reproduces byte for byte).
+    pub const EXR_CRATE: ZipLevel = ZipLevel(4);
+}
+
+/// How the pixels are cut into blocks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Blocks {
+    /// Scanline blocks: 16 lines for ZIP, 1 line uncompressed (OpenEXR's ZIP and NONE).
+    ScanLines,
+    /// Square tiles of this side with all mip levels (rounding up), as the mip files store.
+    MipTiles(usize),
+}
+
+/// How a file is encoded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Encoding {
+    pub compression: TileCompression,
+    pub level: ZipLevel,
+    pub blocks: Blocks,
+}
+
+impl Encoding {
+    pub fn scanlines(compression: TileCompression) -> Self {
+        Encoding {
+            compression,
+            level: ZipLevel::DEFAULT,
+            blocks: Blocks::ScanLines,
+        }
+    }
+}
+
+/// The samples of one channel at one level, in the type they are stored in.
+#[derive(Clone, Debug)]
+pub enum Samples<'a> {
+    F32(Cow<'a, [f32]>),
+    F16(Cow<'a, [f16]>),
+}
+
+impl Samples<'_> {
+    fn len(&self) -> usize {
+        match self {
+            Samples::F32(v) => v.len(),
+            Samples::F16(v) => v.len(),
+        }
+    }
+
+    fn sample_type(&self) -> SampleType {
+        match self {
+            Samples::F32(_) => SampleType::F32,
+            Samples::F16(_) => SampleType::F16,
+        }
+    }
+
+    /// Append samples `start..start + n` as little-endian bytes.
+    fn push_le(&self, start: usize, n: usize, out: &mut Vec<u8>) {
+        match self {
+            Samples::F32(v) => {
+                for x in &v[start..start + n] {
+                    out.extend_from_slice(&x.to_bits().to_le_bytes());
+                }
+            }
+            Samples::F16(v) => {
+                for x in &v[start..start + n] {
+                    out.extend_from_slice(&x.to_bits().to_le_bytes());
+                }
+            }
+        }
+    }
+}
+
+/// One channel to write: its name and its levels (one level for scanline files, all mip levels,
+/// largest first, for [`Blocks::MipTiles`]).
+#[derive(Clone, Debug)]
+pub struct Channel<'a> {
+    pub name: &'a str,
+    pub levels: Vec<Samples<'a>>,
+}
+
+/// The header a file of this size, channel list and encoding gets: the same attributes the
+/// `exr` crate's `Image::from_layer(Layer::new(…, LayerAttributes::named(name), …))` wrote.
+fn header(name: &str, size: (usize, usize), channels: ChannelList, enc: &Encoding) -> Header {
+    let compression = match enc.compression {
+        TileCompression::Zip => Compression::ZIP16,
+        TileCompression::None => Compression::Uncompressed,
+    };
+    let blocks = match enc.blocks {
+        Blocks::ScanLines => BlockDescription::ScanLines,
+        Blocks::MipTiles(t) => BlockDescription::Tiles(TileDescription {
+            tile_size: Vec2(t, t),
+            level_mode: LevelMode::MipMap,
+            rounding_mode: RoundingMode::Up,
+        }),
+    };
+    Header::new(name.into(), size, channels.list)
+        .with_encoding(compression, blocks, LineOrder::Increasing)
+        .with_attributes(LayerAttributes::named(name))
+        .with_shared_attributes(ImageAttributes::new(IntegerBounds::from_dimensions(size)))
+}
+
+/// The pixel size of each level of a header (one for scanline and single-level tiled files).
+fn level_sizes(h: &Header) -> Result<Vec<(usize, usize)>, String> {
+    let (w, ht) = (h.layer_size.width(), h.layer_size.height());
+    match h.blocks {
+        BlockDescription::ScanLines => Ok(vec![(w, ht)]),
+        BlockDescription::Tiles(t) => match t.level_mode {
+            LevelMode::Singular => Ok(vec![(w, ht)]),
+            LevelMode::MipMap => {
+                let n = compute_level_count(t.rounding_mode, w.max(ht));
+                Ok((0..n)
+                    .map(|l| {
+                        (
+                            compute_level_size(t.rounding_mode, w, l),
+                            compute_level_size(t.rounding_mode, ht, l),
+                        )
+                    })
+                    .collect())
+            }
+            LevelMode::RipMap => Err("rip-mapped, not mip-mapped".into()),
+        },
+    }
+}
+
+/// OpenEXR's ZIP transform before deflate: even bytes then odd bytes, then each byte as the
+/// difference to the previous one plus 128.
+fn predict(packed: &[u8], out: &mut Vec<u8>) {
+    let n = packed.len();
+    out.clear();
+    out.resize(n, 0);
+    let half = n.div_ceil(2);
+    let (a, b) = out.split_at_mut(half);
+    for (i, pair) in packed.chunks(2).enumerate() {
+        a[i] = pair[0];
+        if let Some(&v) = pair.get(1) {
+            b[i] = v;
+        }
+    }
+    let mut prev = out.first().copied().unwrap_or(0);
+    for v in out.iter_mut().skip(1) {
+        let cur = *v;
+        *v = cur.wrapping_sub(prev).wrapping_add(128);
+        prev = cur;
+    }
+}
+
+/// The inverse of [`predict`].
+fn unpredict(data: &mut [u8]) -> Vec<u8> {
+    let mut prev = data.first().copied().unwrap_or(0);
+    for v in data.iter_mut().skip(1) {
+        prev = v.wrapping_add(prev).wrapping_sub(128);
+        *v = prev;
+    }
+    let n = data.len();
+    let half = n.div_ceil(2);
+    let mut out = vec![0u8; n];
+    for (i, pair) in out.chunks_mut(2).enumerate() {
+        pair[0] = data[i];
+        if pair.len() == 2 {
+            pair[1] = data[half + i];
+        }
+    }
+    out
+}
+
+/// zlib-compress with miniz_oxide, reusing one compressor per thread (a fresh one zeroes
+/// ≈ 300 KB of tables, a noticeable cost for 25–30 KB blocks).
+fn deflate(data: &[u8], level: ZipLevel) -> Vec<u8> {
+    use miniz_oxide::deflate::core::{
+        compress, create_comp_flags_from_zip_params, CompressorOxide, TDEFLFlush, TDEFLStatus,
+    };
+    use std::cell::RefCell;
+    thread_local! {
+        static COMPRESSOR: RefCell<Option<Box<CompressorOxide>>> = const { RefCell::new(None) };
+    }
+    let flags = create_comp_flags_from_zip_params(level.0.into(), 1, 0);
+    COMPRESSOR.with(|c| {
+        let mut slot = c.borrow_mut();
+        let comp = slot.get_or_insert_with(|| Box::new(CompressorOxide::new(flags)));
+        comp.reset();
+        comp.set_format_and_level(miniz_oxide::DataFormat::Zlib, level.0);
+        let mut out = vec![0u8; (data.len() / 2).max(64)];
+        let mut input = data;
+        let mut pos = 0;
+        loop {
+            let (status, used, written) =
+                compress(comp, input, &mut out[pos..], TDEFLFlush::Finish);
+            pos += written;
+            match status {
+                TDEFLStatus::Done => {
+                    out.truncate(pos);
+                    return out;
+                }
+                TDEFLStatus::Okay => {
+                    input = &input[used..];
+                    if out.len() - pos < 64 {
+                        out.resize(out.len() * 2, 0);
+                    }
+                }
+                _ => unreachable!("miniz_oxide failed on in-memory input"),
+            }
+        }
+    })
+}
+
+/// Encode a single-part EXR file in memory. `size` is the largest level's (width, height);
+/// channels may come in any order (they are stored sorted by name, as OpenEXR requires).
+pub fn encode(
+    name: &str,
+    size: (usize, usize),
+    channels: &[Channel<'_>],
+    enc: &Encoding,
+) -> Result<Vec<u8>, String> {
+    let mut channels: Vec<&Channel> = channels.iter().collect();
+    channels.sort_by(|a, b| a.name.cmp(b.name));
+    let list = ChannelList::new(
+        channels
+            .iter()
+            .map(|c| {
+                let t = c
+                    .levels
+                    .first()
+                    .map_or(SampleType::F32, Samples::sample_type);
+                ChannelDescription::named(c.name, t)
+            })
+            .collect(),
+    );
+    let header = header(name, size, list, enc);
+    let sizes = level_sizes(&header)?;
+    for c in &channels {
+        if c.levels.len() != sizes.len()
+            || c.levels
+                .iter()
+                .zip(&sizes)
+                .any(|(s, &(w, h))| s.len() != w * h)
+            || c.levels
+                .iter()
+                .any(|s| s.sample_type() != c.levels[0].sample_type())
+        {
+            return Err(format!(
+                "channel '{}' does not hold {} level(s) of a {}×{} image",
+                c.name,
+                sizes.len(),
+                size.0,
+                size.1
+            ));
+        }
+    }
+    let blocks: Vec<_> = header.blocks_increasing_y_order().collect();
+    let zip = enc.compression == TileCompression::Zip;
+    let chunks: Vec<Result<Chunk, String>> = blocks
+        .par_iter()
+        .map_init(
+            || (Vec::new(), Vec::new()),
+            |(packed, predicted), tile| {
+                let b = header
+                    .get_absolute_block_pixel_coordinates(tile.location)
+                    .map_err(|e| e.to_string())?;
+                let (x0, y0) = (b.position.x() as usize, b.position.y() as usize);
+                let (w, h) = (b.size.width(), b.size.height());
+                let level = tile.location.level_index.x();
+                let lw = sizes[level].0;
+                packed.clear();
+                for y in y0..y0 + h {
+                    for c in &channels {
+                        c.levels[level].push_le(y * lw + x0, w, packed);
+                    }
+                }
+                let bytes = if zip {
+                    predict(packed, predicted);
+                    let z = deflate(predicted, enc.level);
+                    // OpenEXR stores a block raw when deflate does not make it smaller.
+                    if z.len() < packed.len() {
+                        z
+                    } else {
+                        packed.clone()
+                    }
+                } else {
+                    packed.clone()
+                };
+                Ok(Chunk {
+                    layer_index: 0,
+                    compressed_block: match enc.blocks {
+                        Blocks::ScanLines => CompressedBlock::ScanLine(CompressedScanLineBlock {
+                            y_coordinate: y0 as i32,
+                            compressed_pixels_le: bytes,
+                        }),
+                        Blocks::MipTiles(_) => CompressedBlock::Tile(CompressedTileBlock {
+                            coordinates: tile.location,
+                            compressed_pixels_le: bytes,
+                        }),
+                    },
+                })
+            },
+        )
+        .collect();
+    let chunks: Vec<Chunk> = chunks.into_iter().collect::<Result<_, _>>()?;
+    let total: usize = chunks.iter().map(chunk_len).sum();
+    let mut buf = Cursor::new(Vec::with_capacity(total + 1024 + 8 * chunks.len()));
+    exr::block::write(
+        &mut buf,
+        exr::prelude::SmallVec::from_vec(vec![header]),
+        true,
+        |_meta, writer| {
+            use exr::block::writer::ChunksWriter;
+            for (i, chunk) in chunks.into_iter().enumerate() {
+                writer.write_chunk(i, chunk)?;
+            }
+            Ok(())
+        },
+    )
+    .map_err(|e| e.to_string())?;
+    Ok(buf.into_inner())
+}
+
+fn chunk_len(c: &Chunk) -> usize {
+    match &c.compressed_block {
+        CompressedBlock::ScanLine(b) => b.compressed_pixels_le.len() + 8,
+        CompressedBlock::Tile(b) => b.compressed_pixels_le.len() + 20,
+        _ => 0,
+    }
+}
+
+/// A decoded file: every channel's levels (largest first) converted to f32.
+#[derive(Clone, Debug)]
+pub struct Decoded {
+    /// The layer name stored in the header, if any.
+    pub layer_name: Option<String>,
+    /// The file's compression.
+    pub compression: Compression,
+    /// Whether the file is tiled with mip levels (even when it has a single one, 1×1).
+    pub mip_mapped: bool,
+    /// (width, height) of each level, largest first.
+    pub level_sizes: Vec<(usize, usize)>,
+    /// Channel name, stored sample type, levels.
+    pub channels: Vec<(String, SampleType, Vec<Vec<f32>>)>,
+}
+
+impl Decoded {
+    pub fn size(&self) -> (usize, usize) {
+        self.level_sizes[0]
+    }
+
+    /// The levels of a channel.
+    pub fn channel(&self, name: &str) -> Option<&Vec<Vec<f32>>> {
+        self.channels
+            .iter()
+            .find(|(n, _, _)| n == name)
+            .map(|(_, _, l)| l)
+    }
+
+    /// Take a channel's levels out.
+    pub fn take(&mut self, name: &str) -> Option<Vec<Vec<f32>>> {
+        let i = self.channels.iter().position(|(n, _, _)| n == name)?;
+        Some(self.channels.swap_remove(i).2)
+    }
+}
+
+/// One decoded block: its level, pixel rectangle and native little-endian bytes.
+struct Block {
+    level: usize,
+    x0: usize,
+    y0: usize,
+    w: usize,
+    h: usize,
+    bytes: Vec<u8>,
+}
+
+/// Decode the first layer of a flat EXR file in memory (all levels, or only the largest).
+pub fn decode(bytes: &[u8], largest_only: bool) -> Result<Decoded, String> {
+    let reader = exr::block::read(Cursor::new(bytes), false).map_err(|e| e.to_string())?;
+    let meta = reader.meta_data().clone();
+    let header = meta
+        .headers
+        .first()
+        .ok_or_else(|| "no image layer".to_string())?;
+    if meta.headers.len() != 1 {
+        return Err(format!(
+            "{} layers; a single-layer file expected",
+            meta.headers.len()
+        ));
+    }
+    if header.deep {
+        return Err("deep data, not a flat image".into());
+    }
+    if header
+        .channels
+        .list
+        .iter()
+        .any(|c| c.sampling != Vec2(1, 1))
+    {
+        return Err("subsampled channels are not supported".into());
+    }
+    let sizes = level_sizes(header)?;
+    let keep_levels = if largest_only { 1 } else { sizes.len() };
+    let chunks: Vec<Chunk> = reader
+        .all_chunks(false)
+        .map_err(|e| e.to_string())?
+        .collect::<Result<_, _>>()
+        .map_err(|e| e.to_string())?;
+    let bpp = header.channels.bytes_per_pixel;
+    let compression = header.compression;
+    let blocks: Vec<Result<Option<Block>, String>> = chunks
+        .into_par_iter()
+        .map(|chunk| {
+            let tile = header
+                .get_block_data_indices(&chunk.compressed_block)
+                .map_err(|e| e.to_string())?;
+            let level = tile.level_index.x();
+            if tile.level_index.y() != level || level >= sizes.len() {
+                return Err(format!(
+                    "block at level {:?} outside the image",
+                    tile.level_index
+                ));
+            }
+            if level >= keep_levels {
+                return Ok(None);
+            }
+            let b = header
+                .get_absolute_block_pixel_coordinates(tile)
+                .map_err(|e| e.to_string())?;
+            let (x0, y0) = (b.position.x(), b.position.y());
+            let (w, h) = (b.size.width(), b.size.height());
+            if x0 < 0 || y0 < 0 {
+                return Err("block at a negative position".into());
+            }
+            let (x0, y0) = (x0 as usize, y0 as usize);
+            let (lw, lh) = sizes[level];
+            if x0 + w > lw || y0 + h > lh {
+                return Err("block outside the image".into());
+            }
+            let expected = w * h * bpp;
+            let bytes = match (compression, chunk.compressed_block) {
+                (
+                    Compression::ZIP1 | Compression::ZIP16 | Compression::Uncompressed,
+                    CompressedBlock::ScanLine(CompressedScanLineBlock {
+                        compressed_pixels_le: data,
+                        ..
+                    })
+                    | CompressedBlock::Tile(CompressedTileBlock {
+                        compressed_pixels_le: data,
+                        ..
+                    }),
+                ) => {
+                    if data.len() == expected {
+                        data
+                    } else if compression == Compression::Uncompressed {
+                        return Err(format!(
+                            "uncompressed block of {} bytes, {expected} expected",
+                            data.len()
+                        ));
+                    } else {
+                        let options = zune_inflate::DeflateOptions::default()
+                            .set_limit(expected)
+                            .set_size_hint(expected);
+                        let mut inflated =
+                            zune_inflate::DeflateDecoder::new_with_options(&data, options)
+                                .decode_zlib()
+                                .map_err(|e| format!("damaged ZIP block ({e:?})"))?;
+                        if inflated.len() != expected {
+                            return Err(format!(
+                                "ZIP block inflates to {} bytes, {expected} expected",
+                                inflated.len()
+                            ));
+                        }
+                        unpredict(&mut inflated)
+                    }
+                }
+                (_, block) => {
+                    let chunk = Chunk {
+                        layer_index: 0,
+                        compressed_block: block,
+                    };
+                    let u = UncompressedBlock::decompress_chunk(chunk, &meta, false)
+                        .map_err(|e| e.to_string())?;
+                    if u.data.len() != expected {
+                        return Err("block decodes to the wrong size".into());
+                    }
+                    // exr returns native-endian samples; store them little-endian like the rest.
+                    if cfg!(target_endian = "big") {
+                        return Err("big-endian hosts are not supported".into());
+                    }
+                    u.data
+                }
+            };
+            Ok(Some(Block {
+                level,
+                x0,
+                y0,
+                w,
+                h,
+                bytes,
+            }))
+        })
+        .collect();
+
+    let types: Vec<SampleType> = header.channels.list.iter().map(|c| c.sample_type).collect();
+    let mut out: Vec<Vec<Vec<f32>>> = types
+        .iter()
+        .map(|_| {
+            sizes[..keep_levels]
+                .iter()
+                .map(|&(w, h)| vec![0.0f32; w * h])
+                .collect()
+        })
+        .collect();
+    let mut covered = vec![0usize; keep_levels];
+    let mut seen = std::collections::HashSet::new();
+    for b in blocks {
+        let Some(b) = b? else { continue };
+        if !seen.insert((b.level, b.x0, b.y0)) {
+            return Err("a block is stored twice".into());
+        }
+        covered[b.level] += b.w * b.h;
+        let lw = sizes[b.level].0;
+        let mut off = 0;
+        for y in b.y0..b.y0 + b.h {
+            for (c, t) in types.iter().enumerate() {
+                let dst = &mut out[c][b.level][y * lw + b.x0..y * lw + b.x0 + b.w];
+                match t {
+                    SampleType::F32 => {
+                        for (d, s) in dst.iter_mut().zip(b.bytes[off..].chunks_exact(4)) {
+                            *d = f32::from_le_bytes([s[0], s[1], s[2], s[3]]);
+                        }
+                        off += 4 * b.w;
+                    }
+                    SampleType::F16 => {
+                        for (d, s) in dst.iter_mut().zip(b.bytes[off..].chunks_exact(2)) {
+                            *d = f16::from_bits(u16::from_le_bytes([s[0], s[1]])).to_f32();
+                        }
+                        off += 2 * b.w;
+                    }
+                    SampleType::U32 => {
+                        for (d, s) in dst.iter_mut().zip(b.bytes[off..].chunks_exact(4)) {
+                            *d = u32::from_le_bytes([s[0], s[1], s[2], s[3]]) as f32;
+                        }
+                        off += 4 * b.w;
+                    }
+                }
+            }
+        }
+    }
+    for (l, &c) in covered.iter().enumerate() {
+        let (w, h) = sizes[l];
+        if c != w * h {
+            return Err(format!("level {l} is missing blocks"));
+        }
+    }
+    let channels = header
+        .channels
+        .list
+        .iter()
+        .zip(types)
+        .zip(out)
+        .map(|((c, t), levels)| (c.name.to_string(), t, levels))
+        .collect();
+    Ok(Decoded {
+        layer_name: header
+            .own_attributes
+            .layer_name
+            .as_ref()
+            .map(|n| n.to_string()),
+        compression,
+        mip_mapped: matches!(
+            header.blocks,
+            BlockDescription::Tiles(TileDescription {
+                level_mode: LevelMode::MipMap,
+                ..
+            })
+        ),
+        level_sizes: sizes[..keep_levels].to_vec(),
+        channels,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn predictor_round_trips_odd_and_even_lengths() {
+        for n in [0usize, 1, 2, 3, 17, 64, 1001] {
+            let data: Vec<u8> = (0..n).map(|i| (i * 37 % 251) as u8).collect();
+            let mut p = Vec::new();
+            predict(&data, &mut p);
+            assert_eq!(unpredict(&mut p), data, "n = {n}");
+        }
+    }
+
+    use crate::horizon::io::{
+        decode_horizon_exr, encode_horizon_exr, encode_horizon_exr_exr_crate, HorizonPrecision,
+    };
+    use crate::mip::schema::Precision;
+    use crate::mip::{decode_mip_exr, encode_mip_exr, encode_mip_exr_exr_crate, level_sizes};
+    use crate::tileio::{
+        decode_height_tile, encode_height_tile, encode_height_tile_exr_crate, HeightTile,
+    };
+
+    /// Terrain-like values with NaNs, negative zeros, infinities and extreme magnitudes.
+    fn values(n: usize, seed: u32) -> Vec<f32> {
+        (0..n)
+            .map(|i| {
+                let x = i as f32;
+                match (i as u32 ^ seed) % 97 {
+                    0 => f32::NAN,
+                    1 => -0.0,
+                    2 => f32::INFINITY,
+                    3 => f32::MIN_POSITIVE / 3.0,
+                    4 => 65504.0 * 3.0,
+                    _ => (x * 0.013 + seed as f32).sin() * 1500.0 + (x * 0.0007).cos() * 30.0,
+                }
+            })
+            .collect()
+    }
+
+    fn bits(v: &[f32]) -> Vec<u32> {
+        v.iter().map(|x| x.to_bits()).collect()
+    }
+
+    #[test]
+    fn height_tiles_store_the_exr_crates_samples_and_its_bytes_at_level_4() {
+        for n in [1usize, 15, 16, 17, 37, 260] {
+            let tile = HeightTile {
+                size: n,
+                height: values(n * n, n as u32),
+                mask: (0..n * n).map(|i| (i % 3) as u8).collect(),
+            };
+            for c in [TileCompression::Zip, TileCompression::None] {
+                let old = encode_height_tile_exr_crate(&tile, c).unwrap();
+                // Same transform, same deflate level: the very same file.
+                assert_eq!(
+                    encode_height_tile(&tile, c, ZipLevel::EXR_CRATE).unwrap(),
+                    old
+                );
+                let new = encode_height_tile(&tile, c, ZipLevel::DEFAULT).unwrap();
+                let (a, b) = (
+                    decode_height_tile(&old).unwrap(),
+                    decode_height_tile(&new).unwrap(),
+                );
+                assert_eq!(bits(&a.height), bits(&tile.height), "n = {n}");
+                assert_eq!(bits(&b.height), bits(&tile.height), "n = {n}");
+                assert_eq!((&a.mask, &b.mask), (&tile.mask, &tile.mask));
+            }
+        }
+    }
+
+    #[test]
+    fn mip_files_store_the_exr_crates_samples_and_its_bytes_at_level_4() {
+        for size in [1usize, 63, 64, 65, 130, 260] {
+            let sizes = level_sizes(size);
+            let max: Vec<Vec<f32>> = sizes.iter().map(|&s| values(s * s, s as u32)).collect();
+            let min: Vec<Vec<f32>> = sizes.iter().map(|&s| values(s * s, 7 + s as u32)).collect();
+            for precision in [Precision::F32, Precision::F16] {
+                for c in [TileCompression::Zip, TileCompression::None] {
+                    for m in [None, Some(min.as_slice())] {
+                        let old =
+                            encode_mip_exr_exr_crate(size, m, &max, precision, c, "t").unwrap();
+                        let same = encode_mip_exr(size, m, &max, precision, c, ZipLevel(4), "t");
+                        assert_eq!(same.unwrap(), old, "{size} {precision:?} {c:?}");
+                        let new =
+                            encode_mip_exr(size, m, &max, precision, c, ZipLevel(1), "t").unwrap();
+                        let (a, b) = (decode_mip_exr(&old).unwrap(), decode_mip_exr(&new).unwrap());
+                        assert_eq!(a.sizes, sizes);
+                        assert_eq!(b.sizes, sizes);
+                        for name in ["max", "min"] {
+                            let (x, y) = (a.channels.get(name), b.channels.get(name));
+                            assert_eq!(x.is_some(), name == "max" || m.is_some());
+                            let (Some(x), Some(y)) = (x, y) else { continue };
+                            for (lx, ly) in x.iter().zip(y) {
+                                assert_eq!(bits(lx), bits(ly));
+                            }
+                            if precision == Precision::F32 {
+                                let want = if name == "max" { &max } else { &min };
+                                for (lx, lw) in x.iter().zip(want) {
+                                    assert_eq!(bits(lx), bits(lw));
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn horizon_files_store_the_exr_crates_samples_and_its_bytes_at_level_4() {
+        for (n, a) in [(16usize, 1usize), (33, 3), (64, 8)] {
+            let e: Vec<f32> = values(n * n * a, a as u32)
+                .iter()
+                .map(|v| v.clamp(-90.0, 90.0))
+                .collect();
+            for p in [HorizonPrecision::F16, HorizonPrecision::F32] {
+                for c in [TileCompression::Zip, TileCompression::None] {
+                    let old = encode_horizon_exr_exr_crate(n, a, &e, p, c).unwrap();
+                    let same = encode_horizon_exr(n, a, &e, p, c, ZipLevel(4)).unwrap();
+                    assert_eq!(same, old);
+                    let new = encode_horizon_exr(n, a, &e, p, c, ZipLevel(1)).unwrap();
+                    let (x, y) = (
+                        decode_horizon_exr(&old, n).unwrap(),
+                        decode_horizon_exr(&new, n).unwrap(),
+                    );
+                    assert_eq!(x.0, a);
+                    assert_eq!(y.0, a);
+                    assert_eq!(bits(&x.1), bits(&y.1));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn output_does_not_depend_on_the_thread_count() {
+        let tile = HeightTile {
+            size: 260,
+            height: values(260 * 260, 3),
+            mask: vec![1; 260 * 260],
+        };
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let four = rayon::ThreadPoolBuilder::new()
+            .num_threads(4)
+            .build()
+            .unwrap();
+        let enc = || encode_height_tile(&tile, TileCompression::Zip, ZipLevel::DEFAULT).unwrap();
+        assert_eq!(one.install(enc), four.install(enc));
+    }
+
+    #[test]
+    fn damaged_blocks_are_errors_not_panics() {
+        let tile = HeightTile {
+            size: 64,
+            height: values(64 * 64, 1),
+            mask: vec![0; 64 * 64],
+        };
+        let good = encode_height_tile(&tile, TileCompression::Zip, ZipLevel::DEFAULT).unwrap();
+        // Flip bytes across the whole file, one at a time at a stride, and truncate: every
+        // variant either decodes or is an error (never a panic).
+        for i in (0..good.len()).step_by(7) {
+            let mut bad = good.clone();
+            bad[i] ^= 0x5a;
+            let _ = decode_height_tile(&bad);
+        }
+        for len in (0..good.len()).step_by(13) {
+            assert!(
+                decode_height_tile(&good[..len]).is_err(),
+                "truncated to {len}"
+            );
+        }
+    }
+}
