@@ -69,7 +69,11 @@ fn compare(ctx: &Context, rect: Rect, a: usize, label: &str) -> (f64, f64) {
     let exact = horizon::horizons(ctx, rect, a, Method::Exact);
     let (_, emax, en) = diff_stats(&exact, &reference);
     for (e, r) in exact.iter().zip(&reference) {
-        assert_eq!(e.is_nan(), r.is_nan(), "{label}: exact and reference disagree on no data");
+        assert_eq!(
+            e.is_nan(),
+            r.is_nan(),
+            "{label}: exact and reference disagree on no data"
+        );
     }
     let worst = (0..exact.len())
         .filter(|&i| exact[i].is_finite())
@@ -78,7 +82,14 @@ fn compare(ctx: &Context, rect: Rect, a: usize, label: &str) -> (f64, f64) {
                 .abs()
                 .total_cmp(&(exact[j] - reference[j]).abs())
         })
-        .map(|i| (i / (rect.w * rect.h), i % (rect.w * rect.h), exact[i], reference[i]));
+        .map(|i| {
+            (
+                i / (rect.w * rect.h),
+                i % (rect.w * rect.h),
+                exact[i],
+                reference[i],
+            )
+        });
     assert!(
         en == n && emax <= 5e-4,
         "{label}: exact differs from the reference by {emax}° ({en} of {n} values); worst \

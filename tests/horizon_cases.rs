@@ -834,8 +834,12 @@ fn distant_spike_is_bounded_by_its_top() {
         .iter()
         .map(|&m| horizon::horizons(&ctx, rect, a, m))
         .collect();
-    let (mut hits, mut over, mut short_ref, mut mean_ratio) =
-        (0usize, [0.0f64; METHODS.len()], 0.0f64, [0.0f64; METHODS.len()]);
+    let (mut hits, mut over, mut short_ref, mut mean_ratio) = (
+        0usize,
+        [0.0f64; METHODS.len()],
+        0.0f64,
+        [0.0f64; METHODS.len()],
+    );
     for k in 0..a {
         let phi = plane_azimuth(k, a);
         for y in rect.y0..rect.y0 + rect.h {

@@ -162,7 +162,7 @@ pub(super) fn far_max(
         let lvl = &pyr.levels[k];
         let size = (1usize << k) as f64;
         let isize = 1.0 / size; // exact: a power of two
-        // The block the ray is in just after s.
+                                // The block the ray is in just after s.
         let sp = s + 1e-7 * (1.0 + s);
         let (x, y) = (ray.x0 + sp * ray.cx, ray.y0 + sp * ray.cy);
         let bx = ((x.max(0.0) * isize) as usize).min(lvl.w - 1);
@@ -327,8 +327,7 @@ mod tests {
                             let got = far_max(&ctx, &pyr, &ray, s_from, floor, &mut st).0;
                             let want = exact.max(floor);
                             assert!(
-                                (got - want).abs() <= 1e-12 * (1.0 + want.abs())
-                                    || (got == want),
+                                (got - want).abs() <= 1e-12 * (1.0 + want.abs()) || (got == want),
                                 "relief {relief} φ {phi} ({x}, {y}) from {s_from} floor \
                                  {floor}: walk {got}, exact {want}"
                             );
@@ -337,7 +336,10 @@ mod tests {
                     }
                 }
             }
-            assert!(st.tests > 0 && st.exact < rays * 40, "{st:?} over {rays} rays");
+            assert!(
+                st.tests > 0 && st.exact < rays * 40,
+                "{st:?} over {rays} rays"
+            );
         }
         let _ = Rect {
             x0: 0,
