@@ -230,7 +230,7 @@ pub(super) fn finish(
     let mut above = vec![f64::NAN; rect.w];
     for j in 0..rect.h {
         let mut left = f64::NAN;
-        for i in 0..rect.w {
+        for (i, seed_above) in above.iter_mut().enumerate() {
             let (x, y) = (rect.x0 + i, rect.y0 + j);
             let o = j * rect.w + i;
             if ctx.at(x as i64, y as i64).is_nan() {
@@ -240,7 +240,7 @@ pub(super) fn finish(
             let ray = Ray::from_parts(ctx, x, y, &geo[o], az);
             let s0 = ctx.slope0_g(x, y, az.cos, az.sin, ray.ground_per_px());
             let mut floor = if s0 > near[o] { s0 } else { near[o] };
-            for seed in [left, above[i]] {
+            for seed in [left, *seed_above] {
                 if seed.is_finite() && seed + SEED_WINDOW > near_px {
                     stats.exact += 1;
                     let lo = (seed - SEED_WINDOW).max(near_px);
@@ -252,7 +252,7 @@ pub(super) fn finish(
             // higher; then the old seed stays the best guess for the next observer.
             if at.is_finite() {
                 left = at;
-                above[i] = at;
+                *seed_above = at;
             }
             dst[o] = t.atan().to_degrees() as f32;
         }
