@@ -27,4 +27,7 @@ pub mod tileio;
 pub mod tileset;
 pub mod tiling;
 
+#[cfg(test)]
+mod testutil;
+
 pub use error::{Error, Result};

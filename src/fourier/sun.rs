@@ -489,6 +489,7 @@ fn cross(a: Vec3, b: Vec3) -> Vec3 {
 mod tests {
     use super::*;
     use crate::horizon::compass_azimuth_deg;
+    use crate::testutil::rng;
 
     /// The Sun's angular radius from the Moon (1 AU), degrees.
     const R_MOON: f64 = 0.2666;
@@ -505,17 +506,6 @@ mod tests {
             (Face::Nx, 2.5, -0.3),
             (Face::Pz, -3.0, 3.0),
         ]
-    }
-
-    /// A xorshift stream in [0, 1).
-    fn rng(seed: u64) -> impl FnMut() -> f64 {
-        let mut st = seed;
-        move || {
-            st ^= st << 13;
-            st ^= st >> 7;
-            st ^= st << 17;
-            (st >> 11) as f64 / (1u64 << 53) as f64
-        }
     }
 
     /// Signed difference a − b wrapped to [−π, π).

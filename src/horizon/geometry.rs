@@ -473,15 +473,8 @@ mod poly_check {
     #[test]
     fn cell_polynomial_equals_bilinear() {
         let (w, h) = (32usize, 32usize);
-        let mut st = 99u64;
-        let heights: Vec<f32> = (0..w * h)
-            .map(|_| {
-                st ^= st << 13;
-                st ^= st >> 7;
-                st ^= st << 17;
-                ((st >> 11) as f64 / (1u64 << 53) as f64 * 500.0) as f32
-            })
-            .collect();
+        let mut rnd = crate::testutil::rng(99);
+        let heights: Vec<f32> = (0..w * h).map(|_| (rnd() * 500.0) as f32).collect();
         let s = (2.0f64 * 1_737_400.0 / 100.0).round();
         let ctx = Context {
             face: Face::Px,

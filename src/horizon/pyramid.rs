@@ -266,13 +266,7 @@ mod tests {
     use crate::horizon::geometry::{plane_azimuth, Rect};
 
     fn context(w: usize, h: usize, relief: f32, pixel_m: f64, seed: u64) -> Context {
-        let mut st = seed;
-        let mut rnd = || {
-            st ^= st << 13;
-            st ^= st >> 7;
-            st ^= st << 17;
-            (st >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = crate::testutil::rng(seed);
         let r = 1_737_400.0;
         // Smooth hills plus noise, a few spikes and a no-data hole.
         let mut heights = vec![0.0f32; w * h];

@@ -527,13 +527,7 @@ mod tests {
     /// observers beyond them at random heights, with the finger carried between queries.
     #[test]
     fn hull_query_equals_a_scan_of_every_sample() {
-        let mut st = 0x9E37_79B9_7F4A_7C15u64;
-        let mut rnd = || {
-            st ^= st << 13;
-            st ^= st >> 7;
-            st ^= st << 17;
-            (st >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = crate::testutil::rng(0x9E37_79B9_7F4A_7C15u64);
         let r = 1_737_400.0;
         for trial in 0..200 {
             // A line through the body's plane: a = 1 (towards the observer), b = p·spacing.
