@@ -354,6 +354,12 @@ fn cli_horizon_and_query_horizon() {
     for (f, r) in ef.iter().zip(&er) {
         assert!(*f <= r + 1e-3 && r - f <= 0.5, "fast {f} reference {r}");
     }
+    let exact = q("exact");
+    assert_eq!(exact["source"], "computed");
+    let ee: Vec<f64> = serde_json::from_value(exact["elevation_deg"].clone()).unwrap();
+    for (e, r) in ee.iter().zip(&er) {
+        assert!((e - r).abs() <= 5e-4, "exact {e} reference {r}");
+    }
     // The pixel centre reported is within a pixel of the point asked for.
     let (lat, lon) = (
         fast["lat_deg"].as_f64().unwrap(),
@@ -419,8 +425,36 @@ fn cli_horizon_and_query_horizon() {
     assert_eq!(r["tiles_written"], 24);
     assert!(before == crate::util::snapshot(&out.join("horizon")));
 
+    // The exact method's maps replace the fast ones (another run key), record no near field,
+    // and are what the query then reads.
+    let r = json(&run(&[
+        "horizon",
+        o,
+        "--levels",
+        "1",
+        "--azimuths",
+        "36",
+        "--method",
+        "exact",
+        "--json",
+    ]));
+    assert_eq!(r["tiles_written"], 24);
+    let ts = penumbra::manifest::Tileset::load(&out).unwrap();
+    let hp = ts.products.horizon.as_ref().unwrap();
+    assert_eq!((hp.method.as_str(), hp.near_px), ("exact", None));
+    let stored = q("exact");
+    assert_eq!(stored["source"], "stored");
+    let es: Vec<f64> = serde_json::from_value(stored["elevation_deg"].clone()).unwrap();
+    for (s, e) in es.iter().zip(&ee) {
+        assert!((s - e).abs() <= 0.05, "stored {s} computed {e}");
+    }
+
     // Bad requests: exit 2, a reason, nothing written.
     for (args, says) in [
+        (
+            vec!["horizon", o, "--method", "exactly"],
+            "fast, exact, reference",
+        ),
         (vec!["horizon", o, "--azimuths", "2"], "outside 4..=4096"),
         (vec!["horizon", o, "--near-px=-1"], "outside 0..=1024"),
         (
