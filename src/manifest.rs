@@ -199,8 +199,8 @@ pub struct FourierProduct {
     /// `raw` (from the stored horizon maps) or `streamed` (compressed as the horizon stage
     /// computed them).
     pub source: String,
-    /// How the horizons were computed: `fast` or `reference`, the fast method's near field,
-    /// the terrain range bounding the search, and the per-level distances.
+    /// How the horizons were computed: `fast`, `exact` or `reference`, the fast method's near
+    /// field, the terrain range bounding the search, and the per-level distances.
     pub horizon_method: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub horizon_near_px: Option<f64>,
@@ -226,7 +226,7 @@ pub struct HorizonProduct {
     pub azimuth: String,
     /// How the planes are stored in the image.
     pub layout: String,
-    /// `fast` or `reference`.
+    /// `fast`, `exact` or `reference`.
     pub method: String,
     /// The fast method's exact near field (plane pixels); absent for the reference and in
     /// tilesets made before it was recorded (4 px then).

@@ -346,7 +346,7 @@ pub struct ShadowAnswer {
     /// The shadow method: `horizon` (a lookup in the horizon products), `reference`,
     /// `uniform N`, `dp RUNS`, `dp-dda RUNS`, `extrema`, `extrema-soft` or `smap`.
     pub method: String,
-    /// For `horizon`: the method that computed the horizon (fast or reference).
+    /// For `horizon`: the method that computed the horizon (fast, exact or reference).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub horizon_method: Option<Method>,
     /// Context searched around the pixel's tile by a ray-marching method (pixels; 0 otherwise).
