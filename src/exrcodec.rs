@@ -539,6 +539,26 @@ pub fn decode(bytes: &[u8], largest_only: bool) -> Result<Decoded, String> {
         })
         .collect();
 
+    // The blocks present must cover the image exactly before the image is allocated: a
+    // header's claimed size alone never decides how much memory a damaged file takes.
+    let mut covered = vec![0usize; keep_levels];
+    let mut seen = std::collections::HashSet::new();
+    let mut present = Vec::with_capacity(blocks.len());
+    for b in blocks {
+        let Some(b) = b? else { continue };
+        if !seen.insert((b.level, b.x0, b.y0)) {
+            return Err("a block is stored twice".into());
+        }
+        covered[b.level] += b.w * b.h;
+        present.push(b);
+    }
+    for (l, &c) in covered.iter().enumerate() {
+        let (w, h) = sizes[l];
+        if c != w * h {
+            return Err(format!("level {l} is missing blocks"));
+        }
+    }
+    let blocks = present;
     let types: Vec<SampleType> = header.channels.list.iter().map(|c| c.sample_type).collect();
     let mut out: Vec<Vec<Vec<f32>>> = types
         .iter()
@@ -549,14 +569,7 @@ pub fn decode(bytes: &[u8], largest_only: bool) -> Result<Decoded, String> {
                 .collect()
         })
         .collect();
-    let mut covered = vec![0usize; keep_levels];
-    let mut seen = std::collections::HashSet::new();
-    for b in blocks {
-        let Some(b) = b? else { continue };
-        if !seen.insert((b.level, b.x0, b.y0)) {
-            return Err("a block is stored twice".into());
-        }
-        covered[b.level] += b.w * b.h;
+    for b in &blocks {
         let lw = sizes[b.level].0;
         let mut off = 0;
         for y in b.y0..b.y0 + b.h {
@@ -583,12 +596,6 @@ pub fn decode(bytes: &[u8], largest_only: bool) -> Result<Decoded, String> {
                     }
                 }
             }
-        }
-    }
-    for (l, &c) in covered.iter().enumerate() {
-        let (w, h) = sizes[l];
-        if c != w * h {
-            return Err(format!("level {l} is missing blocks"));
         }
     }
     let channels = header
@@ -792,5 +799,30 @@ mod tests {
                 "truncated to {len}"
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod header_limits {
+    use super::*;
+    use crate::tileio::{decode_height_tile, encode_height_tile, HeightTile};
+
+    /// A header that claims a huge image is refused before anything that size is allocated:
+    /// the blocks actually present must cover the claimed image first.
+    #[test]
+    fn a_header_claiming_a_huge_image_is_refused_cheaply() {
+        let tile = HeightTile {
+            size: 32,
+            height: vec![1.0; 32 * 32],
+            mask: vec![0; 32 * 32],
+        };
+        let good = encode_height_tile(&tile, TileCompression::Zip, ZipLevel::DEFAULT).unwrap();
+        let key = b"dataWindow\0box2i\0";
+        let at = good.windows(key.len()).position(|w| w == key).unwrap() + key.len() + 4;
+        let mut bad = good.clone();
+        // xMax, yMax of the data window: 60000 × 60000 pixels (≈ 29 GB as f32 + f32).
+        bad[at + 8..at + 12].copy_from_slice(&59_999i32.to_le_bytes());
+        bad[at + 12..at + 16].copy_from_slice(&59_999i32.to_le_bytes());
+        assert!(decode_height_tile(&bad).is_err());
     }
 }
