@@ -325,6 +325,16 @@ fn cli_horizon_and_query_horizon() {
     .unwrap();
     let o = out.to_str().unwrap();
     let run = |args: &[&str]| penumbra_bin().args(args).output().unwrap();
+    // `penumbra [before] horizon o --levels 1 --azimuths 36 [after] --json`.
+    let bake_level1 = |before: &[&str], after: &[&str]| {
+        let args = [
+            before,
+            &["horizon", o, "--levels", "1", "--azimuths", "36"],
+            after,
+            &["--json"],
+        ];
+        json(&run(&args.concat()))
+    };
 
     // Computed on demand (nothing stored yet): both methods, compass azimuths ascending.
     let q = |method: &str| {
@@ -376,15 +386,7 @@ fn cli_horizon_and_query_horizon() {
 
     // Bake the maps of level 1; the query then reads them and agrees with the computed one
     // to f16 precision.
-    let r = json(&run(&[
-        "horizon",
-        o,
-        "--levels",
-        "1",
-        "--azimuths",
-        "36",
-        "--json",
-    ]));
+    let r = bake_level1(&[], &[]);
     assert_eq!(r["tiles_written"], 24);
     let ts = penumbra::manifest::Tileset::load(&out).unwrap();
     let hp = ts.products.horizon.as_ref().unwrap();
@@ -399,45 +401,17 @@ fn cli_horizon_and_query_horizon() {
         assert!((s - f).abs() <= 0.05, "stored {s} computed {f}");
     }
     // Rerun: up to date; same bytes whatever the thread count.
-    let r = json(&run(&[
-        "horizon",
-        o,
-        "--levels",
-        "1",
-        "--azimuths",
-        "36",
-        "--json",
-    ]));
+    let r = bake_level1(&[], &[]);
     assert_eq!(r["up_to_date"], true);
     let before = crate::util::snapshot(&out.join("horizon"));
     std::fs::remove_dir_all(out.join("horizon")).unwrap();
-    let r = json(&run(&[
-        "--threads",
-        "1",
-        "horizon",
-        o,
-        "--levels",
-        "1",
-        "--azimuths",
-        "36",
-        "--json",
-    ]));
+    let r = bake_level1(&["--threads", "1"], &[]);
     assert_eq!(r["tiles_written"], 24);
     assert!(before == crate::util::snapshot(&out.join("horizon")));
 
     // The exact method's maps replace the fast ones (another run key), record no near field,
     // and are what the query then reads.
-    let r = json(&run(&[
-        "horizon",
-        o,
-        "--levels",
-        "1",
-        "--azimuths",
-        "36",
-        "--method",
-        "exact",
-        "--json",
-    ]));
+    let r = bake_level1(&[], &["--method", "exact"]);
     assert_eq!(r["tiles_written"], 24);
     let ts = penumbra::manifest::Tileset::load(&out).unwrap();
     let hp = ts.products.horizon.as_ref().unwrap();

@@ -17,7 +17,7 @@
 //! so a ray whose horizon is near costs a few tests per octave of distance, whatever the
 //! context's size: far terrain is seen only through coarse blocks unless it matters.
 
-use super::geometry::{Context, Ray};
+use super::geometry::{Azimuth, Context, PixelGeo, Ray, Rect};
 
 /// Half-width (plane pixels) of the stretch searched exactly round a neighbour's horizon.
 const SEED_WINDOW: f64 = 1.5;
@@ -215,10 +215,10 @@ pub(super) fn far_max(
 pub(super) fn finish(
     ctx: &Context,
     pyr: &MaxPyramid,
-    rect: super::geometry::Rect,
-    az: &super::geometry::Azimuth,
+    rect: Rect,
+    az: &Azimuth,
     near_px: f64,
-    geo: &[super::geometry::PixelGeo],
+    geo: &[PixelGeo],
     near: &[f64],
     dst: &mut [f32],
     stats: &mut WalkStats,
@@ -263,7 +263,7 @@ pub(super) fn finish(
 mod tests {
     use super::*;
     use crate::cube::Face;
-    use crate::horizon::geometry::{plane_azimuth, Rect};
+    use crate::horizon::geometry::plane_azimuth;
 
     fn context(w: usize, h: usize, relief: f32, pixel_m: f64, seed: u64) -> Context {
         let mut rnd = crate::testutil::rng(seed);
@@ -335,11 +335,5 @@ mod tests {
                 "{st:?} over {rays} rays"
             );
         }
-        let _ = Rect {
-            x0: 0,
-            y0: 0,
-            w: 1,
-            h: 1,
-        };
     }
 }
