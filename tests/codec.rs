@@ -47,7 +47,13 @@ fn openexr_python() -> Option<PathBuf> {
                 }
             };
             run(Command::new("python3").args(["-m", "venv"]).arg(&venv))?;
-            run(Command::new(venv.join("bin/pip")).args(["install", "--quiet", "OpenEXR", "numpy"]))
+            // The OpenEXR release this check was verified with; numpy as it requires.
+            run(Command::new(venv.join("bin/pip")).args([
+                "install",
+                "--quiet",
+                "OpenEXR==3.5.3",
+                "numpy",
+            ]))
         };
         if let Err(e) = setup().and_then(|_| {
             ok(&py)
