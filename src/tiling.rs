@@ -1,9 +1,15 @@
 //! The tiling stage: resample a DEM (and optionally an albedo image) into cube-face tiles.
 //!
-//! Every stored pixel — interior and halo — is sampled from the source at its own direction,
-//! so neighbouring tiles and faces agree wherever they overlap, to within resampling error.
-//! Tiles are independent, rendered in parallel and written atomically; the output does not
-//! depend on the thread count. A rerun with the same run key keeps tiles already on disk.
+//! Every stored pixel — interior and halo — is a function of its own global face position
+//! alone, so neighbouring tiles and faces agree wherever they overlap, to within resampling
+//! error. Finest-level pixels are interpolated from the source at their own direction. With the
+//! box prefilter, a pixel at `finest − d` is the mean of the `2^d × 2^d` finest-level pixel
+//! centres it covers (d ≤ 2, [`MAX_BOX`]): those levels are averaged from one block of
+//! finest-level samples per group of tiles ([`group_depth`]), which costs what point sampling
+//! costs instead of 2–3× that; coarser levels take `4 × 4` source samples per pixel each.
+//! Units of work (groups and single tiles) are rendered in parallel and every tile is written
+//! atomically; the output does not depend on the thread count. A rerun with the same run key
+//! keeps tiles already on disk.
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -308,29 +314,27 @@ pub fn tile_dem(
     let (stage_out, resume) = (run.out().to_path_buf(), run.resume());
 
     progress.start("tiling", candidates.len() as u64);
-    let results: Vec<Result<Option<TileStats>>> = candidates
+    let sink = TileSink {
+        layout: &layout,
+        opts,
+        albedo: albedo.as_ref(),
+        out: &stage_out,
+        resume,
+    };
+    let units = plan_units(&candidates, finest, group_depth(&layout, opts.prefilter));
+    let mut results: std::collections::BTreeMap<TileId, Result<Option<TileStats>>> = units
         .par_iter()
-        .map(|&id| {
-            let r = make_tile(
-                dem,
-                &layout,
-                id,
-                opts,
-                height_shift,
-                albedo.as_ref(),
-                &stage_out,
-                resume,
-            );
-            progress.inc(1);
-            r
-        })
+        .flat_map_iter(|u| run_unit(dem, &sink, u, height_shift, progress))
         .collect();
     progress.finish();
 
     let mut present = BTreeSet::new();
     let (mut min, mut max) = (f64::INFINITY, f64::NEG_INFINITY);
     let (mut filled, mut no_data, mut written, mut kept) = (0u64, 0u64, 0u64, 0u64);
-    for (id, r) in candidates.iter().zip(results) {
+    for id in &candidates {
+        let r = results
+            .remove(id)
+            .expect("every candidate belongs to exactly one unit");
         if let Some(s) = r? {
             present.insert(*id);
             min = min.min(s.min as f64);
@@ -491,21 +495,35 @@ impl<'a> SourceGrid<'a> {
             .dir_to_pixel(self.layout.st_to_dir(self.face, s, t))
     }
 
+    /// The grid around one tile (halo and one pixel more included).
     fn new(dem: &'a Dem, layout: &'a Layout, id: TileId) -> SourceGrid<'a> {
         let h = layout.halo as i64 + 1;
         let (g0x, g0y) = layout.global_pixel(id, -h, -h);
         let n = layout.tile_size as i64 + 2 * h;
+        Self::region(dem, layout, id.face, id.level, (g0x, g0y), (n, n))
+    }
+
+    /// The grid over global face pixels `g0 .. g0 + n` (and up to a lattice cell more) of
+    /// `face` at `level`. A point's coordinates do not depend on the region asked for.
+    fn region(
+        dem: &'a Dem,
+        layout: &'a Layout,
+        face: crate::cube::Face,
+        level: u8,
+        (g0x, g0y): (i64, i64),
+        (nx, ny): (i64, i64),
+    ) -> SourceGrid<'a> {
         let m0 = (g0x.div_euclid(LATTICE), g0y.div_euclid(LATTICE));
         let m1 = (
-            (g0x + n).div_euclid(LATTICE) + 1,
-            (g0y + n).div_euclid(LATTICE) + 1,
+            (g0x + nx).div_euclid(LATTICE) + 1,
+            (g0y + ny).div_euclid(LATTICE) + 1,
         );
         let cells = ((m1.0 - m0.0) as usize, (m1.1 - m0.1) as usize);
         let mut grid = SourceGrid {
             dem,
             layout,
-            face: id.face,
-            level: id.level,
+            face,
+            level,
             m0,
             cells,
             pts: Vec::with_capacity((cells.0 + 1) * (cells.1 + 1)),
@@ -528,11 +546,11 @@ impl<'a> SourceGrid<'a> {
                     // Wholly off the source: the cell's own cap does not meet the source's.
                     let corner = |dx: i64, dy: i64| {
                         let (s, t) = layout.global_st(
-                            id.level,
+                            level,
                             ((m0.0 + mx as i64 + dx) * LATTICE) as f64,
                             ((m0.1 + my as i64 + dy) * LATTICE) as f64,
                         );
-                        layout.st_to_dir(id.face, s, t)
+                        layout.st_to_dir(face, s, t)
                     };
                     let ds = [corner(0, 0), corner(1, 0), corner(0, 1), corner(1, 1)];
                     let mut mid = [0.0; 3];
@@ -617,7 +635,8 @@ impl<'a> SourceGrid<'a> {
     }
 }
 
-/// Sample one height tile (halo included).
+/// Sample one height tile (halo included) directly from the source: each pixel is the mean
+/// of [`box_samples`]² interpolated source samples spread over its footprint.
 pub fn render_height_tile(
     dem: &Dem,
     layout: &Layout,
@@ -631,37 +650,189 @@ pub fn render_height_tile(
     let k = box_samples(layout, id.level, prefilter);
     let offsets: Vec<f64> = (0..k).map(|a| (a as f64 + 0.5) / k as f64 - 0.5).collect();
     let grid = SourceGrid::new(dem, layout, id);
-    let mut height = Vec::with_capacity(size * size);
-    let mut m = Vec::with_capacity(size * size);
+    let mut out = TileBuilder::new(size);
     for j in 0..size as i64 {
         for i in 0..size as i64 {
             let (gx, gy) = layout.global_pixel(id, i - halo, j - halo);
-            let (mut sum, mut n, mut filled) = (0.0f64, 0u32, false);
+            let mut acc = BoxSum::default();
             for &oj in &offsets {
                 for &oi in &offsets {
                     let (col, row) = grid.at(gx as f64 + oi, gy as f64 + oj);
                     let (h, mk) = dem.sample_pixel(col, row, resampling);
-                    if mk != mask::NO_DATA {
-                        sum += h as f64;
-                        n += 1;
-                        filled |= mk == mask::FILLED;
-                    }
+                    acc.add(h, mk);
                 }
             }
-            if n == 0 {
-                height.push(f32::NAN);
-                m.push(mask::NO_DATA);
-            } else {
-                height.push((sum / n as f64 + height_shift) as f32);
-                m.push(if filled { mask::FILLED } else { mask::MEASURED });
-            }
+            out.push(acc, height_shift);
         }
     }
-    HeightTile {
-        size,
+    out.finish()
+}
+
+/// Running mean of the samples that have data, and whether any of them was filled.
+#[derive(Default)]
+struct BoxSum {
+    sum: f64,
+    n: u32,
+    filled: bool,
+}
+
+impl BoxSum {
+    #[inline]
+    fn add(&mut self, h: f32, mk: u8) {
+        if mk != mask::NO_DATA {
+            self.sum += h as f64;
+            self.n += 1;
+            self.filled |= mk == mask::FILLED;
+        }
+    }
+}
+
+struct TileBuilder {
+    size: usize,
+    height: Vec<f32>,
+    mask: Vec<u8>,
+}
+
+impl TileBuilder {
+    fn new(size: usize) -> Self {
+        TileBuilder {
+            size,
+            height: Vec::with_capacity(size * size),
+            mask: Vec::with_capacity(size * size),
+        }
+    }
+
+    #[inline]
+    fn push(&mut self, acc: BoxSum, height_shift: f64) {
+        if acc.n == 0 {
+            self.height.push(f32::NAN);
+            self.mask.push(mask::NO_DATA);
+        } else {
+            self.height
+                .push((acc.sum / acc.n as f64 + height_shift) as f32);
+            self.mask.push(if acc.filled {
+                mask::FILLED
+            } else {
+                mask::MEASURED
+            });
+        }
+    }
+
+    fn finish(self) -> HeightTile {
+        HeightTile {
+            size: self.size,
+            height: self.height,
+            mask: self.mask,
+        }
+    }
+}
+
+/// Largest side (pixels) of the finest-level sample block one tile group holds in memory:
+/// about 4096² samples, 5 bytes each, per thread.
+const GROUP_MAX_SIDE: usize = 4200;
+
+/// How many levels above the finest are averaged from a group's finest-level samples (0: none,
+/// every tile is sampled from the source on its own). With the box prefilter a pixel at
+/// `finest − d` (d ≤ log2 [`MAX_BOX`]) is the mean of the 2^d × 2^d finest-level pixel centres
+/// it covers, so sampling the finest level once over a level-`finest − d` tile (its halo
+/// included) gives every tile below it at `d + 1` levels for the cost of one. Capped so the
+/// sample block stays within [`GROUP_MAX_SIDE`].
+pub fn group_depth(layout: &Layout, prefilter: Prefilter) -> u8 {
+    if prefilter == Prefilter::Point {
+        return 0;
+    }
+    let finest = layout.levels - 1;
+    let mut d = finest.min(MAX_BOX.trailing_zeros() as u8);
+    while d > 0 && (layout.stored_size() << d) > GROUP_MAX_SIDE {
+        d -= 1;
+    }
+    d
+}
+
+/// Raw source heights (before the datum shift) and masks, one interpolated sample per global
+/// face pixel of one level, over a rectangle.
+struct Samples {
+    x0: i64,
+    y0: i64,
+    w: usize,
+    height: Vec<f32>,
+    mask: Vec<u8>,
+}
+
+/// Sample the finest level over the footprint of group root `root` (halo included): the
+/// pixels every tile of the group is averaged from. Rows are sampled in parallel.
+fn sample_group(
+    dem: &Dem,
+    layout: &Layout,
+    root: TileId,
+    finest: u8,
+    resampling: Resampling,
+) -> Samples {
+    let k = 1i64 << (finest - root.level);
+    let (n, halo) = (layout.tile_size as i64, layout.halo as i64);
+    let (x0, y0) = (
+        k * (root.x as i64 * n - halo),
+        k * (root.y as i64 * n - halo),
+    );
+    let w = (k * (n + 2 * halo)) as usize;
+    let grid = SourceGrid::region(
+        dem,
+        layout,
+        root.face,
+        finest,
+        (x0 - 1, y0 - 1),
+        (w as i64 + 2, w as i64 + 2),
+    );
+    let mut height = vec![0f32; w * w];
+    let mut m = vec![0u8; w * w];
+    height
+        .par_chunks_mut(w)
+        .zip(m.par_chunks_mut(w))
+        .enumerate()
+        .for_each(|(j, (hrow, mrow))| {
+            let gy = (y0 + j as i64) as f64;
+            for (i, (h, mk)) in hrow.iter_mut().zip(mrow.iter_mut()).enumerate() {
+                let (col, row) = grid.at((x0 + i as i64) as f64, gy);
+                (*h, *mk) = dem.sample_pixel(col, row, resampling);
+            }
+        });
+    Samples {
+        x0,
+        y0,
+        w,
         height,
         mask: m,
     }
+}
+
+/// Tile `id` of a group from its finest-level samples: each pixel the mean of the
+/// `2^(finest − level)`² samples whose centres [`render_height_tile`]'s box taps sit on.
+fn tile_from_samples(
+    s: &Samples,
+    layout: &Layout,
+    id: TileId,
+    finest: u8,
+    height_shift: f64,
+) -> HeightTile {
+    let size = layout.stored_size();
+    let halo = layout.halo as i64;
+    let k = 1i64 << (finest - id.level);
+    let mut out = TileBuilder::new(size);
+    for j in 0..size as i64 {
+        for i in 0..size as i64 {
+            let (gx, gy) = layout.global_pixel(id, i - halo, j - halo);
+            let (sx, sy) = ((gx * k - s.x0) as usize, (gy * k - s.y0) as usize);
+            let mut acc = BoxSum::default();
+            for b in 0..k as usize {
+                let at = (sy + b) * s.w + sx;
+                for a in at..at + k as usize {
+                    acc.add(s.height[a], s.mask[a]);
+                }
+            }
+            out.push(acc, height_shift);
+        }
+    }
+    out.finish()
 }
 
 /// Sample one albedo tile (halo included).
@@ -686,40 +857,328 @@ pub fn render_albedo_tile(src: &AlbedoSource, layout: &Layout, id: TileId) -> Al
     }
 }
 
-#[allow(clippy::too_many_arguments)]
-fn make_tile(
-    dem: &Dem,
-    layout: &Layout,
-    id: TileId,
-    opts: &TileOptions,
-    height_shift: f64,
-    albedo: Option<&AlbedoSource>,
-    out: &Path,
+/// Where a run's tiles go and what each needs besides its heights.
+struct TileSink<'a> {
+    layout: &'a Layout,
+    opts: &'a TileOptions,
+    albedo: Option<&'a AlbedoSource>,
+    out: &'a Path,
     resume: bool,
-) -> Result<Option<TileStats>> {
-    let hpath = crate::tileset::tile_path(out, manifest::HEIGHT_PATTERN, id);
-    let apath = crate::tileset::tile_path(out, manifest::ALBEDO_PATTERN, id);
-    if resume && hpath.exists() && (albedo.is_none() || apath.exists()) {
-        if let Ok(t) = tileio::read_height_tile(&hpath) {
-            if t.size == layout.stored_size() {
-                return Ok(interior_stats(layout, &t, true));
+}
+
+impl TileSink<'_> {
+    /// Statistics of tile `id` when a resumed run already wrote it (and its albedo tile).
+    fn kept(&self, id: TileId) -> Option<TileStats> {
+        if !self.resume {
+            return None;
+        }
+        let hpath = crate::tileset::tile_path(self.out, manifest::HEIGHT_PATTERN, id);
+        let apath = crate::tileset::tile_path(self.out, manifest::ALBEDO_PATTERN, id);
+        if hpath.exists() && (self.albedo.is_none() || apath.exists()) {
+            if let Ok(t) = tileio::read_height_tile(&hpath) {
+                if t.size == self.layout.stored_size() {
+                    return interior_stats(self.layout, &t, true);
+                }
             }
         }
+        None
     }
-    let tile = render_height_tile(
-        dem,
-        layout,
-        id,
-        opts.resampling,
-        opts.prefilter,
-        height_shift,
-    );
-    let Some(stats) = interior_stats(layout, &tile, false) else {
-        return Ok(None);
-    };
-    tileio::write_height_tile(&hpath, &tile, opts.compression)?;
-    if let Some(a) = albedo {
-        tileio::write_albedo_tile(&apath, &render_albedo_tile(a, layout, id))?;
+
+    /// Write tile `id` (and its albedo tile) unless it holds no data.
+    fn write(&self, id: TileId, tile: HeightTile) -> Result<Option<TileStats>> {
+        let Some(stats) = interior_stats(self.layout, &tile, false) else {
+            return Ok(None);
+        };
+        let hpath = crate::tileset::tile_path(self.out, manifest::HEIGHT_PATTERN, id);
+        tileio::write_height_tile(&hpath, &tile, self.opts.compression)?;
+        if let Some(a) = self.albedo {
+            let apath = crate::tileset::tile_path(self.out, manifest::ALBEDO_PATTERN, id);
+            tileio::write_albedo_tile(&apath, &render_albedo_tile(a, self.layout, id))?;
+        }
+        Ok(Some(stats))
     }
-    Ok(Some(stats))
+}
+
+/// What one worker renders: a tile on its own, or a group root with the tiles below it
+/// (see [`group_depth`]).
+enum Unit {
+    Tile(TileId),
+    Group(TileId, Vec<TileId>),
+}
+
+/// Cut the candidates into units: with a group depth d, each candidate at `finest − d` roots a
+/// group holding it and its candidate descendants (coarse to fine); coarser candidates are
+/// single tiles.
+fn plan_units(candidates: &[TileId], finest: u8, depth: u8) -> Vec<Unit> {
+    if depth == 0 {
+        return candidates.iter().map(|&id| Unit::Tile(id)).collect();
+    }
+    let root_level = finest - depth;
+    let mut members: std::collections::BTreeMap<TileId, Vec<TileId>> = Default::default();
+    let mut units = Vec::new();
+    for &id in candidates {
+        if id.level < root_level {
+            units.push(Unit::Tile(id));
+        } else {
+            let up = id.level - root_level;
+            let root = TileId {
+                level: root_level,
+                face: id.face,
+                x: id.x >> up,
+                y: id.y >> up,
+            };
+            members.entry(root).or_default().push(id);
+        }
+    }
+    for (root, mut tiles) in members {
+        tiles.sort_by_key(|t| (t.level, t.y, t.x));
+        units.push(Unit::Group(root, tiles));
+    }
+    units
+}
+
+/// Render one unit's tiles; kept tiles of a resumed run are read, not rendered.
+fn run_unit(
+    dem: &Dem,
+    sink: &TileSink,
+    unit: &Unit,
+    height_shift: f64,
+    progress: &dyn Progress,
+) -> Vec<(TileId, Result<Option<TileStats>>)> {
+    let opts = sink.opts;
+    match unit {
+        Unit::Tile(id) => {
+            let r = match sink.kept(*id) {
+                Some(s) => Ok(Some(s)),
+                None => sink.write(
+                    *id,
+                    render_height_tile(
+                        dem,
+                        sink.layout,
+                        *id,
+                        opts.resampling,
+                        opts.prefilter,
+                        height_shift,
+                    ),
+                ),
+            };
+            progress.inc(1);
+            vec![(*id, r)]
+        }
+        Unit::Group(root, tiles) => {
+            let finest = sink.layout.levels - 1;
+            let mut samples = None;
+            let mut out = Vec::with_capacity(tiles.len());
+            for &id in tiles {
+                let r = match sink.kept(id) {
+                    Some(s) => Ok(Some(s)),
+                    None => {
+                        let s = samples.get_or_insert_with(|| {
+                            sample_group(dem, sink.layout, *root, finest, opts.resampling)
+                        });
+                        sink.write(
+                            id,
+                            tile_from_samples(s, sink.layout, id, finest, height_shift),
+                        )
+                    }
+                };
+                progress.inc(1);
+                out.push((id, r));
+            }
+            out
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dem::{Crs, DemParts, GeoRef, Samples as DemSamples};
+
+    /// A smooth global geographic raster, `w × w/2` pixel-registered samples.
+    fn global(w: usize) -> Dem {
+        let h = w / 2;
+        let d = 360.0 / w as f64;
+        let georef = GeoRef {
+            crs: Crs::Geographic,
+            x0: -180.0 + d / 2.0,
+            y0: 90.0 - d / 2.0,
+            dx: d,
+            dy: d,
+        };
+        let mut v = Vec::with_capacity(w * h);
+        for r in 0..h {
+            for c in 0..w {
+                let (lat, lon) = (georef.y0 - r as f64 * d, georef.x0 + c as f64 * d);
+                let p = cube::latlon_to_dir(lat.to_radians(), lon.to_radians());
+                v.push((1500.0 * (3.0 * p[0]).sin() * (2.0 * p[1]).cos() + 900.0 * p[2]) as f32);
+            }
+        }
+        Dem::new(
+            DemParts {
+                width: w,
+                height: h,
+                samples: DemSamples::Owned(v),
+                scale: 1.0,
+                offset: 0.0,
+                nodata: None,
+                georef,
+                datum_radius_m: None,
+                target: None,
+                sources: vec![],
+                format: "test raster".into(),
+            },
+            64,
+        )
+        .unwrap()
+    }
+
+    /// Tiles averaged from a group's finest-level samples equal the tiles sampled from the
+    /// source on their own: bit for bit at the finest level (same positions, same lattice), and
+    /// within the lattice's interpolation tolerance above it, where the per-tile path
+    /// interpolates its box taps' source coordinates on the coarser level's lattice.
+    #[test]
+    fn group_tiles_match_tiles_sampled_on_their_own() {
+        // 72: the tiles oversample the source 14× and some lattice cells interpolate;
+        // 720: the source is finer than the tiles and most cells are exact.
+        for (w, tile_size) in [(72, 64), (720, 16)] {
+            group_tiles_match_per_tile_tiles(w, tile_size);
+        }
+    }
+
+    fn group_tiles_match_per_tile_tiles(w: usize, tile_size: u32) {
+        let dem = global(w);
+        let layout = Layout {
+            projection: Projection::Gnomonic,
+            tile_size,
+            halo: 2,
+            levels: 3,
+        };
+        assert_eq!(group_depth(&layout, Prefilter::Box), 2);
+        assert_eq!(group_depth(&layout, Prefilter::Point), 0);
+        // Largest height step between neighbouring source pixels bounds |dh| per source pixel
+        // of position error.
+        let mut step = 0f64;
+        for r in 0..dem.height() {
+            for c in 0..dem.width() - 1 {
+                let (a, b) = (dem.value(c, r).0, dem.value(c + 1, r).0);
+                step = step.max((a - b).abs() as f64);
+                if r + 1 < dem.height() {
+                    step = step.max((a - dem.value(c, r + 1).0).abs() as f64);
+                }
+            }
+        }
+        let bound = 4.0 * APPROX_TOL_PX * step;
+        let (mut worst, mut compared, mut interp, mut cells) = (0f64, 0, 0, 0);
+        for face in cube::Face::ALL {
+            let root = TileId {
+                level: 0,
+                face,
+                x: 0,
+                y: 0,
+            };
+            let s = sample_group(&dem, &layout, root, 2, Resampling::Bilinear);
+            for (x, y) in (0..4).flat_map(|y| (0..4).map(move |x| (x, y))) {
+                let g = SourceGrid::new(
+                    &dem,
+                    &layout,
+                    TileId {
+                        level: 2,
+                        face,
+                        x,
+                        y,
+                    },
+                );
+                interp += g.ok.iter().filter(|&&o| o == INTERP).count();
+                cells += g.ok.len();
+            }
+            for level in 0..3u8 {
+                for y in 0..1u32 << level {
+                    for x in 0..1u32 << level {
+                        let id = TileId { level, face, x, y };
+                        let g = tile_from_samples(&s, &layout, id, 2, 0.0);
+                        let t = render_height_tile(
+                            &dem,
+                            &layout,
+                            id,
+                            Resampling::Bilinear,
+                            Prefilter::Box,
+                            0.0,
+                        );
+                        assert_eq!(g.mask, t.mask, "{id:?}");
+                        for (a, b) in g.height.iter().zip(&t.height) {
+                            if level == 2 {
+                                assert_eq!(a.to_bits(), b.to_bits(), "{id:?}");
+                            } else {
+                                worst = worst.max((a - b).abs() as f64);
+                                compared += 1;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let side = (tile_size + 4) as usize;
+        assert_eq!(compared, 6 * 5 * side * side);
+        eprintln!(
+            "{w} px source: group vs per-tile box levels differ by {worst} m (bound {bound} m); \
+             {interp} of {cells} lattice cells of finest tiles interpolated"
+        );
+        if w == 72 {
+            assert!(interp > 0, "the case meant to interpolate does not");
+        }
+        assert!(
+            worst <= bound,
+            "group and per-tile box levels differ by {worst} m (bound {bound} m)"
+        );
+    }
+
+    #[test]
+    fn units_cover_every_candidate_once() {
+        let layout = Layout {
+            projection: Projection::Gnomonic,
+            tile_size: 16,
+            halo: 2,
+            levels: 5,
+        };
+        let mut candidates = BTreeSet::new();
+        for (x, y) in [(0u32, 0u32), (5, 9), (15, 15), (6, 9)] {
+            let mut t = TileId {
+                level: 4,
+                face: cube::Face::ALL[1],
+                x,
+                y,
+            };
+            loop {
+                candidates.insert(t);
+                match t.parent() {
+                    Some(p) => t = p,
+                    None => break,
+                }
+            }
+        }
+        let candidates: Vec<TileId> = candidates.into_iter().collect();
+        let depth = group_depth(&layout, Prefilter::Box);
+        assert_eq!(depth, 2);
+        let mut seen = Vec::new();
+        for u in plan_units(&candidates, 4, depth) {
+            match u {
+                Unit::Tile(id) => {
+                    assert!(id.level < 2);
+                    seen.push(id);
+                }
+                Unit::Group(root, tiles) => {
+                    assert_eq!(root.level, 2);
+                    assert_eq!(tiles[0], root, "the root comes first");
+                    for t in tiles {
+                        let up = t.level - 2;
+                        assert_eq!((t.face, t.x >> up, t.y >> up), (root.face, root.x, root.y));
+                        seen.push(t);
+                    }
+                }
+            }
+        }
+        seen.sort();
+        assert_eq!(seen, candidates);
+    }
 }
