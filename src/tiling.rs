@@ -20,7 +20,7 @@ use serde::Serialize;
 use crate::albedo::AlbedoSource;
 use crate::body::Body;
 use crate::cube::{self, Projection};
-use crate::dem::{mask, Dem, Resampling};
+use crate::dem::{floor_fast, mask, Dem, Resampling};
 use crate::error::{Error, Result};
 use crate::layout::{Layout, TileId, MAX_LEVELS};
 use crate::manifest::{self, Tileset};
@@ -540,6 +540,9 @@ impl<'a> SourceGrid<'a> {
         }
         let half_width = dem.width() as f64 / 4.0;
         let cap = dem.footprint_cap();
+        // Exact coordinates at the midpoints of horizontal and vertical lattice edges.
+        let mut h_mid: Vec<Option<(f64, f64)>> = vec![None; cells.0 * (cells.1 + 1)];
+        let mut v_mid: Vec<Option<(f64, f64)>> = vec![None; (cells.0 + 1) * cells.1];
         for my in 0..cells.1 {
             for mx in 0..cells.0 {
                 if let Some((cc, cr)) = cap {
@@ -597,7 +600,17 @@ impl<'a> SourceGrid<'a> {
                     let lerp = |p: f64, q: f64, w: f64| p + (q - p) * w;
                     let checks = [(0.5, 0.5), (0.5, 0.0), (0.5, 1.0), (0.0, 0.5), (1.0, 0.5)];
                     ok = checks.iter().all(|&(wx, wy)| {
-                        let e = grid.exact(bx + wx * l, by + wy * l);
+                        // Edge midpoints are shared with the neighbouring cell: computed once.
+                        let memo = match (wx, wy) {
+                            (0.5, 0.5) => None,
+                            (0.5, _) => Some(&mut h_mid[(my + wy as usize) * cells.0 + mx]),
+                            _ => Some(&mut v_mid[my * (cells.0 + 1) + mx + wx as usize]),
+                        };
+                        let at = (bx + wx * l, by + wy * l);
+                        let e = match memo {
+                            None => grid.exact(at.0, at.1),
+                            Some(m) => *m.get_or_insert_with(|| grid.exact(at.0, at.1)),
+                        };
                         let col = lerp(lerp(c[0].0, c[1].0, wx), lerp(c[2].0, c[3].0, wx), wy);
                         let row = lerp(lerp(c[0].1, c[1].1, wx), lerp(c[2].1, c[3].1, wx), wy);
                         (e.0 - col).abs() <= APPROX_TOL_PX && (e.1 - row).abs() <= APPROX_TOL_PX
@@ -613,7 +626,7 @@ impl<'a> SourceGrid<'a> {
     #[inline]
     fn at(&self, gx: f64, gy: f64) -> (f64, f64) {
         let (fx, fy) = (gx / LATTICE as f64, gy / LATTICE as f64);
-        let (cx, cy) = (fx.floor(), fy.floor());
+        let (cx, cy) = (floor_fast(fx), floor_fast(fy));
         let (mx, my) = (cx as i64 - self.m0.0, cy as i64 - self.m0.1);
         if mx < 0 || my < 0 || mx as usize >= self.cells.0 || my as usize >= self.cells.1 {
             return self.exact(gx, gy);

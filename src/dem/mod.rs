@@ -22,6 +22,7 @@ pub mod sidecar;
 pub mod srtm;
 pub(crate) mod types;
 
+pub(crate) use self::raster::floor_fast;
 pub use self::raster::Dem;
 pub use self::types::*;
 
