@@ -5,14 +5,19 @@
 //! plain single-part OpenEXR that any reader opens), but the pixel blocks are packed and
 //! compressed here: OpenEXR's ZIP is "interleave the bytes, delta-predict, zlib", and `exr`'s
 //! writer runs that through miniz_oxide at level 4, one block after another, which was 87% of the
-//! mip stage. Here the same transform is deflated at a low level (1–2; see
-//! [`ZipLevel`] and docs/benchmarks.md, "EXR codec") and all blocks of a file are compressed in
-//! parallel. Reading inflates the blocks in parallel with zune-inflate (the inflater `exr`
-//! itself uses), undoes the predictor and the interleave, and converts to f32. Blocks in any
-//! other compression (RLE, PIZ, … written by other tools) are decoded by `exr`'s own block
-//! decompressor, so every file the old `exr`-based reader opened still opens.
+//! mip stage. Here the same transform is deflated at a low level and all blocks of a file are
+//! compressed in parallel. Two deflate libraries are used, each where it was measured fastest at
+//! an acceptable size (see [`ZipLevel`] and docs/benchmarks.md, "EXR codec"): miniz_oxide
+//! level 1 for f32 data (height tiles, f32 mips) and horizon maps, libdeflate level 1 for f16
+//! mip files. miniz_oxide at level 4 also reproduces the `exr` crate's files byte for byte,
+//! which the tests use to prove the transform is OpenEXR's. Reading inflates the blocks in
+//! parallel with zune-inflate (the inflater `exr` itself uses), undoes the predictor and the
+//! interleave, and converts to f32. Blocks in any other compression (RLE, PIZ, … written by
+//! other tools) are decoded by `exr`'s own block decompressor, so every file the old
+//! `exr`-based reader opened still opens.
 //!
-//! The stored samples are the same bits whatever the level: only the deflate stream differs.
+//! The stored samples are the same bits whatever the library or level: only the deflate stream
+//! differs (and, for a given level, it is fixed by the library versions in Cargo.lock).
 //! Output bytes do not depend on the thread count (blocks are compressed independently and
 //! written in offset-table order).
 
@@ -34,19 +39,34 @@ use rayon::prelude::*;
 
 use crate::tileio::TileCompression;
 
-/// Deflate level of the ZIP blocks (miniz_oxide's 0–10 scale). Lower is faster; the table in
+/// Which deflate library, at which level, compresses the ZIP blocks. Both write plain zlib
+/// streams that every OpenEXR reader inflates; only the size and the time differ. The table in
 /// docs/benchmarks.md ("EXR codec") measured each on the shared DEMs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct ZipLevel(pub u8);
+pub enum ZipLevel {
+    /// libdeflate (C, through the `libdeflater` crate) at this level, 1–12: what the stages
+    /// write. Its fast levels are both faster and smaller than miniz_oxide's.
+    Libdeflate(u8),
+    /// miniz_oxide at this level, 0–10: the library the `exr` crate's writer uses, kept so the
+    /// codec can reproduce that writer byte for byte ([`ZipLevel::EXR_CRATE`]) and so the
+    /// benchmark can compare.
+    Miniz(u8),
+}
 
 impl ZipLevel {
-    /// Height tiles (f32 height + f16 mask), horizon maps, f32 mip files: level 1 is within a
-    /// few percent of level 4's size at 3–4× its speed.
-    pub const DEFAULT: ZipLevel = ZipLevel(1);
-    /// f16 mip files: level 2 shrinks them noticeably more than level 1 for little time.
-    pub const F16_MIP: ZipLevel = ZipLevel(2);
-    /// What the `exr` crate's writer used (and this codec reproduces byte for byte).
-    pub const EXR_CRATE: ZipLevel = ZipLevel(4);
+    /// Height tiles (f32 height + f16 mask), horizon maps, f32 mip files: miniz_oxide level 1,
+    /// a greedy single-probe parser, the fastest measured on f32 data (1.3–2× libdeflate
+    /// level 1 per core on f32 mips and SRTM height tiles; a tie on LDEM_4's height tiles and
+    /// on horizon maps) for +0.6…+3.6% size against level 4.
+    pub const DEFAULT: ZipLevel = ZipLevel::Miniz(1);
+    /// f16 mip files (`--precision f16`): libdeflate level 1. miniz_oxide level 1 loses 9–17%
+    /// on these smooth, repetitive pyramids and its level 2 is slow; libdeflate level 1 is both
+    /// faster (1.1–2×) and smaller (+2.5…+2.6% against level 4, where miniz_oxide level 2 is
+    /// +3.0…+4.7%) than miniz_oxide level 2.
+    pub const F16_MIP: ZipLevel = ZipLevel::Libdeflate(1);
+    /// What the `exr` crate's writer used, miniz_oxide at level 4 (and this codec reproduces its
+    /// files byte for byte with it, which the tests check).
+    pub const EXR_CRATE: ZipLevel = ZipLevel::Miniz(4);
 }
 
 /// How the pixels are cut into blocks.
@@ -208,9 +228,41 @@ fn unpredict(data: &mut [u8]) -> Vec<u8> {
     out
 }
 
+/// zlib-compress with the library and level asked for.
+fn deflate(data: &[u8], level: ZipLevel) -> Vec<u8> {
+    match level {
+        ZipLevel::Libdeflate(l) => deflate_libdeflate(data, l),
+        ZipLevel::Miniz(l) => deflate_miniz(data, l),
+    }
+}
+
+/// zlib-compress with libdeflate, reusing one compressor per thread and level (allocating one
+/// costs more than compressing a small block at the fast levels).
+fn deflate_libdeflate(data: &[u8], level: u8) -> Vec<u8> {
+    use libdeflater::{CompressionLvl, Compressor};
+    use std::cell::RefCell;
+    const LEVELS: usize = 13;
+    thread_local! {
+        static COMPRESSORS: RefCell<[Option<Compressor>; LEVELS]> =
+            const { RefCell::new([const { None }; LEVELS]) };
+    }
+    let lvl = CompressionLvl::new(level.into())
+        .unwrap_or_else(|_| panic!("libdeflate level {level} is not in 1–12"));
+    COMPRESSORS.with(|c| {
+        let mut slots = c.borrow_mut();
+        let comp = slots[usize::from(level)].get_or_insert_with(|| Compressor::new(lvl));
+        let mut out = vec![0u8; comp.zlib_compress_bound(data.len())];
+        let n = comp
+            .zlib_compress(data, &mut out)
+            .expect("libdeflate's bound holds the whole stream");
+        out.truncate(n);
+        out
+    })
+}
+
 /// zlib-compress with miniz_oxide, reusing one compressor per thread (a fresh one zeroes
 /// ≈ 300 KB of tables, a noticeable cost for 25–30 KB blocks).
-fn deflate(data: &[u8], level: ZipLevel) -> Vec<u8> {
+fn deflate_miniz(data: &[u8], level: u8) -> Vec<u8> {
     use miniz_oxide::deflate::core::{
         compress, create_comp_flags_from_zip_params, CompressorOxide, TDEFLFlush, TDEFLStatus,
     };
@@ -218,12 +270,12 @@ fn deflate(data: &[u8], level: ZipLevel) -> Vec<u8> {
     thread_local! {
         static COMPRESSOR: RefCell<Option<Box<CompressorOxide>>> = const { RefCell::new(None) };
     }
-    let flags = create_comp_flags_from_zip_params(level.0.into(), 1, 0);
+    let flags = create_comp_flags_from_zip_params(level.into(), 1, 0);
     COMPRESSOR.with(|c| {
         let mut slot = c.borrow_mut();
         let comp = slot.get_or_insert_with(|| Box::new(CompressorOxide::new(flags)));
         comp.reset();
-        comp.set_format_and_level(miniz_oxide::DataFormat::Zlib, level.0);
+        comp.set_format_and_level(miniz_oxide::DataFormat::Zlib, level);
         let mut out = vec![0u8; (data.len() / 2).max(64)];
         let mut input = data;
         let mut pos = 0;
@@ -643,7 +695,9 @@ mod tests {
         decode_horizon_exr, encode_horizon_exr, encode_horizon_exr_exr_crate, HorizonPrecision,
     };
     use crate::mip::schema::Precision;
-    use crate::mip::{decode_mip_exr, encode_mip_exr, encode_mip_exr_exr_crate, level_sizes};
+    use crate::mip::{
+        decode_mip_exr, encode_mip_exr, encode_mip_exr_exr_crate, level_sizes, zip_level,
+    };
     use crate::tileio::{
         decode_height_tile, encode_height_tile, encode_height_tile_exr_crate, HeightTile,
     };
@@ -707,10 +761,12 @@ mod tests {
                     for m in [None, Some(min.as_slice())] {
                         let old =
                             encode_mip_exr_exr_crate(size, m, &max, precision, c, "t").unwrap();
-                        let same = encode_mip_exr(size, m, &max, precision, c, ZipLevel(4), "t");
+                        let same =
+                            encode_mip_exr(size, m, &max, precision, c, ZipLevel::EXR_CRATE, "t");
                         assert_eq!(same.unwrap(), old, "{size} {precision:?} {c:?}");
                         let new =
-                            encode_mip_exr(size, m, &max, precision, c, ZipLevel(1), "t").unwrap();
+                            encode_mip_exr(size, m, &max, precision, c, zip_level(precision), "t")
+                                .unwrap();
                         let (a, b) = (decode_mip_exr(&old).unwrap(), decode_mip_exr(&new).unwrap());
                         assert_eq!(a.sizes, sizes);
                         assert_eq!(b.sizes, sizes);
@@ -744,9 +800,9 @@ mod tests {
             for p in [HorizonPrecision::F16, HorizonPrecision::F32] {
                 for c in [TileCompression::Zip, TileCompression::None] {
                     let old = encode_horizon_exr_exr_crate(n, a, &e, p, c).unwrap();
-                    let same = encode_horizon_exr(n, a, &e, p, c, ZipLevel(4)).unwrap();
+                    let same = encode_horizon_exr(n, a, &e, p, c, ZipLevel::EXR_CRATE).unwrap();
                     assert_eq!(same, old);
-                    let new = encode_horizon_exr(n, a, &e, p, c, ZipLevel(1)).unwrap();
+                    let new = encode_horizon_exr(n, a, &e, p, c, ZipLevel::DEFAULT).unwrap();
                     let (x, y) = (
                         decode_horizon_exr(&old, n).unwrap(),
                         decode_horizon_exr(&new, n).unwrap(),

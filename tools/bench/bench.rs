@@ -59,9 +59,13 @@ pub enum BenchCommand {
         /// At most this many files per product (spread over the set).
         #[arg(long, default_value_t = 48)]
         max_files: usize,
-        /// Deflate levels of the codec to measure.
-        #[arg(long, value_delimiter = ',', default_values_t = [1u8, 2, 4, 6])]
+        /// miniz_oxide deflate levels of the codec to measure (0–10; what the codec used
+        /// before libdeflate, and the `exr` crate's library).
+        #[arg(long, value_delimiter = ',', default_values_t = [1u8, 2])]
         levels: Vec<u8>,
+        /// libdeflate deflate levels of the codec to measure (1–12; what the stages write).
+        #[arg(long, value_delimiter = ',', default_values_t = [1u8, 2, 3, 4, 6])]
+        libdeflate_levels: Vec<u8>,
         #[arg(long)]
         markdown: bool,
         #[arg(long)]
@@ -410,6 +414,7 @@ pub fn run(cmd: BenchCommand, quiet: bool) -> Result<()> {
             reps,
             max_files,
             levels,
+            libdeflate_levels,
             markdown,
             json,
         } => crate::codec::run_codec(
@@ -418,6 +423,7 @@ pub fn run(cmd: BenchCommand, quiet: bool) -> Result<()> {
             reps.max(1),
             max_files.max(1),
             &levels,
+            &libdeflate_levels,
             markdown,
             json,
             quiet,

@@ -2,8 +2,9 @@
 //! stages really write (issue 14). Tiles LDEM_4 (4 levels) and SRTM N19W156, builds their mips
 //! and LDEM_4's level-1 horizon maps with the `penumbra` binary, then, on one thread, encodes
 //! and decodes a sample of the files with the `exr` crate's own writer/reader (what Penumbra
-//! used before), with src/exrcodec.rs at several deflate levels and uncompressed, against a
-//! memcpy of the same raw bytes in the same run. Every decode is checked bit for bit.
+//! used before), with src/exrcodec.rs at several miniz_oxide and libdeflate levels and
+//! uncompressed, against a memcpy of the same raw bytes in the same run. Every decode is checked
+//! bit for bit.
 
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
@@ -411,6 +412,7 @@ pub fn run_codec(
     reps: usize,
     max_files: usize,
     levels: &[u8],
+    libdeflate_levels: &[u8],
     markdown: bool,
     json: bool,
     quiet: bool,
@@ -481,13 +483,19 @@ pub fn run_codec(
                     vec![("exr crate ZIP (level 4, before)".into(), None)];
                 for &lv in levels {
                     opts.push((
-                        format!("codec ZIP level {lv}"),
-                        Some((TileCompression::Zip, ZipLevel(lv))),
+                        format!("codec ZIP miniz_oxide level {lv}"),
+                        Some((TileCompression::Zip, ZipLevel::Miniz(lv))),
+                    ));
+                }
+                for &lv in libdeflate_levels {
+                    opts.push((
+                        format!("codec ZIP libdeflate level {lv}"),
+                        Some((TileCompression::Zip, ZipLevel::Libdeflate(lv))),
                     ));
                 }
                 opts.push((
                     "codec uncompressed".into(),
-                    Some((TileCompression::None, ZipLevel(1))),
+                    Some((TileCompression::None, ZipLevel::DEFAULT)),
                 ));
                 let mut exr_size = 0usize;
                 for (label, opt) in opts {
