@@ -466,6 +466,7 @@ const LATTICE: i64 = 8;
 const EXACT: u8 = 0;
 const INTERP: u8 = 1;
 const OUTSIDE: u8 = 2;
+const SPLIT: u8 = 3;
 /// Largest error (source pixels) allowed where source coordinates are interpolated.
 pub const APPROX_TOL_PX: f64 = 1e-3;
 
@@ -484,8 +485,19 @@ struct SourceGrid<'a> {
     cells: (usize, usize),
     /// Exact coordinates at lattice points, row-major, `(cells.0 + 1) × (cells.1 + 1)`.
     pts: Vec<(f64, f64)>,
-    /// Per cell: [`EXACT`], [`INTERP`] or [`OUTSIDE`] (wholly off the source).
+    /// Per cell: [`EXACT`], [`INTERP`], [`SPLIT`] or [`OUTSIDE`] (wholly off the source).
     ok: Vec<u8>,
+    /// Per [`SPLIT`] cell, the index of its halves in `split`.
+    split_at: Vec<u32>,
+    split: Vec<Split>,
+}
+
+/// A lattice cell too curved to interpolate whole, cut into 2 × 2 sub-cells (half the
+/// spacing, a quarter of the interpolation error): exact coordinates at the 3 × 3 sub-lattice
+/// points, and per sub-cell whether it interpolates within the tolerance (else it is exact).
+struct Split {
+    pts: [(f64, f64); 9],
+    ok: [bool; 4],
 }
 
 impl<'a> SourceGrid<'a> {
@@ -528,6 +540,8 @@ impl<'a> SourceGrid<'a> {
             cells,
             pts: Vec::with_capacity((cells.0 + 1) * (cells.1 + 1)),
             ok: Vec::with_capacity(cells.0 * cells.1),
+            split_at: Vec::new(),
+            split: Vec::new(),
         };
         for my in 0..=cells.1 as i64 {
             for mx in 0..=cells.0 as i64 {
@@ -588,7 +602,8 @@ impl<'a> SourceGrid<'a> {
                 let cols = c.iter().map(|p| p.0);
                 let spread = cols.clone().fold(f64::NEG_INFINITY, f64::max)
                     - cols.fold(f64::INFINITY, f64::min);
-                let mut ok = inside && spread < half_width;
+                let candidate = inside && spread < half_width;
+                let mut ok = candidate;
                 if ok {
                     // Check the centre and the four edge midpoints: the centre alone misses
                     // maps whose second derivatives cancel there (f_xx ≈ −f_yy).
@@ -616,10 +631,132 @@ impl<'a> SourceGrid<'a> {
                         (e.0 - col).abs() <= APPROX_TOL_PX && (e.1 - row).abs() <= APPROX_TOL_PX
                     });
                 }
-                grid.ok.push(if ok { INTERP } else { EXACT });
+                if ok {
+                    grid.ok.push(INTERP);
+                    continue;
+                }
+                if candidate {
+                    // Too curved for one cell: try its four halves, whose corners are the
+                    // cell's corners, edge midpoints and centre (mostly computed above).
+                    let (bx, by) = (
+                        ((m0.0 + mx as i64) * LATTICE) as f64,
+                        ((m0.1 + my as i64) * LATTICE) as f64,
+                    );
+                    let l = LATTICE as f64;
+                    let mut mid = |wx: f64, wy: f64| -> (f64, f64) {
+                        let memo = match (wx, wy) {
+                            (0.5, 0.5) => None,
+                            (0.5, _) => Some(&mut h_mid[(my + wy as usize) * cells.0 + mx]),
+                            _ => Some(&mut v_mid[my * (cells.0 + 1) + mx + wx as usize]),
+                        };
+                        let at = (bx + wx * l, by + wy * l);
+                        match memo {
+                            None => grid.exact(at.0, at.1),
+                            Some(m) => *m.get_or_insert_with(|| grid.exact(at.0, at.1)),
+                        }
+                    };
+                    let pts = [
+                        c[0],
+                        mid(0.5, 0.0),
+                        c[1],
+                        mid(0.0, 0.5),
+                        mid(0.5, 0.5),
+                        mid(1.0, 0.5),
+                        c[2],
+                        mid(0.5, 1.0),
+                        c[3],
+                    ];
+                    // Midpoints of the inner edges: on the cell's horizontal centre line (left
+                    // and right half) and on its vertical centre line (top and bottom half).
+                    let on_h = [
+                        grid.exact(bx + 0.25 * l, by + 0.5 * l),
+                        grid.exact(bx + 0.75 * l, by + 0.5 * l),
+                    ];
+                    let on_v = [
+                        grid.exact(bx + 0.5 * l, by + 0.25 * l),
+                        grid.exact(bx + 0.5 * l, by + 0.75 * l),
+                    ];
+                    let mut sub_ok = [false; 4];
+                    for (k, ok) in sub_ok.iter_mut().enumerate() {
+                        let (sx, sy) = (k % 2, k / 2);
+                        let q = |i: usize, j: usize| pts[(sy + j) * 3 + sx + i];
+                        let q = [q(0, 0), q(1, 0), q(0, 1), q(1, 1)];
+                        let (ox, oy) = (bx + sx as f64 * l / 2.0, by + sy as f64 * l / 2.0);
+                        let lerp = |p: f64, r: f64, w: f64| p + (r - p) * w;
+                        *ok = [(0.5, 0.5), (0.5, 0.0), (0.5, 1.0), (0.0, 0.5), (1.0, 0.5)]
+                            .iter()
+                            .all(|&(wx, wy)| {
+                                let e = match (wx, wy) {
+                                    // The edges shared by two halves, computed once.
+                                    (0.5, 1.0) if sy == 0 => on_h[sx],
+                                    (0.5, 0.0) if sy == 1 => on_h[sx],
+                                    (1.0, 0.5) if sx == 0 => on_v[sy],
+                                    (0.0, 0.5) if sx == 1 => on_v[sy],
+                                    _ => grid.exact(ox + wx * l / 2.0, oy + wy * l / 2.0),
+                                };
+                                let col =
+                                    lerp(lerp(q[0].0, q[1].0, wx), lerp(q[2].0, q[3].0, wx), wy);
+                                let row =
+                                    lerp(lerp(q[0].1, q[1].1, wx), lerp(q[2].1, q[3].1, wx), wy);
+                                (e.0 - col).abs() <= APPROX_TOL_PX
+                                    && (e.1 - row).abs() <= APPROX_TOL_PX
+                            });
+                    }
+                    if sub_ok.iter().any(|&o| o) {
+                        if grid.split_at.is_empty() {
+                            grid.split_at = vec![u32::MAX; cells.0 * cells.1];
+                        }
+                        grid.split_at[my * cells.0 + mx] = grid.split.len() as u32;
+                        grid.split.push(Split { pts, ok: sub_ok });
+                        grid.ok.push(SPLIT);
+                        continue;
+                    }
+                }
+                grid.ok.push(EXACT);
             }
         }
         grid
+    }
+
+    /// [`SourceGrid::at`] for the whole pixels `gx0 ..` of row `gy`, the same values, with the
+    /// cell looked up once per run of pixels in one lattice cell.
+    fn row(&self, gx0: i64, gy: i64, out: &mut [(f64, f64)]) {
+        let fy = gy as f64 / LATTICE as f64;
+        let cy = floor_fast(fy);
+        let my = cy as i64 - self.m0.1;
+        let wy = fy - cy;
+        let end = gx0 + out.len() as i64;
+        let mut gx = gx0;
+        while gx < end {
+            let cx = gx.div_euclid(LATTICE);
+            let run = gx..((cx + 1) * LATTICE).min(end);
+            let slots = &mut out[(gx - gx0) as usize..(run.end - gx0) as usize];
+            let mx = cx - self.m0.0;
+            let inside =
+                my >= 0 && (my as usize) < self.cells.1 && mx >= 0 && (mx as usize) < self.cells.0;
+            let (my_, mx_) = (my as usize, mx as usize);
+            if inside && self.ok[my_ * self.cells.0 + mx_] == INTERP {
+                let w = self.cells.0 + 1;
+                let (a, b) = (self.pts[my_ * w + mx_], self.pts[my_ * w + mx_ + 1]);
+                let (c, d) = (
+                    self.pts[(my_ + 1) * w + mx_],
+                    self.pts[(my_ + 1) * w + mx_ + 1],
+                );
+                for (x, o) in run.clone().zip(slots.iter_mut()) {
+                    // (x − 8·cx)/8 is exactly at()'s fx − floor(fx).
+                    let wx = (x - cx * LATTICE) as f64 / LATTICE as f64;
+                    let lerp = |p: f64, q: f64, r: f64, s: f64| {
+                        (p * (1.0 - wx) + q * wx) * (1.0 - wy) + (r * (1.0 - wx) + s * wx) * wy
+                    };
+                    *o = (lerp(a.0, b.0, c.0, d.0), lerp(a.1, b.1, c.1, d.1));
+                }
+            } else {
+                for (x, o) in run.clone().zip(slots.iter_mut()) {
+                    *o = self.at(x as f64, gy as f64);
+                }
+            }
+            gx = run.end;
+        }
     }
 
     /// Source (col, row) of fractional global face pixel (gx, gy).
@@ -635,6 +772,21 @@ impl<'a> SourceGrid<'a> {
         match self.ok[my * self.cells.0 + mx] {
             INTERP => {}
             OUTSIDE => return (f64::NAN, f64::NAN),
+            SPLIT => {
+                let sp = &self.split[self.split_at[my * self.cells.0 + mx] as usize];
+                let (wx, wy) = (2.0 * (fx - cx), 2.0 * (fy - cy));
+                let (sx, sy) = ((wx >= 1.0) as usize, (wy >= 1.0) as usize);
+                if !sp.ok[sy * 2 + sx] {
+                    return self.exact(gx, gy);
+                }
+                let (wx, wy) = (wx - sx as f64, wy - sy as f64);
+                let q = |i: usize, j: usize| sp.pts[(sy + j) * 3 + sx + i];
+                let (a, b, c, d) = (q(0, 0), q(1, 0), q(0, 1), q(1, 1));
+                let lerp = |p: f64, q: f64, r: f64, s: f64| {
+                    (p * (1.0 - wx) + q * wx) * (1.0 - wy) + (r * (1.0 - wx) + s * wx) * wy
+                };
+                return (lerp(a.0, b.0, c.0, d.0), lerp(a.1, b.1, c.1, d.1));
+            }
             _ => return self.exact(gx, gy),
         }
         let (wx, wy) = (fx - cx, fy - cy);
@@ -648,8 +800,9 @@ impl<'a> SourceGrid<'a> {
     }
 }
 
-/// Sample one height tile (halo included) directly from the source: each pixel is the mean
-/// of [`box_samples`]² interpolated source samples spread over its footprint.
+/// Sample one height tile (halo included) on its own: each pixel is the mean of the
+/// [`box_samples`]² interpolated source samples at the centres of the level-`level + log2 k`
+/// pixels it covers (one at its own centre for k = 1).
 pub fn render_height_tile(
     dem: &Dem,
     layout: &Layout,
@@ -658,9 +811,31 @@ pub fn render_height_tile(
     prefilter: Prefilter,
     height_shift: f64,
 ) -> HeightTile {
+    let k = box_samples(layout, id.level, prefilter);
+    let depth = k.trailing_zeros() as u8;
+    if (layout.stored_size() << depth) <= GROUP_MAX_SIDE {
+        // The taps are the pixel centres of the level `depth` finer: sample that level once
+        // over the tile's footprint, on its own (finer) lattice, and average.
+        let s = sample_group(dem, layout, id, id.level + depth, resampling);
+        return tile_from_samples(&s, layout, id, id.level + depth, height_shift);
+    }
+    // Tiles too large to hold k² samples per pixel: interpolate each tap's coordinates on this
+    // level's lattice instead.
+    render_taps(dem, layout, id, resampling, k, height_shift)
+}
+
+/// Tile `id` with each pixel the mean of `k × k` source samples spread over its footprint, their
+/// coordinates interpolated on the tile's own level's lattice.
+fn render_taps(
+    dem: &Dem,
+    layout: &Layout,
+    id: TileId,
+    resampling: Resampling,
+    k: u32,
+    height_shift: f64,
+) -> HeightTile {
     let size = layout.stored_size();
     let halo = layout.halo as i64;
-    let k = box_samples(layout, id.level, prefilter);
     let offsets: Vec<f64> = (0..k).map(|a| (a as f64 + 0.5) / k as f64 - 0.5).collect();
     let grid = SourceGrid::new(dem, layout, id);
     let mut out = TileBuilder::new(size);
@@ -772,16 +947,17 @@ struct Samples {
     mask: Vec<u8>,
 }
 
-/// Sample the finest level over the footprint of group root `root` (halo included): the
-/// pixels every tile of the group is averaged from. Rows are sampled in parallel.
+/// Sample level `sample_level` (the finest, for a group) over the footprint of tile `root`
+/// (halo included): the pixels every tile of the group is averaged from. Rows are sampled in
+/// parallel.
 fn sample_group(
     dem: &Dem,
     layout: &Layout,
     root: TileId,
-    finest: u8,
+    sample_level: u8,
     resampling: Resampling,
 ) -> Samples {
-    let k = 1i64 << (finest - root.level);
+    let k = 1i64 << (sample_level - root.level);
     let (n, halo) = (layout.tile_size as i64, layout.halo as i64);
     let (x0, y0) = (
         k * (root.x as i64 * n - halo),
@@ -792,7 +968,7 @@ fn sample_group(
         dem,
         layout,
         root.face,
-        finest,
+        sample_level,
         (x0 - 1, y0 - 1),
         (w as i64 + 2, w as i64 + 2),
     );
@@ -802,13 +978,15 @@ fn sample_group(
         .par_chunks_mut(w)
         .zip(m.par_chunks_mut(w))
         .enumerate()
-        .for_each(|(j, (hrow, mrow))| {
-            let gy = (y0 + j as i64) as f64;
-            for (i, (h, mk)) in hrow.iter_mut().zip(mrow.iter_mut()).enumerate() {
-                let (col, row) = grid.at((x0 + i as i64) as f64, gy);
-                (*h, *mk) = dem.sample_pixel(col, row, resampling);
-            }
-        });
+        .for_each_init(
+            || vec![(0.0, 0.0); w],
+            |coords, (j, (hrow, mrow))| {
+                grid.row(x0, y0 + j as i64, coords);
+                for ((h, mk), &(col, row)) in hrow.iter_mut().zip(mrow.iter_mut()).zip(&*coords) {
+                    (*h, *mk) = dem.sample_pixel(col, row, resampling);
+                }
+            },
+        );
     Samples {
         x0,
         y0,
@@ -818,19 +996,32 @@ fn sample_group(
     }
 }
 
-/// Tile `id` of a group from its finest-level samples: each pixel the mean of the
-/// `2^(finest − level)`² samples whose centres [`render_height_tile`]'s box taps sit on.
+/// Tile `id` from samples at level `sample_level`: each pixel the mean of the
+/// `2^(sample_level − level)`² samples it covers that have data.
 fn tile_from_samples(
     s: &Samples,
     layout: &Layout,
     id: TileId,
-    finest: u8,
+    sample_level: u8,
     height_shift: f64,
 ) -> HeightTile {
     let size = layout.stored_size();
     let halo = layout.halo as i64;
-    let k = 1i64 << (finest - id.level);
+    let k = 1i64 << (sample_level - id.level);
     let mut out = TileBuilder::new(size);
+    if k == 1 {
+        // The same arithmetic as the general case with one sample, row by row.
+        for j in 0..size as i64 {
+            let (gx, gy) = layout.global_pixel(id, -halo, j - halo);
+            let at = (gy - s.y0) as usize * s.w + (gx - s.x0) as usize;
+            for (&h, &mk) in s.height[at..at + size].iter().zip(&s.mask[at..at + size]) {
+                let mut acc = BoxSum::default();
+                acc.add(h, mk);
+                out.push(acc, height_shift);
+            }
+        }
+        return out.finish();
+    }
     for j in 0..size as i64 {
         for i in 0..size as i64 {
             let (gx, gy) = layout.global_pixel(id, i - halo, j - halo);
@@ -1046,10 +1237,10 @@ mod tests {
         .unwrap()
     }
 
-    /// Tiles averaged from a group's finest-level samples equal the tiles sampled from the
-    /// source on their own: bit for bit at the finest level (same positions, same lattice), and
-    /// within the lattice's interpolation tolerance above it, where the per-tile path
-    /// interpolates its box taps' source coordinates on the coarser level's lattice.
+    /// Tiles averaged from a group's finest-level samples equal tiles rendered on their own bit
+    /// for bit (the same positions on the same global lattice), and equal the fallback for
+    /// huge tiles (box taps with coordinates interpolated on the tile's own, coarser lattice)
+    /// within the lattice's interpolation tolerance (bit for bit at the finest level).
     #[test]
     fn group_tiles_match_tiles_sampled_on_their_own() {
         // 72: the tiles oversample the source 14× and some lattice cells interpolate;
@@ -1057,6 +1248,10 @@ mod tests {
         for (w, tile_size) in [(72, 64), (720, 16)] {
             group_tiles_match_per_tile_tiles(w, tile_size);
         }
+    }
+
+    fn bits(v: &[f32]) -> Vec<u32> {
+        v.iter().map(|x| x.to_bits()).collect()
     }
 
     fn group_tiles_match_per_tile_tiles(w: usize, tile_size: u32) {
@@ -1110,7 +1305,7 @@ mod tests {
                     for x in 0..1u32 << level {
                         let id = TileId { level, face, x, y };
                         let g = tile_from_samples(&s, &layout, id, 2, 0.0);
-                        let t = render_height_tile(
+                        let own = render_height_tile(
                             &dem,
                             &layout,
                             id,
@@ -1118,6 +1313,10 @@ mod tests {
                             Prefilter::Box,
                             0.0,
                         );
+                        assert_eq!(bits(&g.height), bits(&own.height), "{id:?}");
+                        assert_eq!(g.mask, own.mask, "{id:?}");
+                        let k = box_samples(&layout, level, Prefilter::Box);
+                        let t = render_taps(&dem, &layout, id, Resampling::Bilinear, k, 0.0);
                         assert_eq!(g.mask, t.mask, "{id:?}");
                         for (a, b) in g.height.iter().zip(&t.height) {
                             if level == 2 {
@@ -1193,5 +1392,53 @@ mod tests {
         }
         seen.sort();
         assert_eq!(seen, candidates);
+    }
+
+    /// Wherever the grid interpolates (whole cells or halves of split ones), the coordinates are
+    /// within twice the tolerance checked at the cells' centres and edge midpoints, and split
+    /// cells do occur where whole ones are too curved (towards the poles of a geographic raster).
+    #[test]
+    fn interpolated_source_coordinates_stay_near_exact() {
+        for (w, tile_size, levels) in [(1440, 512, 4u8), (72, 64, 3)] {
+            let dem = global(w);
+            let layout = Layout {
+                projection: Projection::Gnomonic,
+                tile_size,
+                halo: 2,
+                levels,
+            };
+            let finest = levels - 1;
+            let (mut worst, mut counts) = (0f64, [0usize; 4]);
+            for face in [cube::Face::Pz, cube::Face::Px] {
+                // The tile whose corner is the face centre: the pole on face +Z.
+                let c = (1u32 << finest) / 2 - 1;
+                let id = TileId {
+                    level: finest,
+                    face,
+                    x: c,
+                    y: c,
+                };
+                let g = SourceGrid::new(&dem, &layout, id);
+                for &o in &g.ok {
+                    counts[o as usize] += 1;
+                }
+                for j in -2..tile_size as i64 + 2 {
+                    for i in -2..tile_size as i64 + 2 {
+                        let (gx, gy) = layout.global_pixel(id, i, j);
+                        let (gx, gy) = (gx as f64 + 0.25, gy as f64 - 0.25);
+                        let (a, e) = (g.at(gx, gy), g.exact(gx, gy));
+                        worst = worst.max((a.0 - e.0).abs()).max((a.1 - e.1).abs());
+                    }
+                }
+            }
+            eprintln!(
+                "{w} px source, {tile_size}-px tiles: cells exact/interp/outside/split {counts:?}, \
+                 worst {worst:.2e} px"
+            );
+            assert!(worst <= 2.0 * APPROX_TOL_PX, "{worst} px off");
+            if w == 1440 {
+                assert!(counts[SPLIT as usize] > 0 && counts[INTERP as usize] > 0);
+            }
+        }
     }
 }
