@@ -1022,15 +1022,29 @@ fn tile_from_samples(
         }
         return out.finish();
     }
+    let k = k as usize;
     for j in 0..size as i64 {
-        for i in 0..size as i64 {
-            let (gx, gy) = layout.global_pixel(id, i - halo, j - halo);
-            let (sx, sy) = ((gx * k - s.x0) as usize, (gy * k - s.y0) as usize);
+        let (gx, gy) = layout.global_pixel(id, -halo, j - halo);
+        let (sx, sy) = (
+            (gx * k as i64 - s.x0) as usize,
+            (gy * k as i64 - s.y0) as usize,
+        );
+        // The k sample rows under this output row, cut to its span.
+        let span = sx..sx + size * k;
+        let rows: Vec<(&[f32], &[u8])> = (0..k)
+            .map(|b| {
+                let r = (sy + b) * s.w;
+                (
+                    &s.height[r + span.start..r + span.end],
+                    &s.mask[r + span.start..r + span.end],
+                )
+            })
+            .collect();
+        for i in 0..size {
             let mut acc = BoxSum::default();
-            for b in 0..k as usize {
-                let at = (sy + b) * s.w + sx;
-                for a in at..at + k as usize {
-                    acc.add(s.height[a], s.mask[a]);
+            for (h, m) in &rows {
+                for a in i * k..(i + 1) * k {
+                    acc.add(h[a], m[a]);
                 }
             }
             out.push(acc, height_shift);
