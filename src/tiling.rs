@@ -538,57 +538,85 @@ impl<'a> SourceGrid<'a> {
             level,
             m0,
             cells,
-            pts: Vec::with_capacity((cells.0 + 1) * (cells.1 + 1)),
+            pts: Vec::new(),
             ok: Vec::with_capacity(cells.0 * cells.1),
             split_at: Vec::new(),
             split: Vec::new(),
         };
-        for my in 0..=cells.1 as i64 {
-            for mx in 0..=cells.0 as i64 {
-                let p = grid.exact(
-                    ((m0.0 + mx) * LATTICE) as f64,
-                    ((m0.1 + my) * LATTICE) as f64,
-                );
-                grid.pts.push(p);
+        // Cells wholly off the source (for sources with a bounding cap): the cell's own cap does
+        // not meet the source's. Tested per block of cells first, then per cell in the blocks
+        // that may touch the source; a cell called off the source only saves work, since its
+        // pixels would sample no data anyway.
+        let mut outside = vec![false; cells.0 * cells.1];
+        if let Some((cc, cr)) = dem.footprint_cap() {
+            let off = |mx: usize, my: usize, nx: usize, ny: usize| -> bool {
+                let corner = |dx: usize, dy: usize| {
+                    let (s, t) = layout.global_st(
+                        level,
+                        ((m0.0 + (mx + dx) as i64) * LATTICE) as f64,
+                        ((m0.1 + (my + dy) as i64) * LATTICE) as f64,
+                    );
+                    layout.st_to_dir(face, s, t)
+                };
+                let ds = [corner(0, 0), corner(nx, 0), corner(0, ny), corner(nx, ny)];
+                let mut mid = [0.0; 3];
+                for d in &ds {
+                    for k in 0..3 {
+                        mid[k] += d[k];
+                    }
+                }
+                let n = (mid[0] * mid[0] + mid[1] * mid[1] + mid[2] * mid[2]).sqrt();
+                let mid = [mid[0] / n, mid[1] / n, mid[2] / n];
+                // Cell edges are great circles for gnomonic, nearly so for equal-angle:
+                // 1% margin on the corner radius.
+                let r = ds
+                    .iter()
+                    .map(|d| crate::cube::angle_between(mid, *d))
+                    .fold(0.0f64, f64::max)
+                    * 1.01;
+                crate::cube::angle_between(mid, cc) > r + cr
+            };
+            const BLOCK: usize = 8;
+            for by in (0..cells.1).step_by(BLOCK) {
+                for bx in (0..cells.0).step_by(BLOCK) {
+                    let (ex, ey) = ((bx + BLOCK).min(cells.0), (by + BLOCK).min(cells.1));
+                    let whole = off(bx, by, ex - bx, ey - by);
+                    for my in by..ey {
+                        for mx in bx..ex {
+                            outside[my * cells.0 + mx] = whole || off(mx, my, 1, 1);
+                        }
+                    }
+                }
+            }
+        }
+        // Exact coordinates at the lattice points of cells that may touch the source.
+        let w = cells.0 + 1;
+        grid.pts = vec![(f64::NAN, f64::NAN); w * (cells.1 + 1)];
+        for my in 0..cells.1 {
+            for mx in 0..cells.0 {
+                if outside[my * cells.0 + mx] {
+                    continue;
+                }
+                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    let k = (my + dy) * w + mx + dx;
+                    if grid.pts[k].0.is_nan() && grid.pts[k].1.is_nan() {
+                        grid.pts[k] = grid.exact(
+                            ((m0.0 + (mx + dx) as i64) * LATTICE) as f64,
+                            ((m0.1 + (my + dy) as i64) * LATTICE) as f64,
+                        );
+                    }
+                }
             }
         }
         let half_width = dem.width() as f64 / 4.0;
-        let cap = dem.footprint_cap();
         // Exact coordinates at the midpoints of horizontal and vertical lattice edges.
         let mut h_mid: Vec<Option<(f64, f64)>> = vec![None; cells.0 * (cells.1 + 1)];
         let mut v_mid: Vec<Option<(f64, f64)>> = vec![None; (cells.0 + 1) * cells.1];
         for my in 0..cells.1 {
             for mx in 0..cells.0 {
-                if let Some((cc, cr)) = cap {
-                    // Wholly off the source: the cell's own cap does not meet the source's.
-                    let corner = |dx: i64, dy: i64| {
-                        let (s, t) = layout.global_st(
-                            level,
-                            ((m0.0 + mx as i64 + dx) * LATTICE) as f64,
-                            ((m0.1 + my as i64 + dy) * LATTICE) as f64,
-                        );
-                        layout.st_to_dir(face, s, t)
-                    };
-                    let ds = [corner(0, 0), corner(1, 0), corner(0, 1), corner(1, 1)];
-                    let mut mid = [0.0; 3];
-                    for d in &ds {
-                        for k in 0..3 {
-                            mid[k] += d[k];
-                        }
-                    }
-                    let n = (mid[0] * mid[0] + mid[1] * mid[1] + mid[2] * mid[2]).sqrt();
-                    let mid = [mid[0] / n, mid[1] / n, mid[2] / n];
-                    // Cell edges are great circles for gnomonic, nearly so for equal-angle:
-                    // 1% margin on the corner radius.
-                    let r = ds
-                        .iter()
-                        .map(|d| crate::cube::angle_between(mid, *d))
-                        .fold(0.0f64, f64::max)
-                        * 1.01;
-                    if crate::cube::angle_between(mid, cc) > r + cr {
-                        grid.ok.push(OUTSIDE);
-                        continue;
-                    }
+                if outside[my * cells.0 + mx] {
+                    grid.ok.push(OUTSIDE);
+                    continue;
                 }
                 let c = [
                     grid.pts[my * (cells.0 + 1) + mx],
