@@ -763,7 +763,14 @@ impl<'a> SourceGrid<'a> {
             let inside =
                 my >= 0 && (my as usize) < self.cells.1 && mx >= 0 && (mx as usize) < self.cells.0;
             let (my_, mx_) = (my as usize, mx as usize);
-            if inside && self.ok[my_ * self.cells.0 + mx_] == INTERP {
+            let code = if inside {
+                self.ok[my_ * self.cells.0 + mx_]
+            } else {
+                EXACT
+            };
+            if code == OUTSIDE {
+                slots.fill((f64::NAN, f64::NAN));
+            } else if code == INTERP {
                 let w = self.cells.0 + 1;
                 let (a, b) = (self.pts[my_ * w + mx_], self.pts[my_ * w + mx_ + 1]);
                 let (c, d) = (
