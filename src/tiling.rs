@@ -900,13 +900,15 @@ struct BoxSum {
 }
 
 impl BoxSum {
+    /// Add one sample unless it has no data. Branch-free: a sample without data adds +0.0,
+    /// which leaves the sum's bits unchanged (it starts at +0.0 and round-to-nearest never
+    /// makes it −0.0).
     #[inline]
     fn add(&mut self, h: f32, mk: u8) {
-        if mk != mask::NO_DATA {
-            self.sum += h as f64;
-            self.n += 1;
-            self.filled |= mk == mask::FILLED;
-        }
+        let valid = mk != mask::NO_DATA;
+        self.sum += if valid { h as f64 } else { 0.0 };
+        self.n += valid as u32;
+        self.filled |= mk == mask::FILLED;
     }
 }
 
