@@ -10,3 +10,48 @@ pub(crate) fn rng(seed: u64) -> impl FnMut() -> f64 {
         (st >> 11) as f64 / (1u64 << 53) as f64
     }
 }
+
+/// A DEM held in memory: `w × h` samples `f(column, row)` on `georef`.
+pub(crate) fn synthetic_dem(
+    w: usize,
+    h: usize,
+    georef: crate::dem::GeoRef,
+    f: impl Fn(usize, usize) -> f32,
+) -> crate::dem::Dem {
+    use crate::dem::{Dem, DemParts, Samples, DEFAULT_MAX_FILL_PX};
+    let mut v = Vec::with_capacity(w * h);
+    for r in 0..h {
+        for c in 0..w {
+            v.push(f(c, r));
+        }
+    }
+    Dem::new(
+        DemParts {
+            width: w,
+            height: h,
+            samples: Samples::Owned(v),
+            scale: 1.0,
+            offset: 0.0,
+            nodata: None,
+            georef,
+            datum_radius_m: None,
+            target: None,
+            sources: vec![],
+            format: "test".into(),
+        },
+        DEFAULT_MAX_FILL_PX,
+    )
+    .unwrap()
+}
+
+/// A pixel-registered geographic raster of the whole body, `w × h` pixels, columns from 0°E.
+pub(crate) fn global_georef(w: usize, h: usize) -> crate::dem::GeoRef {
+    let d = 360.0 / w as f64;
+    crate::dem::GeoRef {
+        crs: crate::dem::Crs::Geographic,
+        x0: d / 2.0,
+        y0: 90.0 - d / 2.0,
+        dx: d,
+        dy: 180.0 / h as f64,
+    }
+}

@@ -1248,44 +1248,16 @@ fn run_unit(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::dem::{Crs, DemParts, GeoRef, Samples as DemSamples};
+    use crate::testutil::{global_georef, synthetic_dem};
 
     /// A smooth global geographic raster, `w × w/2` pixel-registered samples.
     fn global(w: usize) -> Dem {
-        let h = w / 2;
-        let d = 360.0 / w as f64;
-        let georef = GeoRef {
-            crs: Crs::Geographic,
-            x0: -180.0 + d / 2.0,
-            y0: 90.0 - d / 2.0,
-            dx: d,
-            dy: d,
-        };
-        let mut v = Vec::with_capacity(w * h);
-        for r in 0..h {
-            for c in 0..w {
-                let (lat, lon) = (georef.y0 - r as f64 * d, georef.x0 + c as f64 * d);
-                let p = cube::latlon_to_dir(lat.to_radians(), lon.to_radians());
-                v.push((1500.0 * (3.0 * p[0]).sin() * (2.0 * p[1]).cos() + 900.0 * p[2]) as f32);
-            }
-        }
-        Dem::new(
-            DemParts {
-                width: w,
-                height: h,
-                samples: DemSamples::Owned(v),
-                scale: 1.0,
-                offset: 0.0,
-                nodata: None,
-                georef,
-                datum_radius_m: None,
-                target: None,
-                sources: vec![],
-                format: "test raster".into(),
-            },
-            64,
-        )
-        .unwrap()
+        let g = global_georef(w, w / 2);
+        synthetic_dem(w, w / 2, g.clone(), |c, r| {
+            let (lat, lon) = (g.y0 - r as f64 * g.dy, g.x0 + c as f64 * g.dx);
+            let p = cube::latlon_to_dir(lat.to_radians(), lon.to_radians());
+            (1500.0 * (3.0 * p[0]).sin() * (2.0 * p[1]).cos() + 900.0 * p[2]) as f32
+        })
     }
 
     /// Tiles averaged from a group's finest-level samples equal tiles rendered on their own bit

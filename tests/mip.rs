@@ -13,7 +13,7 @@ use penumbra::progress::NoProgress;
 use penumbra::tileio::{self, HeightTile};
 use penumbra::tiling::{tile_dem, TileOptions};
 
-use crate::util::{analytic, dem_from, global_dem, penumbra_bin, shared_data, snapshot, Rng};
+use crate::util::{analytic, geographic_dem, global_dem, penumbra_bin, shared_data, snapshot, Rng};
 
 fn same(a: f32, b: f32) -> bool {
     a == b || (a.is_nan() && b.is_nan())
@@ -451,21 +451,6 @@ fn f16_files_bound_the_f32_files() {
 /// A regional tileset (lat −20..20, lon 20..70: two faces, partly covered) of 8-px tiles on
 /// 5 levels: 16 tiles per face side at the finest.
 fn regional_tileset(dir: &Path) {
-    use penumbra::dem::{Crs, GeoRef};
-    let (w, h, d) = (200usize, 160usize, 0.25f64);
-    let georef = GeoRef {
-        crs: Crs::Geographic,
-        x0: 20.0 + d / 2.0,
-        y0: 20.0 - d / 2.0,
-        dx: d,
-        dy: d,
-    };
-    let mut v = Vec::with_capacity(w * h);
-    for r in 0..h {
-        for c in 0..w {
-            v.push(analytic(georef.y0 - r as f64 * d, georef.x0 + c as f64 * d) as f32);
-        }
-    }
     let opts = TileOptions {
         tile_size: 8,
         halo: 2,
@@ -473,7 +458,13 @@ fn regional_tileset(dir: &Path) {
         ..Default::default()
     };
     let moon = Body::preset("moon").unwrap();
-    let dem = dem_from(georef, w, h, v, "regional test raster");
+    let dem = geographic_dem(
+        (20.0, 20.0),
+        (200, 160),
+        0.25,
+        "regional test raster",
+        |_, _, lat, lon| analytic(lat, lon) as f32,
+    );
     tile_dem(&dem, &moon, dir, &opts, None, &NoProgress).unwrap();
 }
 

@@ -2,14 +2,14 @@ use std::collections::BTreeSet;
 
 use penumbra::body::Body;
 use penumbra::cube::{self, Face};
-use penumbra::dem::{Crs, Dem, GeoRef, Resampling};
+use penumbra::dem::{Dem, Resampling};
 use penumbra::layout::TileId;
 use penumbra::manifest::{self, Tileset};
 use penumbra::progress::NoProgress;
 use penumbra::tileio;
 use penumbra::tiling::{tile_dem, TileOptions};
 
-use crate::util::{analytic, copy_tree, dem_from, global_dem, snapshot};
+use crate::util::{analytic, copy_tree, geographic_dem, global_dem, snapshot};
 
 fn small_opts() -> TileOptions {
     TileOptions {
@@ -95,21 +95,13 @@ fn reruns_resume_and_stale_tiles_go() {
 #[test]
 fn coverage_matches_brute_force_for_a_regional_dem() {
     // 20° × 10° at 0.1°, straddling faces +X and +Y (lon 30..50).
-    let (w, h, d) = (200usize, 100usize, 0.1);
-    let georef = GeoRef {
-        crs: Crs::Geographic,
-        x0: 30.0 + d / 2.0,
-        y0: 20.0 - d / 2.0,
-        dx: d,
-        dy: d,
-    };
-    let mut v = Vec::new();
-    for r in 0..h {
-        for c in 0..w {
-            v.push(analytic(georef.y0 - r as f64 * d, georef.x0 + c as f64 * d) as f32);
-        }
-    }
-    let dem = dem_from(georef, w, h, v, "regional");
+    let dem = geographic_dem(
+        (30.0, 20.0),
+        (200, 100),
+        0.1,
+        "regional",
+        |_, _, lat, lon| analytic(lat, lon) as f32,
+    );
     let dir = tempfile::tempdir().unwrap();
     let opts = TileOptions {
         tile_size: 32,
@@ -251,26 +243,20 @@ fn albedo_tiles_follow_the_height_layout() {
 #[test]
 fn box_levels_are_means_of_the_finest_pixels_they_cover() {
     // 8° × 6° at 0.05°, near lon 44 (face +Y's edge with +X).
-    let (w, h, d) = (160usize, 120usize, 0.05);
-    let georef = GeoRef {
-        crs: Crs::Geographic,
-        x0: 40.0 + d / 2.0,
-        y0: 12.0 - d / 2.0,
-        dx: d,
-        dy: d,
-    };
-    let mut v = Vec::new();
-    for r in 0..h {
-        for c in 0..w {
+    let dem = geographic_dem(
+        (40.0, 12.0),
+        (160, 120),
+        0.05,
+        "regional with a void",
+        |c, r, lat, lon| {
             let void = (50..53).contains(&r) && (70..74).contains(&c);
-            v.push(if void {
+            if void {
                 f32::NAN
             } else {
-                analytic(georef.y0 - r as f64 * d, georef.x0 + c as f64 * d) as f32
-            });
-        }
-    }
-    let dem = dem_from(georef, w, h, v, "regional with a void");
+                analytic(lat, lon) as f32
+            }
+        },
+    );
     let dir = tempfile::tempdir().unwrap();
     let opts = TileOptions {
         tile_size: 32,

@@ -84,6 +84,31 @@ pub fn global_dem(w: usize) -> Dem {
     dem_from(georef, w, h, v, "analytic test raster")
 }
 
+/// A geographic raster of `w × h` pixels of `d` degrees whose outer edges are at
+/// `lon_west` and `lat_north`, sample `f(column, row, lat, lon)` at each pixel centre.
+pub fn geographic_dem(
+    (lon_west, lat_north): (f64, f64),
+    (w, h): (usize, usize),
+    d: f64,
+    label: &str,
+    f: impl Fn(usize, usize, f64, f64) -> f32,
+) -> Dem {
+    let georef = GeoRef {
+        crs: Crs::Geographic,
+        x0: lon_west + d / 2.0,
+        y0: lat_north - d / 2.0,
+        dx: d,
+        dy: d,
+    };
+    let mut v = Vec::with_capacity(w * h);
+    for r in 0..h {
+        for c in 0..w {
+            v.push(f(c, r, georef.y0 - r as f64 * d, georef.x0 + c as f64 * d));
+        }
+    }
+    dem_from(georef, w, h, v, label)
+}
+
 pub fn penumbra_bin() -> std::process::Command {
     let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_penumbra"));
     c.arg("--quiet");

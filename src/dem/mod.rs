@@ -86,42 +86,7 @@ fn read_with_sidecar(path: &Path) -> Result<DemParts> {
 mod tests {
     use super::*;
 
-    fn synthetic(w: usize, h: usize, georef: GeoRef, f: impl Fn(usize, usize) -> f32) -> Dem {
-        let mut v = Vec::with_capacity(w * h);
-        for r in 0..h {
-            for c in 0..w {
-                v.push(f(c, r));
-            }
-        }
-        Dem::new(
-            DemParts {
-                width: w,
-                height: h,
-                samples: Samples::Owned(v),
-                scale: 1.0,
-                offset: 0.0,
-                nodata: None,
-                georef,
-                datum_radius_m: None,
-                target: None,
-                sources: vec![],
-                format: "test".into(),
-            },
-            DEFAULT_MAX_FILL_PX,
-        )
-        .unwrap()
-    }
-
-    fn global(w: usize, h: usize) -> GeoRef {
-        let d = 360.0 / w as f64;
-        GeoRef {
-            crs: Crs::Geographic,
-            x0: d / 2.0,
-            y0: 90.0 - d / 2.0,
-            dx: d,
-            dy: 180.0 / h as f64,
-        }
-    }
+    use crate::testutil::{global_georef as global, synthetic_dem as synthetic};
 
     #[test]
     fn bilinear_reproduces_planes_and_wraps() {
