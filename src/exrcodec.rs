@@ -44,12 +44,12 @@ use crate::tileio::TileCompression;
 /// docs/benchmarks.md ("EXR codec") measured each on the shared DEMs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ZipLevel {
-    /// libdeflate (C, through the `libdeflater` crate) at this level, 1–12: what the stages
-    /// write. Its fast levels are both faster and smaller than miniz_oxide's.
+    /// libdeflate (C, through the `libdeflater` crate) at this level, 1–12: what f16 mip files
+    /// are written with ([`ZipLevel::F16_MIP`]); on f32 data it is no faster than miniz_oxide.
     Libdeflate(u8),
-    /// miniz_oxide at this level, 0–10: the library the `exr` crate's writer uses, kept so the
-    /// codec can reproduce that writer byte for byte ([`ZipLevel::EXR_CRATE`]) and so the
-    /// benchmark can compare.
+    /// miniz_oxide at this level, 0–10: what every other product is written with
+    /// ([`ZipLevel::DEFAULT`]), and the library the `exr` crate's writer uses, so the codec
+    /// can reproduce that writer byte for byte ([`ZipLevel::EXR_CRATE`]).
     Miniz(u8),
 }
 

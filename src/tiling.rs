@@ -492,12 +492,48 @@ struct SourceGrid<'a> {
     split: Vec<Split>,
 }
 
+/// Bilinear interpolation of source coordinates between cell corners `a` (top left), `b` (top
+/// right), `c` (bottom left), `d` (bottom right) at fractions (wx, wy) of the cell.
+#[inline]
+fn bilerp([a, b, c, d]: [(f64, f64); 4], wx: f64, wy: f64) -> (f64, f64) {
+    let lerp = |p: f64, q: f64, r: f64, s: f64| {
+        (p * (1.0 - wx) + q * wx) * (1.0 - wy) + (r * (1.0 - wx) + s * wx) * wy
+    };
+    (lerp(a.0, b.0, c.0, d.0), lerp(a.1, b.1, c.1, d.1))
+}
+
+/// Whether bilinear interpolation between `corners` (as in [`bilerp`]) is within
+/// [`APPROX_TOL_PX`] of `exact(wx, wy)` at the cell's centre and its four edge midpoints (the
+/// centre alone misses maps whose second derivatives cancel there, f_xx ≈ −f_yy).
+fn interpolates(
+    [a, b, c, d]: [(f64, f64); 4],
+    mut exact: impl FnMut(f64, f64) -> (f64, f64),
+) -> bool {
+    let lerp = |p: f64, q: f64, w: f64| p + (q - p) * w;
+    [(0.5, 0.5), (0.5, 0.0), (0.5, 1.0), (0.0, 0.5), (1.0, 0.5)]
+        .iter()
+        .all(|&(wx, wy)| {
+            let e = exact(wx, wy);
+            let col = lerp(lerp(a.0, b.0, wx), lerp(c.0, d.0, wx), wy);
+            let row = lerp(lerp(a.1, b.1, wx), lerp(c.1, d.1, wx), wy);
+            (e.0 - col).abs() <= APPROX_TOL_PX && (e.1 - row).abs() <= APPROX_TOL_PX
+        })
+}
+
 /// A lattice cell too curved to interpolate whole, cut into 2 × 2 sub-cells (half the
 /// spacing, a quarter of the interpolation error): exact coordinates at the 3 × 3 sub-lattice
 /// points, and per sub-cell whether it interpolates within the tolerance (else it is exact).
 struct Split {
     pts: [(f64, f64); 9],
     ok: [bool; 4],
+}
+
+impl Split {
+    /// The corners of sub-cell (sx, sy), in [`bilerp`]'s order.
+    fn corners(&self, sx: usize, sy: usize) -> [(f64, f64); 4] {
+        let q = |i: usize, j: usize| self.pts[(sy + j) * 3 + sx + i];
+        [q(0, 0), q(1, 0), q(0, 1), q(1, 1)]
+    }
 }
 
 impl<'a> SourceGrid<'a> {
@@ -618,127 +654,85 @@ impl<'a> SourceGrid<'a> {
                     grid.ok.push(OUTSIDE);
                     continue;
                 }
-                let c = [
-                    grid.pts[my * (cells.0 + 1) + mx],
-                    grid.pts[my * (cells.0 + 1) + mx + 1],
-                    grid.pts[(my + 1) * (cells.0 + 1) + mx],
-                    grid.pts[(my + 1) * (cells.0 + 1) + mx + 1],
-                ];
+                let c = grid.corners(mx, my);
                 let inside = c
                     .iter()
                     .all(|p| p.0.is_finite() && p.1.is_finite() && dem.covers(p.0, p.1));
                 let cols = c.iter().map(|p| p.0);
                 let spread = cols.clone().fold(f64::NEG_INFINITY, f64::max)
                     - cols.fold(f64::INFINITY, f64::min);
-                let candidate = inside && spread < half_width;
-                let mut ok = candidate;
-                if ok {
-                    // Check the centre and the four edge midpoints: the centre alone misses
-                    // maps whose second derivatives cancel there (f_xx ≈ −f_yy).
-                    let (bx, by) = (
-                        ((m0.0 + mx as i64) * LATTICE) as f64,
-                        ((m0.1 + my as i64) * LATTICE) as f64,
-                    );
-                    let l = LATTICE as f64;
-                    let lerp = |p: f64, q: f64, w: f64| p + (q - p) * w;
-                    let checks = [(0.5, 0.5), (0.5, 0.0), (0.5, 1.0), (0.0, 0.5), (1.0, 0.5)];
-                    ok = checks.iter().all(|&(wx, wy)| {
-                        // Edge midpoints are shared with the neighbouring cell: computed once.
-                        let memo = match (wx, wy) {
-                            (0.5, 0.5) => None,
-                            (0.5, _) => Some(&mut h_mid[(my + wy as usize) * cells.0 + mx]),
-                            _ => Some(&mut v_mid[my * (cells.0 + 1) + mx + wx as usize]),
-                        };
-                        let at = (bx + wx * l, by + wy * l);
-                        let e = match memo {
-                            None => grid.exact(at.0, at.1),
-                            Some(m) => *m.get_or_insert_with(|| grid.exact(at.0, at.1)),
-                        };
-                        let col = lerp(lerp(c[0].0, c[1].0, wx), lerp(c[2].0, c[3].0, wx), wy);
-                        let row = lerp(lerp(c[0].1, c[1].1, wx), lerp(c[2].1, c[3].1, wx), wy);
-                        (e.0 - col).abs() <= APPROX_TOL_PX && (e.1 - row).abs() <= APPROX_TOL_PX
-                    });
+                if !(inside && spread < half_width) {
+                    grid.ok.push(EXACT);
+                    continue;
                 }
-                if ok {
+                let (bx, by) = (
+                    ((m0.0 + mx as i64) * LATTICE) as f64,
+                    ((m0.1 + my as i64) * LATTICE) as f64,
+                );
+                let l = LATTICE as f64;
+                // Exact coordinates at (wx, wy) of the cell; edge midpoints are shared with the
+                // neighbouring cell and computed once.
+                let mut mid = |wx: f64, wy: f64| -> (f64, f64) {
+                    let memo = match (wx, wy) {
+                        (0.5, 0.0) | (0.5, 1.0) => {
+                            Some(&mut h_mid[(my + wy as usize) * cells.0 + mx])
+                        }
+                        (0.0, 0.5) | (1.0, 0.5) => {
+                            Some(&mut v_mid[my * (cells.0 + 1) + mx + wx as usize])
+                        }
+                        _ => None,
+                    };
+                    let at = (bx + wx * l, by + wy * l);
+                    match memo {
+                        None => grid.exact(at.0, at.1),
+                        Some(m) => *m.get_or_insert_with(|| grid.exact(at.0, at.1)),
+                    }
+                };
+                if interpolates(c, &mut mid) {
                     grid.ok.push(INTERP);
                     continue;
                 }
-                if candidate {
-                    // Too curved for one cell: try its four halves, whose corners are the
-                    // cell's corners, edge midpoints and centre (mostly computed above).
-                    let (bx, by) = (
-                        ((m0.0 + mx as i64) * LATTICE) as f64,
-                        ((m0.1 + my as i64) * LATTICE) as f64,
-                    );
-                    let l = LATTICE as f64;
-                    let mut mid = |wx: f64, wy: f64| -> (f64, f64) {
-                        let memo = match (wx, wy) {
-                            (0.5, 0.5) => None,
-                            (0.5, _) => Some(&mut h_mid[(my + wy as usize) * cells.0 + mx]),
-                            _ => Some(&mut v_mid[my * (cells.0 + 1) + mx + wx as usize]),
-                        };
-                        let at = (bx + wx * l, by + wy * l);
-                        match memo {
-                            None => grid.exact(at.0, at.1),
-                            Some(m) => *m.get_or_insert_with(|| grid.exact(at.0, at.1)),
-                        }
-                    };
-                    let pts = [
-                        c[0],
-                        mid(0.5, 0.0),
-                        c[1],
-                        mid(0.0, 0.5),
-                        mid(0.5, 0.5),
-                        mid(1.0, 0.5),
-                        c[2],
-                        mid(0.5, 1.0),
-                        c[3],
-                    ];
-                    // Midpoints of the inner edges: on the cell's horizontal centre line (left
-                    // and right half) and on its vertical centre line (top and bottom half).
-                    let on_h = [
-                        grid.exact(bx + 0.25 * l, by + 0.5 * l),
-                        grid.exact(bx + 0.75 * l, by + 0.5 * l),
-                    ];
-                    let on_v = [
-                        grid.exact(bx + 0.5 * l, by + 0.25 * l),
-                        grid.exact(bx + 0.5 * l, by + 0.75 * l),
-                    ];
-                    let mut sub_ok = [false; 4];
-                    for (k, ok) in sub_ok.iter_mut().enumerate() {
-                        let (sx, sy) = (k % 2, k / 2);
-                        let q = |i: usize, j: usize| pts[(sy + j) * 3 + sx + i];
-                        let q = [q(0, 0), q(1, 0), q(0, 1), q(1, 1)];
-                        let (ox, oy) = (bx + sx as f64 * l / 2.0, by + sy as f64 * l / 2.0);
-                        let lerp = |p: f64, r: f64, w: f64| p + (r - p) * w;
-                        *ok = [(0.5, 0.5), (0.5, 0.0), (0.5, 1.0), (0.0, 0.5), (1.0, 0.5)]
-                            .iter()
-                            .all(|&(wx, wy)| {
-                                let e = match (wx, wy) {
-                                    // The edges shared by two halves, computed once.
-                                    (0.5, 1.0) if sy == 0 => on_h[sx],
-                                    (0.5, 0.0) if sy == 1 => on_h[sx],
-                                    (1.0, 0.5) if sx == 0 => on_v[sy],
-                                    (0.0, 0.5) if sx == 1 => on_v[sy],
-                                    _ => grid.exact(ox + wx * l / 2.0, oy + wy * l / 2.0),
-                                };
-                                let col =
-                                    lerp(lerp(q[0].0, q[1].0, wx), lerp(q[2].0, q[3].0, wx), wy);
-                                let row =
-                                    lerp(lerp(q[0].1, q[1].1, wx), lerp(q[2].1, q[3].1, wx), wy);
-                                (e.0 - col).abs() <= APPROX_TOL_PX
-                                    && (e.1 - row).abs() <= APPROX_TOL_PX
-                            });
+                // Too curved for one cell: try its four halves, whose corners are the cell's
+                // corners, edge midpoints and centre (mostly computed above).
+                let pts = [
+                    c[0],
+                    mid(0.5, 0.0),
+                    c[1],
+                    mid(0.0, 0.5),
+                    mid(0.5, 0.5),
+                    mid(1.0, 0.5),
+                    c[2],
+                    mid(0.5, 1.0),
+                    c[3],
+                ];
+                // Midpoints of the inner edges: on the cell's horizontal centre line (left and
+                // right half) and on its vertical centre line (top and bottom half).
+                let on_h = [mid(0.25, 0.5), mid(0.75, 0.5)];
+                let on_v = [mid(0.5, 0.25), mid(0.5, 0.75)];
+                let mut split = Split {
+                    pts,
+                    ok: [false; 4],
+                };
+                for k in 0..4 {
+                    let (sx, sy) = (k % 2, k / 2);
+                    let (ox, oy) = (sx as f64 / 2.0, sy as f64 / 2.0);
+                    split.ok[k] = interpolates(split.corners(sx, sy), |wx, wy| match (wx, wy) {
+                        // The edges shared by two halves, computed once.
+                        (0.5, 1.0) if sy == 0 => on_h[sx],
+                        (0.5, 0.0) if sy == 1 => on_h[sx],
+                        (1.0, 0.5) if sx == 0 => on_v[sy],
+                        (0.0, 0.5) if sx == 1 => on_v[sy],
+                        _ => mid(ox + wx / 2.0, oy + wy / 2.0),
+                    });
+                }
+                if split.ok.iter().any(|&o| o) {
+                    if grid.split_at.is_empty() {
+                        grid.split_at = vec![u32::MAX; cells.0 * cells.1];
                     }
-                    if sub_ok.iter().any(|&o| o) {
-                        if grid.split_at.is_empty() {
-                            grid.split_at = vec![u32::MAX; cells.0 * cells.1];
-                        }
-                        grid.split_at[my * cells.0 + mx] = grid.split.len() as u32;
-                        grid.split.push(Split { pts, ok: sub_ok });
-                        grid.ok.push(SPLIT);
-                        continue;
-                    }
+                    grid.split_at[my * cells.0 + mx] = grid.split.len() as u32;
+                    grid.split.push(split);
+                    grid.ok.push(SPLIT);
+                    continue;
                 }
                 grid.ok.push(EXACT);
             }
@@ -771,19 +765,11 @@ impl<'a> SourceGrid<'a> {
             if code == OUTSIDE {
                 slots.fill((f64::NAN, f64::NAN));
             } else if code == INTERP {
-                let w = self.cells.0 + 1;
-                let (a, b) = (self.pts[my_ * w + mx_], self.pts[my_ * w + mx_ + 1]);
-                let (c, d) = (
-                    self.pts[(my_ + 1) * w + mx_],
-                    self.pts[(my_ + 1) * w + mx_ + 1],
-                );
+                let corners = self.corners(mx_, my_);
                 for (x, o) in run.clone().zip(slots.iter_mut()) {
                     // (x − 8·cx)/8 is exactly at()'s fx − floor(fx).
                     let wx = (x - cx * LATTICE) as f64 / LATTICE as f64;
-                    let lerp = |p: f64, q: f64, r: f64, s: f64| {
-                        (p * (1.0 - wx) + q * wx) * (1.0 - wy) + (r * (1.0 - wx) + s * wx) * wy
-                    };
-                    *o = (lerp(a.0, b.0, c.0, d.0), lerp(a.1, b.1, c.1, d.1));
+                    *o = bilerp(corners, wx, wy);
                 }
             } else {
                 for (x, o) in run.clone().zip(slots.iter_mut()) {
@@ -814,24 +800,23 @@ impl<'a> SourceGrid<'a> {
                 if !sp.ok[sy * 2 + sx] {
                     return self.exact(gx, gy);
                 }
-                let (wx, wy) = (wx - sx as f64, wy - sy as f64);
-                let q = |i: usize, j: usize| sp.pts[(sy + j) * 3 + sx + i];
-                let (a, b, c, d) = (q(0, 0), q(1, 0), q(0, 1), q(1, 1));
-                let lerp = |p: f64, q: f64, r: f64, s: f64| {
-                    (p * (1.0 - wx) + q * wx) * (1.0 - wy) + (r * (1.0 - wx) + s * wx) * wy
-                };
-                return (lerp(a.0, b.0, c.0, d.0), lerp(a.1, b.1, c.1, d.1));
+                return bilerp(sp.corners(sx, sy), wx - sx as f64, wy - sy as f64);
             }
             _ => return self.exact(gx, gy),
         }
-        let (wx, wy) = (fx - cx, fy - cy);
+        bilerp(self.corners(mx, my), fx - cx, fy - cy)
+    }
+
+    /// The exact coordinates at the four corners of cell (mx, my), in [`bilerp`]'s order.
+    #[inline]
+    fn corners(&self, mx: usize, my: usize) -> [(f64, f64); 4] {
         let w = self.cells.0 + 1;
-        let (a, b) = (self.pts[my * w + mx], self.pts[my * w + mx + 1]);
-        let (c, d) = (self.pts[(my + 1) * w + mx], self.pts[(my + 1) * w + mx + 1]);
-        let lerp = |p: f64, q: f64, r: f64, s: f64| {
-            (p * (1.0 - wx) + q * wx) * (1.0 - wy) + (r * (1.0 - wx) + s * wx) * wy
-        };
-        (lerp(a.0, b.0, c.0, d.0), lerp(a.1, b.1, c.1, d.1))
+        [
+            self.pts[my * w + mx],
+            self.pts[my * w + mx + 1],
+            self.pts[(my + 1) * w + mx],
+            self.pts[(my + 1) * w + mx + 1],
+        ]
     }
 }
 
@@ -848,10 +833,10 @@ pub fn render_height_tile(
 ) -> HeightTile {
     let k = box_samples(layout, id.level, prefilter);
     let depth = k.trailing_zeros() as u8;
-    if (layout.stored_size() << depth) <= GROUP_MAX_SIDE {
+    if block_fits(layout, depth) {
         // The taps are the pixel centres of the level `depth` finer: sample that level once
         // over the tile's footprint, on its own (finer) lattice, and average.
-        let s = sample_group(dem, layout, id, id.level + depth, resampling);
+        let s = sample_block(dem, layout, id, id.level + depth, resampling);
         return tile_from_samples(&s, layout, id, id.level + depth, height_shift);
     }
     // Tiles too large to hold k² samples per pixel: interpolate each tap's coordinates on this
@@ -952,23 +937,29 @@ impl TileBuilder {
     }
 }
 
-/// Largest side (pixels) of the finest-level sample block one tile group holds in memory:
-/// about 4096² samples, 5 bytes each, per thread.
-const GROUP_MAX_SIDE: usize = 4200;
+/// Largest side (pixels) of the sample block one thread holds in memory: about 4096² samples,
+/// 5 bytes each.
+const BLOCK_MAX_SIDE: usize = 4200;
+
+/// Whether a block sampled `depth` levels finer than a tile, over the tile's footprint, stays
+/// within [`BLOCK_MAX_SIDE`].
+fn block_fits(layout: &Layout, depth: u8) -> bool {
+    (layout.stored_size() << depth) <= BLOCK_MAX_SIDE
+}
 
 /// How many levels above the finest are averaged from a group's finest-level samples (0: none,
 /// every tile is sampled from the source on its own). With the box prefilter a pixel at
 /// `finest − d` (d ≤ log2 [`MAX_BOX`]) is the mean of the 2^d × 2^d finest-level pixel centres
 /// it covers, so sampling the finest level once over a level-`finest − d` tile (its halo
 /// included) gives every tile below it at `d + 1` levels for the cost of one. Capped so the
-/// sample block stays within [`GROUP_MAX_SIDE`].
+/// sample block stays within [`BLOCK_MAX_SIDE`].
 pub fn group_depth(layout: &Layout, prefilter: Prefilter) -> u8 {
     if prefilter == Prefilter::Point {
         return 0;
     }
     let finest = layout.levels - 1;
     let mut d = finest.min(MAX_BOX.trailing_zeros() as u8);
-    while d > 0 && (layout.stored_size() << d) > GROUP_MAX_SIDE {
+    while d > 0 && !block_fits(layout, d) {
         d -= 1;
     }
     d
@@ -976,7 +967,7 @@ pub fn group_depth(layout: &Layout, prefilter: Prefilter) -> u8 {
 
 /// Raw source heights (before the datum shift) and masks, one interpolated sample per global
 /// face pixel of one level, over a rectangle.
-struct Samples {
+struct SampleBlock {
     x0: i64,
     y0: i64,
     w: usize,
@@ -987,13 +978,13 @@ struct Samples {
 /// Sample level `sample_level` (the finest, for a group) over the footprint of tile `root`
 /// (halo included): the pixels every tile of the group is averaged from. Rows are sampled in
 /// parallel.
-fn sample_group(
+fn sample_block(
     dem: &Dem,
     layout: &Layout,
     root: TileId,
     sample_level: u8,
     resampling: Resampling,
-) -> Samples {
+) -> SampleBlock {
     let k = 1i64 << (sample_level - root.level);
     let (n, halo) = (layout.tile_size as i64, layout.halo as i64);
     let (x0, y0) = (
@@ -1024,7 +1015,7 @@ fn sample_group(
                 }
             },
         );
-    Samples {
+    SampleBlock {
         x0,
         y0,
         w,
@@ -1036,7 +1027,7 @@ fn sample_group(
 /// Tile `id` from samples at level `sample_level`: each pixel the mean of the
 /// `2^(sample_level − level)`² samples it covers that have data.
 fn tile_from_samples(
-    s: &Samples,
+    s: &SampleBlock,
     layout: &Layout,
     id: TileId,
     sample_level: u8,
@@ -1044,22 +1035,8 @@ fn tile_from_samples(
 ) -> HeightTile {
     let size = layout.stored_size();
     let halo = layout.halo as i64;
-    let k = 1i64 << (sample_level - id.level);
+    let k = 1usize << (sample_level - id.level);
     let mut out = TileBuilder::new(size);
-    if k == 1 {
-        // The same arithmetic as the general case with one sample, row by row.
-        for j in 0..size as i64 {
-            let (gx, gy) = layout.global_pixel(id, -halo, j - halo);
-            let at = (gy - s.y0) as usize * s.w + (gx - s.x0) as usize;
-            for (&h, &mk) in s.height[at..at + size].iter().zip(&s.mask[at..at + size]) {
-                let mut acc = BoxSum::default();
-                acc.add(h, mk);
-                out.push(acc, height_shift);
-            }
-        }
-        return out.finish();
-    }
-    let k = k as usize;
     for j in 0..size as i64 {
         let (gx, gy) = layout.global_pixel(id, -halo, j - halo);
         let (sx, sy) = (
@@ -1229,7 +1206,7 @@ fn run_unit(
                     Some(s) => Ok(Some(s)),
                     None => {
                         let s = samples.get_or_insert_with(|| {
-                            sample_group(dem, sink.layout, *root, finest, opts.resampling)
+                            sample_block(dem, sink.layout, *root, finest, opts.resampling)
                         });
                         sink.write(
                             id,
@@ -1308,7 +1285,7 @@ mod tests {
                 x: 0,
                 y: 0,
             };
-            let s = sample_group(&dem, &layout, root, 2, Resampling::Bilinear);
+            let s = sample_block(&dem, &layout, root, 2, Resampling::Bilinear);
             for (x, y) in (0..4).flat_map(|y| (0..4).map(move |x| (x, y))) {
                 let g = SourceGrid::new(
                     &dem,
