@@ -197,6 +197,10 @@ pub enum BenchCommand {
     },
 }
 
+/// The `penumbra tile` options of the LDEM_4 tileset the mip and codec benchmarks measure
+/// (510 tiles of 256² on 4 levels).
+pub const LDEM4_BENCH_TILING: &[&str] = &["--body", "moon", "--tile-size", "256", "--levels", "4"];
+
 struct Case {
     name: &'static str,
     file: &'static str,
@@ -992,15 +996,8 @@ fn run_mip(
         let status = Command::new(penumbra_exe()?)
             .args(["--quiet", "tile"])
             .arg(&src_dem)
-            .args([
-                "--body",
-                "moon",
-                "--tile-size",
-                "256",
-                "--levels",
-                "4",
-                "--out",
-            ])
+            .args(LDEM4_BENCH_TILING)
+            .arg("--out")
             .arg(&out)
             .stdout(std::process::Stdio::null())
             .status()?;

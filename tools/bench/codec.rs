@@ -16,7 +16,7 @@ use penumbra::exrcodec::{self, Blocks, Channel, Samples, ZipLevel};
 use penumbra::tileio::TileCompression;
 use serde::Serialize;
 
-use crate::bench::{best_of, in_pool, penumbra_exe, tempfile_dir};
+use crate::bench::{best_of, in_pool, penumbra_exe, tempfile_dir, LDEM4_BENCH_TILING};
 
 /// One channel's stored samples, every level.
 #[derive(Clone)]
@@ -430,21 +430,12 @@ pub fn run_codec(
     let l = tmp.join("ldem4");
     let ls = ldem.to_string_lossy().into_owned();
     let ss = srtm.to_string_lossy().into_owned();
-    run_penumbra(
-        &[
-            "tile",
-            &ls,
-            "--body",
-            "moon",
-            "--tile-size",
-            "256",
-            "--levels",
-            "4",
-            "--out",
-        ],
-        &l,
-        quiet,
-    )?;
+    let args: Vec<&str> = ["tile", ls.as_str()]
+        .into_iter()
+        .chain(LDEM4_BENCH_TILING.iter().copied())
+        .chain(["--out"])
+        .collect();
+    run_penumbra(&args, &l, quiet)?;
     run_penumbra(&["mip"], &l, quiet)?;
     run_penumbra(&["horizon", "--levels", "1", "--azimuths", "16"], &l, quiet)?;
     dems.push(("LDEM_4 (256² tiles, 4 levels)", l));
