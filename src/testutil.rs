@@ -18,7 +18,7 @@ pub(crate) fn synthetic_dem(
     georef: crate::dem::GeoRef,
     f: impl Fn(usize, usize) -> f32,
 ) -> crate::dem::Dem {
-    use crate::dem::{Dem, DemParts, Samples, DEFAULT_MAX_FILL_PX};
+    use crate::dem::{Dem, DemParts, DEFAULT_MAX_FILL_PX};
     let mut v = Vec::with_capacity(w * h);
     for r in 0..h {
         for c in 0..w {
@@ -26,19 +26,7 @@ pub(crate) fn synthetic_dem(
         }
     }
     Dem::new(
-        DemParts {
-            width: w,
-            height: h,
-            samples: Samples::Owned(v),
-            scale: 1.0,
-            offset: 0.0,
-            nodata: None,
-            georef,
-            datum_radius_m: None,
-            target: None,
-            sources: vec![],
-            format: "test".into(),
-        },
+        DemParts::in_memory(georef, w, h, v, "test"),
         DEFAULT_MAX_FILL_PX,
     )
     .unwrap()

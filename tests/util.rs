@@ -1,7 +1,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use penumbra::dem::{Crs, Dem, DemParts, GeoRef, Samples};
+use penumbra::dem::{Crs, Dem, DemParts, GeoRef};
 
 /// The real DEMs every real-data test reads: `$PENUMBRA_SHARED_DATA` when set, else
 /// `../shared/data` beside the repository root. When the folder is absent the test is skipped
@@ -117,23 +117,7 @@ pub fn penumbra_bin() -> std::process::Command {
 
 /// A DEM over `values` (row-major, `w × h`, metres) placed by `georef`.
 pub fn dem_from(georef: GeoRef, w: usize, h: usize, values: Vec<f32>, label: &str) -> Dem {
-    Dem::new(
-        DemParts {
-            width: w,
-            height: h,
-            samples: Samples::Owned(values),
-            scale: 1.0,
-            offset: 0.0,
-            nodata: None,
-            georef,
-            datum_radius_m: None,
-            target: None,
-            sources: vec![],
-            format: label.into(),
-        },
-        64,
-    )
-    .unwrap()
+    Dem::new(DemParts::in_memory(georef, w, h, values, label), 64).unwrap()
 }
 
 /// Every file below `dir` with its bytes, by relative path.

@@ -285,6 +285,33 @@ pub struct DemParts {
     pub format: String,
 }
 
+impl DemParts {
+    /// A raster held in memory: `width × height` heights in metres (row-major, NaN for voids)
+    /// placed by `georef`, with no datum, no target body and no source files. `label` is what
+    /// reports call its format.
+    pub fn in_memory(
+        georef: GeoRef,
+        width: usize,
+        height: usize,
+        heights: Vec<f32>,
+        label: &str,
+    ) -> DemParts {
+        DemParts {
+            width,
+            height,
+            samples: Samples::Owned(heights),
+            scale: 1.0,
+            offset: 0.0,
+            nodata: None,
+            georef,
+            datum_radius_m: None,
+            target: None,
+            sources: vec![],
+            format: label.into(),
+        }
+    }
+}
+
 /// Reject absurd raster sizes before anything is allocated.
 pub fn check_dimensions(path: &Path, width: u64, height: u64) -> Result<()> {
     if width < 2 || height < 2 {

@@ -253,7 +253,7 @@ pub fn read_png(p: &Path) -> (u32, u32, Vec<[u8; 3]>) {
 /// A small global tileset (the Moon's radius, gentle analytic relief) with an albedo image
 /// whose western hemisphere is red and eastern blue: 32-px tiles, levels 0..=1.
 pub fn albedo_globe() -> &'static Path {
-    use penumbra::dem::{Crs, Dem, DemParts, GeoRef, Samples};
+    use penumbra::dem::{Crs, Dem, DemParts, GeoRef};
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
         let root = fixtures().join("albedo-globe");
@@ -284,29 +284,14 @@ pub fn albedo_globe() -> &'static Path {
                 );
             }
         }
-        let dem = Dem::new(
-            DemParts {
-                width: w,
-                height: h,
-                samples: Samples::Owned(v),
-                scale: 1.0,
-                offset: 0.0,
-                nodata: None,
-                georef: GeoRef {
-                    crs: Crs::Geographic,
-                    x0: -180.0 + d / 2.0,
-                    y0: 90.0 - d / 2.0,
-                    dx: d,
-                    dy: d,
-                },
-                datum_radius_m: None,
-                target: None,
-                sources: vec![],
-                format: "analytic globe".into(),
-            },
-            64,
-        )
-        .unwrap();
+        let georef = GeoRef {
+            crs: Crs::Geographic,
+            x0: -180.0 + d / 2.0,
+            y0: 90.0 - d / 2.0,
+            dx: d,
+            dy: d,
+        };
+        let dem = Dem::new(DemParts::in_memory(georef, w, h, v, "analytic globe"), 64).unwrap();
         let body = penumbra::body::Body::preset("moon").unwrap();
         let opts = TileOptions {
             tile_size: 32,
