@@ -1,6 +1,7 @@
 //! Reading and writing tiles: EXR height tiles (f32 `height` + f16 `mask`), PNG albedo tiles,
-//! written through [`crate::fsio::write_atomic`] (temp file, fsync, rename), so a reader or a
-//! crashed run never sees half a file.
+//! written into a run's staging folder through [`crate::fsio::write_staged`] (temp file,
+//! rename; made durable by the run's commit), so a reader or a killed run never sees half a
+//! file.
 
 use std::borrow::Cow;
 use std::io::Write;
@@ -11,7 +12,7 @@ use exr::prelude::f16;
 use crate::error::{Error, IoContext, Result};
 use crate::exrcodec::{self, Channel, Samples};
 
-pub use crate::fsio::{write_atomic, write_atomic_bytes};
+pub use crate::fsio::{write_atomic, write_atomic_bytes, write_staged};
 
 /// A square height tile including its halo.
 #[derive(Clone, Debug, PartialEq)]
@@ -88,9 +89,9 @@ pub fn write_height_tile(
     tile: &HeightTile,
     compression: TileCompression,
 ) -> Result<()> {
-    let bytes = encode_height_tile(tile, compression, exrcodec::ZipLevel::DEFAULT)
+    let bytes = encode_height_tile(tile, compression, exrcodec::ZipLevel::HEIGHT_TILE)
         .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
-    write_atomic(path, |f| f.write_all(&bytes).at(path))
+    write_staged(path, |f| f.write_all(&bytes).at(path))
 }
 
 /// The bytes of a height tile file (what [`write_height_tile`] stores), at a given deflate level.
@@ -216,7 +217,7 @@ pub fn write_albedo_tile(path: &Path, tile: &AlbedoTile) -> Result<()> {
             _ => DynamicImage::ImageRgba8(ImageBuffer::from_raw(w, h, d).ok_or_else(bad)?),
         }
     };
-    write_atomic(path, |f| {
+    write_staged(path, |f| {
         let mut buf = std::io::Cursor::new(Vec::new());
         img.write_to(&mut buf, image::ImageFormat::Png)
             .map_err(|e| Error::invalid(path, format!("PNG encoding failed: {e}")))?;

@@ -11,7 +11,9 @@ use serde::Serialize;
 
 use super::pyramid::{self, Encoding, Layout, Pyramid, Reduce, GROUP};
 use super::series::{max_coefficients, Scratch, Sigma, Transform};
-use crate::error::{Error, Result};
+use std::io::Write as _;
+
+use crate::error::{Error, IoContext, Result};
 use crate::layout::TileId;
 use crate::manifest::{self, FourierGroup, FourierProduct, HorizonLevelDistance, Tileset};
 use crate::progress::Progress;
@@ -631,7 +633,8 @@ pub fn build_fourier(
         let tile = store.height(id)?.expect("listed tiles exist");
         let elev = store.horizon(id)?;
         let (p, stats) = enc.encode(&elev, &tile);
-        crate::fsio::write_atomic_bytes(&out, &p.encode())?;
+        let bytes = p.encode();
+        crate::fsio::write_staged(&out, |f| f.write_all(&bytes).at(&out))?;
         tally.add(id, stats);
         report.tiles_written += 1;
         report.bytes_written += stats.bytes;

@@ -54,7 +54,7 @@ pub fn write_horizon_exr(
 ) -> Result<()> {
     let bytes = encode_horizon_exr(n, a, elev, precision, compression, ZipLevel::DEFAULT)
         .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
-    tileio::write_atomic(path, |f| f.write_all(&bytes).at(path))
+    tileio::write_staged(path, |f| f.write_all(&bytes).at(path))
 }
 
 /// The bytes of a horizon file (what [`write_horizon_exr`] stores) at a given deflate level.

@@ -3,6 +3,7 @@
 //! its pixels, and the raw maps on disk; plus the on-demand query of one point.
 
 use std::collections::HashMap;
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -14,7 +15,7 @@ pub use super::io::{read_horizon_exr, write_horizon_exr, HorizonPrecision};
 use super::method::{horizons_with, Method};
 use super::near::{DEFAULT_NEAR_PX, MAX_NEAR_PX};
 use crate::cube::{Face, Projection};
-use crate::error::{Error, Result};
+use crate::error::{Error, IoContext, Result};
 use crate::layout::TileId;
 use crate::manifest::{self, HorizonLevelDistance, HorizonProduct, Tileset};
 use crate::progress::Progress;
@@ -656,7 +657,8 @@ pub fn build_horizons(
         if let Some(enc) = &encoder {
             let t1 = std::time::Instant::now();
             let (p, stats) = enc.encode(&elev, &tile);
-            crate::fsio::write_atomic_bytes(&fout, &p.encode())?;
+            let bytes = p.encode();
+            crate::fsio::write_staged(&fout, |f| f.write_all(&bytes).at(&fout))?;
             compress_s += t1.elapsed().as_secs_f64();
             tally.add(id, stats);
         }

@@ -92,7 +92,7 @@ pub fn write_mip_exr(
         name,
     )
     .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
-    tileio::write_atomic(path, |f| f.write_all(&bytes).at(path))
+    tileio::write_staged(path, |f| f.write_all(&bytes).at(path))
 }
 
 /// The bytes the `exr` crate's own writer produced for a mip file before

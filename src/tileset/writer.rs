@@ -29,6 +29,23 @@ const PLAN: &str = "commit.json";
 #[derive(Serialize, Deserialize)]
 struct RunMarker {
     run_key: String,
+    /// The boot of the system the run wrote its (unsynced, [`fsio::write_staged`]) files in: a
+    /// rerun resumes from them only within the same boot.
+    #[serde(default)]
+    boot: Option<String>,
+}
+
+impl RunMarker {
+    fn read(root: &Path) -> Option<RunMarker> {
+        fsio::read_capped(&root.join(RUN), 1 << 16, "a run marker")
+            .ok()
+            .and_then(|b| serde_json::from_slice::<RunMarker>(&b).ok())
+    }
+
+    /// A marker of this run key written in this boot.
+    fn resumable(&self, run_key: &str) -> bool {
+        self.run_key == run_key && self.boot.as_deref() == fsio::boot_id()
+    }
 }
 
 #[derive(Serialize, Deserialize)]
@@ -134,10 +151,7 @@ impl Writer {
     /// run marker behind). Staging of a run with another key is kept for its resume.
     pub fn discard_stage(&self, name: &str, run_key: &str) -> Result<()> {
         let root = self.state().join("staging").join(name);
-        let same = fsio::read_capped(&root.join(RUN), 1 << 16, "a run marker")
-            .ok()
-            .and_then(|b| serde_json::from_slice::<RunMarker>(&b).ok())
-            .is_some_and(|m| m.run_key == run_key);
+        let same = RunMarker::read(&root).is_some_and(|m| m.run_key == run_key);
         if same {
             remove_tree(&root)?;
         }
@@ -145,19 +159,18 @@ impl Writer {
     }
 
     /// The staging folder of stage `name` for a run with `run_key`: kept (resume) when an
-    /// interrupted run of the same key left it, else made afresh.
+    /// interrupted run of the same key left it in this boot of the system, else made afresh
+    /// (files are staged without an fsync each, so after a system crash none is trusted).
     pub fn stage(&mut self, name: &str, run_key: &str) -> Result<Staging> {
         let root = self.state().join("staging").join(name);
         let marker = root.join(RUN);
-        let resume = fsio::read_capped(&marker, 1 << 16, "a run marker")
-            .ok()
-            .and_then(|b| serde_json::from_slice::<RunMarker>(&b).ok())
-            .is_some_and(|m| m.run_key == run_key);
+        let resume = RunMarker::read(&root).is_some_and(|m| m.resumable(run_key));
         if !resume {
             remove_tree(&root)?;
             std::fs::create_dir_all(&root).at(&root)?;
             let m = RunMarker {
                 run_key: run_key.to_string(),
+                boot: fsio::boot_id().map(str::to_string),
             };
             write_atomic_bytes(&marker, &serde_json::to_vec(&m).expect("marker serialises"))?;
         }
@@ -217,7 +230,7 @@ impl Writer {
         let json = serde_json::to_string_pretty(&manifest).expect("manifest serialises");
         write_atomic_bytes(&staging.root.join(MANIFEST), json.as_bytes())?;
         for d in &moves {
-            sync_tree(&staging.root.join(d))?;
+            fsio::sync_staged(&staging.root.join(d))?;
         }
         let plan = Plan {
             staging: staging
@@ -320,19 +333,4 @@ impl Drop for Writer {
             let _ = std::fs::remove_dir_all(self.state());
         }
     }
-}
-
-/// fsync every folder of a tree (files were synced when written; their names are made durable
-/// here, once per folder rather than once per file).
-fn sync_tree(root: &Path) -> Result<()> {
-    let mut stack = vec![root.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).at(&d)?.flatten() {
-            if e.file_type().is_ok_and(|t| t.is_dir()) {
-                stack.push(e.path());
-            }
-        }
-        sync_dir(&d)?;
-    }
-    Ok(())
 }

@@ -478,6 +478,10 @@ pub fn run_codec(
                         Some((TileCompression::Zip, ZipLevel::Miniz(lv))),
                     ));
                 }
+                opts.push((
+                    "codec ZIP miniz_oxide level 1, noisy channels stored (height tiles)".into(),
+                    Some((TileCompression::Zip, ZipLevel::HEIGHT_TILE)),
+                ));
                 for &lv in libdeflate_levels {
                     opts.push((
                         format!("codec ZIP libdeflate level {lv}"),

@@ -39,6 +39,8 @@ use rayon::prelude::*;
 
 use crate::tileio::TileCompression;
 
+mod mixed;
+
 /// Which deflate library, at which level, compresses the ZIP blocks. Both write plain zlib
 /// streams that every OpenEXR reader inflates; only the size and the time differ. The table in
 /// docs/benchmarks.md ("EXR codec") measured each on the shared DEMs.
@@ -47,18 +49,29 @@ pub enum ZipLevel {
     /// libdeflate (C, through the `libdeflater` crate) at this level, 1–12: what f16 mip files
     /// are written with ([`ZipLevel::F16_MIP`]); on f32 data it is no faster than miniz_oxide.
     Libdeflate(u8),
-    /// miniz_oxide at this level, 0–10: what every other product is written with
-    /// ([`ZipLevel::DEFAULT`]), and the library the `exr` crate's writer uses, so the codec
-    /// can reproduce that writer byte for byte ([`ZipLevel::EXR_CRATE`]).
+    /// miniz_oxide at this level, 0–10: the library the `exr` crate's writer uses, so the
+    /// codec can reproduce that writer byte for byte ([`ZipLevel::EXR_CRATE`]).
     Miniz(u8),
+    /// As `Miniz(level)`, except in blocks where a channel's predicted bytes are noise to
+    /// deflate (order-0 entropy above [`mixed::NOISE_BITS`] bits per byte on a sample): there
+    /// those channels are stored and the others run-length coded, in one plain zlib stream
+    /// (src/exrcodec/mixed.rs). Blocks without noise get exactly `Miniz(level)`'s bytes. What
+    /// height tiles are written with ([`ZipLevel::HEIGHT_TILE`]).
+    StoreNoise(u8),
 }
 
 impl ZipLevel {
-    /// Height tiles (f32 height + f16 mask), horizon maps, f32 mip files: miniz_oxide level 1,
-    /// a greedy single-probe parser, the fastest measured on f32 data (1.3–2× libdeflate
-    /// level 1 per core on f32 mips and SRTM height tiles; a tie on LDEM_4's height tiles and
-    /// on horizon maps) for +0.6…+3.6% size against level 4.
+    /// Horizon maps, f32 mip files: miniz_oxide level 1, a greedy single-probe parser, the
+    /// fastest measured on f32 data (1.3–2× libdeflate level 1 per core on f32 mips and SRTM
+    /// height tiles; a tie on LDEM_4's height tiles and on horizon maps) for +0.6…+3.6% size
+    /// against level 4.
     pub const DEFAULT: ZipLevel = ZipLevel::Miniz(1);
+    /// Height tiles (f32 height + f16 mask): as [`ZipLevel::DEFAULT`], but where the heights
+    /// of a block are noise to deflate (LDEM_4 oversampled: ratio 1.00) they are stored and
+    /// the mask run-length coded, 1.5–3× faster for +1% size. Not for mip files: their
+    /// max-pooled values repeat across channels and blocks in ways an excerpt does not show
+    /// (SRTM mips came out +6% larger).
+    pub const HEIGHT_TILE: ZipLevel = ZipLevel::StoreNoise(1);
     /// f16 mip files (`--precision f16`): libdeflate level 1. miniz_oxide level 1 loses 9–17%
     /// on these smooth, repetitive pyramids and its level 2 is slow; libdeflate level 1 is both
     /// faster (1.1–2×) and smaller (+2.5…+2.6% against level 4, where miniz_oxide level 2 is
@@ -232,7 +245,7 @@ fn unpredict(data: &mut [u8]) -> Vec<u8> {
 fn deflate(data: &[u8], level: ZipLevel) -> Vec<u8> {
     match level {
         ZipLevel::Libdeflate(l) => deflate_libdeflate(data, l),
-        ZipLevel::Miniz(l) => deflate_miniz(data, l),
+        ZipLevel::Miniz(l) | ZipLevel::StoreNoise(l) => deflate_miniz(data, l),
     }
 }
 
@@ -345,6 +358,18 @@ pub fn encode(
     }
     let blocks: Vec<_> = header.blocks_increasing_y_order().collect();
     let zip = enc.compression == TileCompression::Zip;
+    // Bytes per sample of each channel, in stored order, per level.
+    let bps: Vec<Vec<usize>> = (0..sizes.len())
+        .map(|l| {
+            channels
+                .iter()
+                .map(|c| match c.levels[l] {
+                    Samples::F32(_) => 4,
+                    Samples::F16(_) => 2,
+                })
+                .collect()
+        })
+        .collect();
     let chunks: Vec<Result<Chunk, String>> = blocks
         .par_iter()
         .map_init(
@@ -365,7 +390,19 @@ pub fn encode(
                 }
                 let bytes = if zip {
                     predict(packed, predicted);
-                    let z = deflate(predicted, enc.level);
+                    let noisy = match enc.level {
+                        ZipLevel::StoreNoise(_) => {
+                            mixed::noisy_channels(predicted, &bps[level], w, h, |b| {
+                                deflate(b, enc.level).len()
+                            })
+                        }
+                        _ => 0,
+                    };
+                    let z = if noisy != 0 {
+                        mixed::zlib(predicted, &bps[level], w, h, noisy)
+                    } else {
+                        deflate(predicted, enc.level)
+                    };
                     // OpenEXR stores a block raw when deflate does not make it smaller.
                     if z.len() < packed.len() {
                         z
@@ -815,6 +852,46 @@ mod tests {
         }
     }
 
+    /// Heights that are noise to deflate (random mantissas, as LDEM_4's oversampled tiles)
+    /// are stored and the mask run-length coded: the samples come back bit for bit, the file
+    /// is about the heights' raw size (the mask all but vanishes), and heights deflate can
+    /// shrink get exactly the plain level-1 file.
+    #[test]
+    fn height_tiles_store_noisy_heights_and_keep_the_samples() {
+        let mut rnd = crate::testutil::rng(11);
+        for n in [16usize, 100, 260, 516] {
+            let tile = HeightTile {
+                size: n,
+                height: (0..n * n)
+                    .map(|i| 1000.0 + (i % n) as f32 * 0.37 + rnd() as f32)
+                    .collect(),
+                mask: (0..n * n).map(|i| u8::from(i % n > n / 2)).collect(),
+            };
+            let z = encode_height_tile(&tile, TileCompression::Zip, ZipLevel::HEIGHT_TILE).unwrap();
+            let back = decode_height_tile(&z).unwrap();
+            assert_eq!(bits(&back.height), bits(&tile.height), "n = {n}");
+            assert_eq!(back.mask, tile.mask);
+            let raw_heights = 4 * n * n;
+            if n >= 100 {
+                assert!(
+                    z.len() < raw_heights + raw_heights / 20,
+                    "n = {n}: {} bytes for {raw_heights} of heights",
+                    z.len()
+                );
+            }
+            // Whole metres, as SRTM's: the low mantissa bytes are zeros, deflate wins.
+            let whole = HeightTile {
+                height: values(n * n, 5).iter().map(|v| v.round()).collect(),
+                ..tile
+            };
+            let plain = encode_height_tile(&whole, TileCompression::Zip, ZipLevel::DEFAULT);
+            assert!(
+                encode_height_tile(&whole, TileCompression::Zip, ZipLevel::HEIGHT_TILE) == plain,
+                "n = {n}: compressible heights were not deflated as before"
+            );
+        }
+    }
+
     #[test]
     fn output_does_not_depend_on_the_thread_count() {
         let tile = HeightTile {
@@ -830,8 +907,10 @@ mod tests {
             .num_threads(4)
             .build()
             .unwrap();
-        let enc = || encode_height_tile(&tile, TileCompression::Zip, ZipLevel::DEFAULT).unwrap();
-        assert_eq!(one.install(enc), four.install(enc));
+        for level in [ZipLevel::DEFAULT, ZipLevel::HEIGHT_TILE] {
+            let enc = || encode_height_tile(&tile, TileCompression::Zip, level).unwrap();
+            assert_eq!(one.install(enc), four.install(enc));
+        }
     }
 
     #[test]
