@@ -168,6 +168,50 @@ fn openexr_reads_height_and_mip_tiles_bit_for_bit() {
         let exr_crate = tileio::encode_height_tile_exr_crate(&t, TileCompression::Zip).unwrap();
         assert_ne!(std::fs::read(&heights[0]).unwrap(), exr_crate);
 
+        // A tile whose heights are noise to deflate (as LDEM_4's oversampled ones): its blocks
+        // hold stored stretches beside run-length coded ones (src/exrcodec/mixed.rs); the
+        // other readers must see it bit for bit too.
+        let noisy = dir.path().join("noisy-height.exr");
+        let n = 260;
+        let mut seed = 0x2545_F491_4F6C_DD1Du64;
+        let tile = tileio::HeightTile {
+            size: n,
+            height: (0..n * n)
+                .map(|i| {
+                    seed ^= seed << 13;
+                    seed ^= seed >> 7;
+                    seed ^= seed << 17;
+                    1000.0 + (i % n) as f32 * 0.37 + (seed >> 40) as f32 / (1u64 << 24) as f32
+                })
+                .collect(),
+            mask: (0..n * n).map(|i| u8::from(i % n > 200) * 2).collect(),
+        };
+        let tile = tileio::HeightTile {
+            height: tile
+                .height
+                .iter()
+                .zip(&tile.mask)
+                .map(|(&h, &m)| if m == 2 { f32::NAN } else { h })
+                .collect(),
+            ..tile
+        };
+        tileio::write_height_tile(&noisy, &tile, TileCompression::Zip).unwrap();
+        let len = std::fs::metadata(&noisy).unwrap().len() as usize;
+        assert!(
+            len > 4 * n * n * 3 / 4 && len < 6 * n * n * 9 / 10,
+            "{len} bytes: the noisy heights were not stored as stored deflate blocks"
+        );
+        let back = tileio::read_height_tile(&noisy).unwrap();
+        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert!(bits(&back.height) == bits(&tile.height) && back.mask == tile.mask);
+        let theirs = exr_crate_levels(&noisy);
+        let h = &theirs.iter().find(|c| c.0 == "height").unwrap().1[0];
+        assert!(
+            bits(h) == bits(&tile.height),
+            "exr crate reads other noisy heights"
+        );
+        heights.insert(0, noisy);
+
         // The exr crate's reader (independent of src/exrcodec.rs) sees every mip level the same.
         for f in &mips {
             let ours = mip::read_mip_exr(f).unwrap();

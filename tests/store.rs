@@ -713,3 +713,46 @@ fn output_caps_refuse_nan_negative_and_oversized_runs() {
         }
     }
 }
+
+/// Staged files are not synced one by one (the commit syncs them all), so a run's staging
+/// folder is trusted for a resume only within the boot of the system that wrote it: a marker
+/// from another boot (a system crash may have lost unsynced files) starts the stage afresh.
+#[test]
+fn staging_from_another_boot_is_not_resumed() {
+    use penumbra::tileset::writer::Writer;
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("tiles");
+    let mut writer = Writer::begin(&out).unwrap();
+    let first = writer.stage("tile", "key-1").unwrap();
+    assert!(!first.resume);
+    let kept = first.root.join("height/0/px/0/0.exr");
+    std::fs::create_dir_all(kept.parent().unwrap()).unwrap();
+    std::fs::write(&kept, b"staged").unwrap();
+    // As a kill leaves it: no clean-up of the staging folder.
+    std::mem::forget(writer);
+    // Same key, same boot: resumed, the staged file kept.
+    let mut writer = Writer::begin(&out).unwrap();
+    let again = writer.stage("tile", "key-1").unwrap();
+    if penumbra::tileset::fsio::boot_id().is_some() {
+        assert!(again.resume, "same boot, same key: resume");
+        assert!(kept.exists());
+    }
+    std::mem::forget(writer);
+    // The marker claims another boot: nothing staged is trusted.
+    let marker = again.root.join("run.json");
+    let text = std::fs::read_to_string(&marker).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(v["run_key"], "key-1");
+    std::fs::write(
+        &marker,
+        serde_json::json!({"run_key": "key-1", "boot": "another-boot"}).to_string(),
+    )
+    .unwrap();
+    let mut writer = Writer::begin(&out).unwrap();
+    let fresh = writer.stage("tile", "key-1").unwrap();
+    assert!(
+        !fresh.resume,
+        "a staging folder from another boot was resumed"
+    );
+    assert!(!kept.exists(), "files staged in another boot were kept");
+}
