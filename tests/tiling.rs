@@ -69,7 +69,9 @@ fn reruns_resume_and_stale_tiles_go() {
     copy_tree(&dir.path().join("height"), &staged.join("height"));
     std::fs::write(
         staged.join("run.json"),
-        serde_json::json!({ "run_key": ts.run_key }).to_string(),
+        // Staged files are trusted within the boot that wrote them (fsio::write_staged).
+        serde_json::json!({ "run_key": ts.run_key, "boot": penumbra::tileset::fsio::boot_id() })
+            .to_string(),
     )
     .unwrap();
     std::fs::remove_file(staged.join("height/2/px/1/3.exr")).unwrap();
