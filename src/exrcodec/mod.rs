@@ -9,7 +9,8 @@
 //! compressed in parallel. Two deflate libraries are used, each where it was measured fastest at
 //! an acceptable size (see [`ZipLevel`] and docs/benchmarks.md, "EXR codec"): miniz_oxide
 //! level 1 for f32 data (height tiles, f32 mips) and horizon maps, libdeflate level 1 for f16
-//! mip files. miniz_oxide at level 4 also reproduces the `exr` crate's files byte for byte,
+//! mip files; in height tiles, channels that are noise to deflate are stored instead
+//! ([`mixed`]). miniz_oxide at level 4 also reproduces the `exr` crate's files byte for byte,
 //! which the tests use to prove the transform is OpenEXR's. Reading inflates the blocks in
 //! parallel with zune-inflate (the inflater `exr` itself uses), undoes the predictor and the
 //! interleave, and converts to f32. Blocks in any other compression (RLE, PIZ, … written by
@@ -68,9 +69,10 @@ impl ZipLevel {
     pub const DEFAULT: ZipLevel = ZipLevel::Miniz(1);
     /// Height tiles (f32 height + f16 mask): as [`ZipLevel::DEFAULT`], but where the heights
     /// of a block are noise to deflate (LDEM_4 oversampled: ratio 1.00) they are stored and
-    /// the mask run-length coded, 1.5–3× faster for +1% size. Not for mip files: their
-    /// max-pooled values repeat across channels and blocks in ways an excerpt does not show
-    /// (SRTM mips came out +6% larger).
+    /// the mask run-length coded: 1.9× the encode speed for +1.7% size on LDEM_4's tiles
+    /// (codec bench, 21:18 run). Not for mip files: their max-pooled values repeat across
+    /// channels and blocks in ways an excerpt does not show (SRTM mips came out 1.118× the
+    /// exr crate's size, over issue 14's 10%).
     pub const HEIGHT_TILE: ZipLevel = ZipLevel::StoreNoise(1);
     /// f16 mip files (`--precision f16`): libdeflate level 1. miniz_oxide level 1 loses 9–17%
     /// on these smooth, repetitive pyramids and its level 2 is slow; libdeflate level 1 is both
