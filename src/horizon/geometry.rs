@@ -90,6 +90,32 @@ impl Context {
         // x, y ≥ 0 here, so truncation is floor (and needs no libm call on baseline x86-64).
         let (xi, yi) = (x as i64, y as i64);
         let (fx, fy) = (x - xi as f64, y - yi as f64);
+        if xi + 1 < self.width as i64 && yi + 1 < self.height as i64 {
+            // All four taps inside: without branches when they all hold data. A zero weight's
+            // term adds ±0, which leaves the sums as skipping it would (they start at +0), so
+            // the bytes are those of the general loop below.
+            let i = yi as usize * self.width + xi as usize;
+            let t = [
+                self.heights[i],
+                self.heights[i + 1],
+                self.heights[i + self.width],
+                self.heights[i + self.width + 1],
+            ];
+            if !t.iter().any(|v| v.is_nan()) {
+                let w = [
+                    (1.0 - fx) * (1.0 - fy),
+                    fx * (1.0 - fy),
+                    (1.0 - fx) * fy,
+                    fx * fy,
+                ];
+                let (mut acc, mut wsum) = (0.0f64, 0.0f64);
+                for (&wk, &tk) in w.iter().zip(&t) {
+                    acc += wk * tk as f64;
+                    wsum += wk;
+                }
+                return acc / wsum;
+            }
+        }
         let mut acc = 0.0f64;
         let mut wsum = 0.0f64;
         for (dx, dy, w) in [
@@ -338,12 +364,24 @@ impl Ray {
         while s < s_to && ax.i >= 0 && ay.i >= 0 && ax.i < nx && ay.i < ny {
             let (ix, iy) = (ax.i, ay.i);
             let s_next = ax.next.min(ay.next).min(s_to);
-            let (h00, h10, h01, h11) = (
-                ctx.at(ix, iy) as f64,
-                ctx.at(ix + 1, iy) as f64,
-                ctx.at(ix, iy + 1) as f64,
-                ctx.at(ix + 1, iy + 1) as f64,
-            );
+            let (h00, h10, h01, h11) = if ix + 1 < nx && iy + 1 < ny {
+                // The walk keeps ix, iy ≥ 0: the four corners are inside.
+                let (i, w) = (iy as usize * ctx.width + ix as usize, ctx.width);
+                let h = &ctx.heights;
+                (
+                    h[i] as f64,
+                    h[i + 1] as f64,
+                    h[i + w] as f64,
+                    h[i + w + 1] as f64,
+                )
+            } else {
+                (
+                    ctx.at(ix, iy) as f64,
+                    ctx.at(ix + 1, iy) as f64,
+                    ctx.at(ix, iy + 1) as f64,
+                    ctx.at(ix + 1, iy + 1) as f64,
+                )
+            };
             if !(h00.is_nan() || h10.is_nan() || h01.is_nan() || h11.is_nan()) {
                 // Along the ray the cell's bilinear surface is h(s) = c0 + c1·s + c2·s².
                 let (a, b, c) = (h10 - h00, h01 - h00, h11 - h10 - h01 + h00);
@@ -360,7 +398,16 @@ impl Ray {
                 };
                 try_at(s_next);
                 let (ca, cc) = (c0 - self.h0, c2 - self.kappa);
-                if ca != 0.0 && cc != 0.0 && ca / cc > 0.0 {
+                // s* = √(ca/cc) can lie in (s, s_next) only where ca/cc is in (s², s_next²):
+                // tested first without the division and the root, widened by 0.1 % (far
+                // beyond rounding) so that it never drops a cell the exact test takes.
+                let (aa, ac) = (ca.abs(), cc.abs());
+                let may = ac.is_nan()
+                    || ac <= 1e-200
+                    || ((ca > 0.0) == (cc > 0.0)
+                        && aa >= 0.999 * s * s * ac
+                        && aa <= 1.001 * s_next * s_next * ac);
+                if may && ca != 0.0 && cc != 0.0 && ca / cc > 0.0 {
                     let st = (ca / cc).sqrt();
                     if st > s && st < s_next {
                         try_at(st);
