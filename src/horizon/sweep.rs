@@ -27,13 +27,15 @@ pub(super) fn finish(
     dst: &mut [f32],
 ) {
     let (cos, sin) = (az.cos, az.sin);
+    let mut slopes = vec![0.0f64; rect.w];
     for j in 0..rect.h {
-        for i in 0..rect.w {
+        let row = &mut dst[j * rect.w..(j + 1) * rect.w];
+        for (i, slope) in slopes.iter_mut().enumerate() {
             let (x, y) = (rect.x0 + i, rect.y0 + j);
             let o = j * rect.w + i;
             let h0 = ctx.at(x as i64, y as i64);
             if h0.is_nan() {
-                dst[o] = f32::NAN;
+                *slope = f64::NAN;
                 continue;
             }
             let ray = Ray::from_parts(ctx, x, y, &geo[o], az);
@@ -57,9 +59,113 @@ pub(super) fn finish(
             if s0 > t {
                 t = s0;
             }
-            dst[o] = t.atan().to_degrees() as f32;
+            *slope = t;
+        }
+        degrees(&slopes, row);
+    }
+}
+
+/// `dst[k] = slope[k].atan().to_degrees() as f32`, the same bytes, for a row at once: a
+/// branch-free arc tangent (Cephes' `atan`, relative error below 2.2e-16, i.e. ≈ 1 ulp)
+/// that the compiler vectorises, checked per value: where the f32 it rounds to could differ
+/// from the one the libm arc tangent gives (the degrees within 1e-13, relatively, of a
+/// midpoint between two f32s), or the slope is not finite, libm's is taken. NaN slopes give
+/// `f32::NAN`.
+fn degrees(slope: &[f64], dst: &mut [f32]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU has AVX-512F, checked just above.
+            unsafe { degrees_avx512(slope, dst) };
+            return;
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2, checked just above.
+            unsafe { degrees_avx2(slope, dst) };
+            return;
         }
     }
+    degrees_generic(slope, dst)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn degrees_avx512(slope: &[f64], dst: &mut [f32]) {
+    degrees_generic(slope, dst)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn degrees_avx2(slope: &[f64], dst: &mut [f32]) {
+    degrees_generic(slope, dst)
+}
+
+#[inline(always)]
+fn degrees_generic(slope: &[f64], dst: &mut [f32]) {
+    const DEG: f64 = 180.0 / std::f64::consts::PI;
+    let dst = &mut dst[..slope.len()];
+    let mut sure = true;
+    for (d, &x) in dst.iter_mut().zip(slope) {
+        let v = atan_cephes(x) * DEG;
+        let (lo, hi) = (v * (1.0 - 1e-13), v * (1.0 + 1e-13));
+        *d = v as f32;
+        sure &= x.is_finite() & ((lo as f32).to_bits() == (hi as f32).to_bits());
+    }
+    if sure {
+        return;
+    }
+    for (d, &x) in dst.iter_mut().zip(slope) {
+        let v = atan_cephes(x) * DEG;
+        let (lo, hi) = (v * (1.0 - 1e-13), v * (1.0 + 1e-13));
+        if !(x.is_finite() && (lo as f32).to_bits() == (hi as f32).to_bits()) {
+            *d = if x.is_nan() {
+                f32::NAN
+            } else {
+                x.atan().to_degrees() as f32
+            };
+        }
+    }
+}
+
+/// Arc tangent, branch-free (Cephes `atan`: reduction to |x| ≤ 0.66 and a (4, 5) rational
+/// approximation, relative error below 2.2e-16); not for non-finite x.
+#[inline(always)]
+fn atan_cephes(x: f64) -> f64 {
+    const T3P8: f64 = 2.414_213_562_373_095; // tan(3π/8)
+    const MOREBITS: f64 = 6.123_233_995_736_766e-17;
+    const P: [f64; 5] = [
+        -8.750_608_600_031_904e-1,
+        -1.615_753_718_733_365e1,
+        -7.500_855_792_314_705e1,
+        -1.228_866_684_490_136e2,
+        -6.485_021_904_942_025e1,
+    ];
+    const Q: [f64; 5] = [
+        2.485_846_490_142_306e1,
+        1.650_270_098_316_988_5e2,
+        4.328_810_604_912_903e2,
+        4.853_903_996_359_137e2,
+        1.945_506_571_482_614e2,
+    ];
+    let a = x.abs();
+    let big = a > T3P8;
+    let mid = a > 0.66;
+    let (y0, m, r) = if big {
+        (std::f64::consts::FRAC_PI_2, MOREBITS, -1.0 / a)
+    } else if mid {
+        (
+            std::f64::consts::FRAC_PI_4,
+            0.5 * MOREBITS,
+            (a - 1.0) / (a + 1.0),
+        )
+    } else {
+        (0.0, 0.0, a)
+    };
+    let z = r * r;
+    let p = (((P[0] * z + P[1]) * z + P[2]) * z + P[3]) * z + P[4];
+    let q = ((((z + Q[0]) * z + Q[1]) * z + Q[2]) * z + Q[3]) * z + Q[4];
+    let y = y0 + ((r * (z * p / q) + r) + m);
+    y.copysign(x)
 }
 
 /// Half-width (plane pixels) of the window searched exactly around the sweep's winner.
@@ -522,6 +628,51 @@ pub(crate) struct Scratch {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The row arc tangent gives libm's bytes: random slopes over many scales, both signs,
+    /// the reduction's boundaries, zeros, infinities and NaN.
+    #[test]
+    fn degrees_equal_libm() {
+        let mut rnd = crate::testutil::rng(0x5EED_A7A9);
+        let mut slopes = vec![
+            0.0,
+            -0.0,
+            0.66,
+            -0.66,
+            2.414_213_562_373_095,
+            2.414_213_562_373_096,
+            1.0,
+            -1.0,
+            1e-300,
+            -1e300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ];
+        for i in 0..400_000 {
+            let scale = 10f64.powi(i % 13 - 6);
+            slopes.push((rnd() - 0.5) * 2.0 * scale);
+        }
+        for x in [0.66f64, 2.414_213_562_373_095] {
+            for k in -50i64..=50 {
+                slopes.push(f64::from_bits((x.to_bits() as i64 + k) as u64));
+            }
+        }
+        let mut got = vec![0.0f32; slopes.len()];
+        degrees(&slopes, &mut got);
+        for (x, g) in slopes.iter().zip(&got) {
+            let want = if x.is_nan() {
+                f32::NAN
+            } else {
+                x.atan().to_degrees() as f32
+            };
+            assert_eq!(
+                g.to_bits(),
+                want.to_bits(),
+                "slope {x:e}: {g} vs libm {want}"
+            );
+        }
+    }
 
     /// The hull query finds the sample seen highest among *all* samples pushed so far, from
     /// observers beyond them at random heights, with the finger carried between queries.
