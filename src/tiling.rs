@@ -463,6 +463,9 @@ pub fn box_samples(layout: &Layout, level: u8, prefilter: Prefilter) -> u32 {
 
 /// Spacing in pixels of the lattice on which source coordinates are computed exactly.
 const LATTICE: i64 = 8;
+/// How far (source pixels) beyond one edge of the raster all four corners of an interpolable
+/// lattice cell must lie for the cell to be called off the source ([`Dem::beyond_one_edge`]).
+const OFF_EDGE_MARGIN_PX: f64 = 1.0;
 const EXACT: u8 = 0;
 const INTERP: u8 = 1;
 const OUTSIDE: u8 = 2;
@@ -655,13 +658,17 @@ impl<'a> SourceGrid<'a> {
                     continue;
                 }
                 let c = grid.corners(mx, my);
-                let inside = c
-                    .iter()
-                    .all(|p| p.0.is_finite() && p.1.is_finite() && dem.covers(p.0, p.1));
+                let finite = c.iter().all(|p| p.0.is_finite() && p.1.is_finite());
+                let inside = finite && c.iter().all(|p| dem.covers(p.0, p.1));
                 let cols = c.iter().map(|p| p.0);
                 let spread = cols.clone().fold(f64::NEG_INFINITY, f64::max)
                     - cols.fold(f64::INFINITY, f64::min);
-                if !(inside && spread < half_width) {
+                // A cell off the raster's rectangle inside its bounding cap (a regional DEM's
+                // cap is a circle round a rectangle: ≈ 57 % more area): beyond one edge with
+                // all four corners, by a margin far above the interpolation tolerance, it is
+                // wholly off once it is shown to interpolate.
+                let beyond = !inside && finite && dem.beyond_one_edge(&c, OFF_EDGE_MARGIN_PX);
+                if !((inside || beyond) && spread < half_width) {
                     grid.ok.push(EXACT);
                     continue;
                 }
@@ -689,7 +696,11 @@ impl<'a> SourceGrid<'a> {
                     }
                 };
                 if interpolates(c, &mut mid) {
-                    grid.ok.push(INTERP);
+                    grid.ok.push(if inside { INTERP } else { OUTSIDE });
+                    continue;
+                }
+                if !inside {
+                    grid.ok.push(EXACT);
                     continue;
                 }
                 // Too curved for one cell: try its four halves, whose corners are the cell's
@@ -1392,6 +1403,68 @@ mod tests {
         }
         seen.sort();
         assert_eq!(seen, candidates);
+    }
+
+    /// A regional raster's bounding cap is a circle round its rectangle. Lattice cells inside
+    /// the cap but beyond one edge of the rectangle are called off the source (every pixel's
+    /// exact coordinates there are off the raster), so only the cells along the rectangle's
+    /// edges are computed pixel by pixel; the tiles stay what exact coordinates give.
+    #[test]
+    fn cells_beyond_a_regional_rasters_edges_are_off_the_source() {
+        // 1° × 1° at 90 px per degree, its corner near the centre of face +X.
+        let n = 90;
+        let d = 1.0 / n as f64;
+        let g = crate::dem::GeoRef {
+            crs: crate::dem::Crs::Geographic,
+            x0: -0.2 + d / 2.0,
+            y0: 0.7 - d / 2.0,
+            dx: d,
+            dy: d,
+        };
+        let dem = synthetic_dem(n, n, g, |c, r| {
+            (30.0 * (c as f64 * 0.1).sin() + r as f64) as f32
+        });
+        let layout = Layout {
+            projection: Projection::Gnomonic,
+            tile_size: 64,
+            halo: 2,
+            levels: 8,
+        };
+        let (mut counts, mut off_pixels) = ([0usize; 4], 0usize);
+        for (x, y) in [(63, 63), (64, 63), (63, 64), (64, 64)] {
+            let id = TileId {
+                level: 7,
+                face: cube::Face::Px,
+                x,
+                y,
+            };
+            let grid = SourceGrid::new(&dem, &layout, id);
+            for &o in &grid.ok {
+                counts[o as usize] += 1;
+            }
+            for j in -2..66 {
+                for i in -2..66 {
+                    let (gx, gy) = layout.global_pixel(id, i, j);
+                    let (gx, gy) = (gx as f64 + 0.5, gy as f64 + 0.5);
+                    let (a, e) = (grid.at(gx, gy), grid.exact(gx, gy));
+                    if a.0.is_nan() {
+                        off_pixels += 1;
+                        assert!(
+                            !dem.covers(e.0, e.1),
+                            "{id:?} ({i}, {j}): {e:?} is on the raster"
+                        );
+                    }
+                }
+            }
+        }
+        // The rectangle is ≈ 91 face pixels a side (0.011° each): ≈ 12 cells per edge.
+        eprintln!("cells exact/interp/outside/split {counts:?}, {off_pixels} pixels off");
+        assert!(off_pixels > 0 && counts[INTERP as usize] > 0);
+        assert!(
+            counts[EXACT as usize] <= 4 * (12 + 3),
+            "{} cells computed pixel by pixel: more than the rectangle's edges",
+            counts[EXACT as usize]
+        );
     }
 
     /// Wherever the grid interpolates (whole cells or halves of split ones), the coordinates are

@@ -550,6 +550,17 @@ impl Dem {
         col_ok && row_ok
     }
 
+    /// Whether every point of the convex hull of `pts` (source col, row) lies more than
+    /// `margin` pixels beyond one and the same edge of the raster, so that [`Dem::covers`] fails
+    /// everywhere in it. Never for an axis the raster wraps or spans whole.
+    pub fn beyond_one_edge(&self, pts: &[(f64, f64)], margin: f64) -> bool {
+        let (w, h) = (self.p.width as f64, self.p.height as f64);
+        let all = |f: &dyn Fn(&(f64, f64)) -> bool| pts.iter().all(f);
+        (!self.global_lon && (all(&|p| p.0 < -0.5 - margin) || all(&|p| p.0 > w - 0.5 + margin)))
+            || (!self.global_lat
+                && (all(&|p| p.1 < -0.5 - margin) || all(&|p| p.1 > h - 0.5 + margin)))
+    }
+
     /// Interpolated height (m above the DEM's datum) at latitude/longitude in degrees, with its
     /// mask value (see [`mask`]). NaN with `NO_DATA` off the raster or on unfilled voids.
     #[inline]
