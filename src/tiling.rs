@@ -1021,9 +1021,7 @@ fn sample_block(
             || vec![(0.0, 0.0); w],
             |coords, (j, (hrow, mrow))| {
                 grid.row(x0, y0 + j as i64, coords);
-                for ((h, mk), &(col, row)) in hrow.iter_mut().zip(mrow.iter_mut()).zip(&*coords) {
-                    (*h, *mk) = dem.sample_pixel(col, row, resampling);
-                }
+                dem.sample_row(coords, resampling, hrow, mrow);
             },
         );
     SampleBlock {

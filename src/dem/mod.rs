@@ -103,6 +103,134 @@ mod tests {
         assert_eq!(a, b);
     }
 
+    /// The row sampler the tiler uses gives `sample_pixel`'s bits for every stored sample type
+    /// and byte order (its own per-type loops, and the fallback for the others), at positions
+    /// inside, on the edges of and off the raster, next to no-data samples (filled and not), for
+    /// non-finite positions and for both resampling methods.
+    #[test]
+    fn sample_row_equals_sample_pixel() {
+        let (w, h) = (37usize, 23usize);
+        let g = GeoRef {
+            crs: Crs::Geographic,
+            x0: 10.0,
+            y0: 5.0,
+            dx: 0.1,
+            dy: 0.1,
+        };
+        let value = |c: usize, r: usize| ((c * 7 + r * 13) % 61) as f64 + 3.0;
+        // Two lone voids (filled) and a block too large to fill at 1 px.
+        let void = |c: usize, r: usize| {
+            (c, r) == (4, 4) || (c, r) == (30, 2) || ((15..22).contains(&c) && (8..16).contains(&r))
+        };
+        let dir = std::env::temp_dir().join(format!("penumbra-sample-row-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut rnd = crate::testutil::rng(0x5EED_1234);
+        let mut coords: Vec<(f64, f64)> = (0..4000)
+            .map(|_| {
+                (
+                    rnd() * (w as f64 + 4.0) - 2.0,
+                    rnd() * (h as f64 + 4.0) - 2.0,
+                )
+            })
+            .collect();
+        coords.extend([
+            (0.0, 0.0),
+            (-0.5, -0.5),
+            (w as f64 - 0.5, h as f64 - 0.5),
+            (w as f64 - 1.0, 3.0),
+            (f64::NAN, 1.0),
+            (1.0, f64::INFINITY),
+        ]);
+        let types = [
+            (SampleType::U8, ByteOrder::Little),
+            (SampleType::I16, ByteOrder::Big),
+            (SampleType::I16, ByteOrder::Little),
+            (SampleType::U16, ByteOrder::Big),
+            (SampleType::U16, ByteOrder::Little),
+            (SampleType::F32, ByteOrder::Big),
+            (SampleType::F32, ByteOrder::Little),
+            (SampleType::I32, ByteOrder::Little),
+            (SampleType::F64, ByteOrder::Big),
+        ];
+        let mut dems = Vec::new();
+        for (k, &(ty, order)) in types.iter().enumerate() {
+            let nodata = 250.0;
+            let mut bytes = vec![0u8; 5]; // a header to skip
+            for r in 0..h {
+                for c in 0..w {
+                    let v = if void(c, r) { nodata } else { value(c, r) };
+                    macro_rules! put {
+                        ($t:ty) => {{
+                            let x = v as $t;
+                            match order {
+                                ByteOrder::Little => bytes.extend(x.to_le_bytes()),
+                                ByteOrder::Big => bytes.extend(x.to_be_bytes()),
+                            }
+                        }};
+                    }
+                    match ty {
+                        SampleType::U8 => bytes.push(v as u8),
+                        SampleType::I16 => put!(i16),
+                        SampleType::U16 => put!(u16),
+                        SampleType::I32 => put!(i32),
+                        SampleType::U32 => put!(u32),
+                        SampleType::F32 => put!(f32),
+                        SampleType::F64 => put!(f64),
+                    }
+                }
+            }
+            let path = dir.join(format!("{k}.bin"));
+            std::fs::write(&path, &bytes).unwrap();
+            let parts = DemParts {
+                width: w,
+                height: h,
+                samples: Samples::Mapped {
+                    map: map_file(&path).unwrap(),
+                    offset: 5,
+                    row_stride: w * ty.size(),
+                    ty,
+                    order,
+                },
+                scale: 0.5,
+                offset: -10.0,
+                nodata: Some(nodata),
+                georef: g.clone(),
+                datum_radius_m: None,
+                target: None,
+                sources: vec![path.clone()],
+                format: "test".into(),
+            };
+            dems.push((format!("{ty:?} {order:?}"), Dem::new(parts, 1).unwrap()));
+        }
+        let owned = synthetic(w, h, g.clone(), |c, r| {
+            if void(c, r) {
+                f32::NAN
+            } else {
+                value(c, r) as f32
+            }
+        });
+        dems.push(("owned f32".into(), owned));
+        let _ = std::fs::remove_dir_all(&dir);
+        for (name, dem) in &dems {
+            for method in [Resampling::Bilinear, Resampling::Bicubic] {
+                let n = coords.len();
+                let (mut hs, mut ms) = (vec![0f32; n], vec![0u8; n]);
+                dem.sample_row(&coords, method, &mut hs, &mut ms);
+                let mut kinds = [0usize; 3];
+                for (i, &(c, r)) in coords.iter().enumerate() {
+                    let (v, m) = dem.sample_pixel(c, r, method);
+                    assert_eq!(
+                        (hs[i].to_bits(), ms[i]),
+                        (v.to_bits(), m),
+                        "{name} {method:?} at ({c}, {r})"
+                    );
+                    kinds[(m as usize).min(2)] += 1;
+                }
+                assert!(kinds.iter().all(|&k| k > 0), "{name} {method:?}: {kinds:?}");
+            }
+        }
+    }
+
     #[test]
     fn bicubic_reproduces_cubics_in_one_axis() {
         let dem = synthetic(64, 32, global(64, 32), |c, _| {

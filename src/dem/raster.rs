@@ -164,21 +164,123 @@ impl Dem {
         (v * self.p.scale + self.p.offset) as f32
     }
 
+    /// [`Dem::sample_pixel`] for a row of positions, the same values: bilinear samples whose
+    /// four taps are inside the raster and measured are read with the sample type and byte
+    /// order dispatched once for the row (the tiler's inner loop); everything else goes through
+    /// [`Dem::sample_pixel`].
+    pub fn sample_row(
+        &self,
+        coords: &[(f64, f64)],
+        method: Resampling,
+        height: &mut [f32],
+        mask_out: &mut [u8],
+    ) {
+        debug_assert!(coords.len() == height.len() && coords.len() == mask_out.len());
+        if method != Resampling::Bilinear {
+            for ((h, m), &(c, r)) in height.iter_mut().zip(mask_out.iter_mut()).zip(coords) {
+                (*h, *m) = self.sample_pixel(c, r, method);
+            }
+            return;
+        }
+        let w = self.p.width;
+        match &self.p.samples {
+            Samples::Owned(v) => {
+                self.bilinear_row(coords, height, mask_out, |c, r| owned_quad(v, w, r * w + c))
+            }
+            Samples::Mapped {
+                map,
+                offset,
+                row_stride,
+                ty,
+                order,
+            } => {
+                let (map, offset, row_stride) = (&map[..], *offset, *row_stride);
+                macro_rules! rows {
+                    ($t:ty, $n:expr, $from:ident) => {
+                        self.bilinear_row(coords, height, mask_out, |c, r| {
+                            let a = offset + r * row_stride + c * $n;
+                            mapped_quad::<$n>(map, a, a + row_stride, |x| <$t>::$from(x) as f64)
+                        })
+                    };
+                }
+                match (ty, order) {
+                    (SampleType::U8, _) => self.bilinear_row(coords, height, mask_out, |c, r| {
+                        let a = offset + r * row_stride + c;
+                        let b = a + row_stride;
+                        [
+                            map[a] as f64,
+                            map[a + 1] as f64,
+                            map[b] as f64,
+                            map[b + 1] as f64,
+                        ]
+                    }),
+                    (SampleType::I16, ByteOrder::Big) => rows!(i16, 2, from_be_bytes),
+                    (SampleType::I16, ByteOrder::Little) => rows!(i16, 2, from_le_bytes),
+                    (SampleType::U16, ByteOrder::Big) => rows!(u16, 2, from_be_bytes),
+                    (SampleType::U16, ByteOrder::Little) => rows!(u16, 2, from_le_bytes),
+                    (SampleType::F32, ByteOrder::Big) => rows!(f32, 4, from_be_bytes),
+                    (SampleType::F32, ByteOrder::Little) => rows!(f32, 4, from_le_bytes),
+                    _ => {
+                        for ((h, m), &(c, r)) in
+                            height.iter_mut().zip(mask_out.iter_mut()).zip(coords)
+                        {
+                            (*h, *m) = self.sample_pixel(c, r, method);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The bilinear fast path of [`Dem::sample_pixel`] over a row, `raw4(c, r)` giving the raw
+    /// samples of (c, r), (c+1, r), (c, r+1), (c+1, r+1) as [`Dem::quad`] reads them.
+    #[inline(always)]
+    fn bilinear_row(
+        &self,
+        coords: &[(f64, f64)],
+        height: &mut [f32],
+        mask_out: &mut [u8],
+        raw4: impl Fn(usize, usize) -> [f64; 4],
+    ) {
+        let (w, h) = (self.p.width, self.p.height);
+        let (scale, offset, nodata) = (self.p.scale, self.p.offset, self.p.nodata);
+        for ((ho, mo), &(col, row)) in height.iter_mut().zip(mask_out.iter_mut()).zip(coords) {
+            if !(col.is_finite() && row.is_finite() && self.covers(col, row)) {
+                (*ho, *mo) = (f32::NAN, mask::NO_DATA);
+                continue;
+            }
+            let (c0, r0) = (floor_fast(col), floor_fast(row));
+            let (fc, fr) = (col - c0, row - r0);
+            let (c0, r0) = (c0 as i64, r0 as i64);
+            if c0 >= 0 && r0 >= 0 && ((c0 + 1) as usize) < w && ((r0 + 1) as usize) < h {
+                let raw = raw4(c0 as usize, r0 as usize);
+                let mut q = [0f32; 4];
+                let mut ok = true;
+                for (o, v) in q.iter_mut().zip(raw) {
+                    if !v.is_finite() || nodata == Some(v) {
+                        ok = false;
+                        break;
+                    }
+                    *o = (v * scale + offset) as f32;
+                }
+                if ok {
+                    let top = q[0] as f64 * (1.0 - fc) + q[1] as f64 * fc;
+                    let bottom = q[2] as f64 * (1.0 - fc) + q[3] as f64 * fc;
+                    (*ho, *mo) = ((top * (1.0 - fr) + bottom * fr) as f32, mask::MEASURED);
+                    continue;
+                }
+            }
+            (*ho, *mo) = self.sample_pixel(col, row, Resampling::Bilinear);
+        }
+    }
+
     /// Heights of pixels (c, r), (c+1, r), (c, r+1), (c+1, r+1), all inside the raster, or
     /// `None` when any of them is a void. One dispatch on the sample type for all four.
     #[inline]
     fn quad(&self, c: usize, r: usize) -> Option<[f32; 4]> {
         let w = self.p.width;
         let raw: [f64; 4] = match &self.p.samples {
-            Samples::Owned(v) => {
-                let i = r * w + c;
-                [
-                    v[i] as f64,
-                    v[i + 1] as f64,
-                    v[i + w] as f64,
-                    v[i + w + 1] as f64,
-                ]
-            }
+            Samples::Owned(v) => owned_quad(v, w, r * w + c),
             Samples::Mapped {
                 map,
                 offset,
@@ -190,18 +292,16 @@ impl Dem {
                 let a = offset + r * row_stride + c * sz;
                 let b = a + row_stride;
                 macro_rules! four {
-                    ($t:ty, $n:expr) => {{
-                        let rd = |at: usize| {
-                            let x: [u8; $n] = map[at..at + $n]
-                                .try_into()
-                                .expect("slice length matches sample size");
-                            (match order {
-                                ByteOrder::Little => <$t>::from_le_bytes(x),
-                                ByteOrder::Big => <$t>::from_be_bytes(x),
-                            }) as f64
-                        };
-                        [rd(a), rd(a + $n), rd(b), rd(b + $n)]
-                    }};
+                    ($t:ty, $n:expr) => {
+                        match order {
+                            ByteOrder::Little => {
+                                mapped_quad::<$n>(map, a, b, |x| <$t>::from_le_bytes(x) as f64)
+                            }
+                            ByteOrder::Big => {
+                                mapped_quad::<$n>(map, a, b, |x| <$t>::from_be_bytes(x) as f64)
+                            }
+                        }
+                    };
                 }
                 match ty {
                     SampleType::U8 => [
@@ -736,6 +836,36 @@ fn catmull_rom(t: f64) -> [f64; 4] {
         0.5 * (-3.0 * t3 + 4.0 * t2 + t),
         0.5 * (t3 - t2),
     ]
+}
+
+/// The samples at index `i`, `i + 1` and the same two a row (`w`) below of decoded samples.
+#[inline(always)]
+fn owned_quad(v: &[f32], w: usize, i: usize) -> [f64; 4] {
+    [
+        v[i] as f64,
+        v[i + 1] as f64,
+        v[i + w] as f64,
+        v[i + w + 1] as f64,
+    ]
+}
+
+/// The raw samples at byte offsets `a`, `a + N` (row above) and `b`, `b + N` (row below) of a
+/// mapped raster, each `N` bytes decoded by `conv`.
+#[inline(always)]
+fn mapped_quad<const N: usize>(
+    map: &[u8],
+    a: usize,
+    b: usize,
+    conv: impl Fn([u8; N]) -> f64,
+) -> [f64; 4] {
+    let rd = |at: usize| {
+        conv(
+            map[at..at + N]
+                .try_into()
+                .expect("slice length matches sample size"),
+        )
+    };
+    [rd(a), rd(a + N), rd(b), rd(b + N)]
 }
 
 /// `x.floor()` for finite `x` of magnitude below 2^52, inline: without SSE4.1 (the baseline
