@@ -177,10 +177,7 @@ impl Dem {
     ) {
         debug_assert!(coords.len() == height.len() && coords.len() == mask_out.len());
         if method != Resampling::Bilinear {
-            for ((h, m), &(c, r)) in height.iter_mut().zip(mask_out.iter_mut()).zip(coords) {
-                (*h, *m) = self.sample_pixel(c, r, method);
-            }
-            return;
+            return self.sample_each(coords, method, height, mask_out);
         }
         let w = self.p.width;
         match &self.p.samples {
@@ -204,31 +201,29 @@ impl Dem {
                     };
                 }
                 match (ty, order) {
-                    (SampleType::U8, _) => self.bilinear_row(coords, height, mask_out, |c, r| {
-                        let a = offset + r * row_stride + c;
-                        let b = a + row_stride;
-                        [
-                            map[a] as f64,
-                            map[a + 1] as f64,
-                            map[b] as f64,
-                            map[b + 1] as f64,
-                        ]
-                    }),
+                    (SampleType::U8, _) => rows!(u8, 1, from_le_bytes),
                     (SampleType::I16, ByteOrder::Big) => rows!(i16, 2, from_be_bytes),
                     (SampleType::I16, ByteOrder::Little) => rows!(i16, 2, from_le_bytes),
                     (SampleType::U16, ByteOrder::Big) => rows!(u16, 2, from_be_bytes),
                     (SampleType::U16, ByteOrder::Little) => rows!(u16, 2, from_le_bytes),
                     (SampleType::F32, ByteOrder::Big) => rows!(f32, 4, from_be_bytes),
                     (SampleType::F32, ByteOrder::Little) => rows!(f32, 4, from_le_bytes),
-                    _ => {
-                        for ((h, m), &(c, r)) in
-                            height.iter_mut().zip(mask_out.iter_mut()).zip(coords)
-                        {
-                            (*h, *m) = self.sample_pixel(c, r, method);
-                        }
-                    }
+                    _ => self.sample_each(coords, method, height, mask_out),
                 }
             }
+        }
+    }
+
+    /// [`Dem::sample_pixel`] at each position of a row.
+    fn sample_each(
+        &self,
+        coords: &[(f64, f64)],
+        method: Resampling,
+        height: &mut [f32],
+        mask_out: &mut [u8],
+    ) {
+        for ((h, m), &(c, r)) in height.iter_mut().zip(mask_out.iter_mut()).zip(coords) {
+            (*h, *m) = self.sample_pixel(c, r, method);
         }
     }
 
@@ -243,7 +238,6 @@ impl Dem {
         raw4: impl Fn(usize, usize) -> [f64; 4],
     ) {
         let (w, h) = (self.p.width, self.p.height);
-        let (scale, offset, nodata) = (self.p.scale, self.p.offset, self.p.nodata);
         for ((ho, mo), &(col, row)) in height.iter_mut().zip(mask_out.iter_mut()).zip(coords) {
             if !(col.is_finite() && row.is_finite() && self.covers(col, row)) {
                 (*ho, *mo) = (f32::NAN, mask::NO_DATA);
@@ -253,20 +247,8 @@ impl Dem {
             let (fc, fr) = (col - c0, row - r0);
             let (c0, r0) = (c0 as i64, r0 as i64);
             if c0 >= 0 && r0 >= 0 && ((c0 + 1) as usize) < w && ((r0 + 1) as usize) < h {
-                let raw = raw4(c0 as usize, r0 as usize);
-                let mut q = [0f32; 4];
-                let mut ok = true;
-                for (o, v) in q.iter_mut().zip(raw) {
-                    if !v.is_finite() || nodata == Some(v) {
-                        ok = false;
-                        break;
-                    }
-                    *o = (v * scale + offset) as f32;
-                }
-                if ok {
-                    let top = q[0] as f64 * (1.0 - fc) + q[1] as f64 * fc;
-                    let bottom = q[2] as f64 * (1.0 - fc) + q[3] as f64 * fc;
-                    (*ho, *mo) = ((top * (1.0 - fr) + bottom * fr) as f32, mask::MEASURED);
+                if let Some(q) = self.scaled(raw4(c0 as usize, r0 as usize)) {
+                    (*ho, *mo) = (bilerp4(q, fc, fr), mask::MEASURED);
                     continue;
                 }
             }
@@ -319,6 +301,12 @@ impl Dem {
                 }
             }
         };
+        self.scaled(raw)
+    }
+
+    /// Heights of four raw samples, or `None` when any of them is a void.
+    #[inline(always)]
+    fn scaled(&self, raw: [f64; 4]) -> Option<[f32; 4]> {
         let mut out = [0f32; 4];
         for (o, v) in out.iter_mut().zip(raw) {
             if !v.is_finite() || self.p.nodata == Some(v) {
@@ -654,11 +642,14 @@ impl Dem {
     /// `margin` pixels beyond one and the same edge of the raster, so that [`Dem::covers`] fails
     /// everywhere in it. Never for an axis the raster wraps or spans whole.
     pub fn beyond_one_edge(&self, pts: &[(f64, f64)], margin: f64) -> bool {
-        let (w, h) = (self.p.width as f64, self.p.height as f64);
-        let all = |f: &dyn Fn(&(f64, f64)) -> bool| pts.iter().all(f);
-        (!self.global_lon && (all(&|p| p.0 < -0.5 - margin) || all(&|p| p.0 > w - 0.5 + margin)))
-            || (!self.global_lat
-                && (all(&|p| p.1 < -0.5 - margin) || all(&|p| p.1 > h - 0.5 + margin)))
+        // All of one coordinate below the raster's first centre − ½ − margin, or all above its
+        // last centre + ½ + margin.
+        let off = |n: usize, coord: fn(&(f64, f64)) -> f64| {
+            pts.iter().all(|p| coord(p) < -0.5 - margin)
+                || pts.iter().all(|p| coord(p) > n as f64 - 0.5 + margin)
+        };
+        (!self.global_lon && off(self.p.width, |p| p.0))
+            || (!self.global_lat && off(self.p.height, |p| p.1))
     }
 
     /// Interpolated height (m above the DEM's datum) at latitude/longitude in degrees, with its
@@ -724,9 +715,7 @@ impl Dem {
             && ((r0 + 1) as usize) < self.p.height
         {
             if let Some(q) = self.quad(c0 as usize, r0 as usize) {
-                let top = q[0] as f64 * (1.0 - fc) + q[1] as f64 * fc;
-                let bottom = q[2] as f64 * (1.0 - fc) + q[3] as f64 * fc;
-                return ((top * (1.0 - fr) + bottom * fr) as f32, mask::MEASURED);
+                return (bilerp4(q, fc, fr), mask::MEASURED);
             }
         }
         let taps = [
@@ -836,6 +825,14 @@ fn catmull_rom(t: f64) -> [f64; 4] {
         0.5 * (-3.0 * t3 + 4.0 * t2 + t),
         0.5 * (t3 - t2),
     ]
+}
+
+/// Bilinear interpolation of (c, r), (c+1, r), (c, r+1), (c+1, r+1) at fractions (fc, fr).
+#[inline(always)]
+fn bilerp4(q: [f32; 4], fc: f64, fr: f64) -> f32 {
+    let top = q[0] as f64 * (1.0 - fc) + q[1] as f64 * fc;
+    let bottom = q[2] as f64 * (1.0 - fc) + q[3] as f64 * fc;
+    (top * (1.0 - fr) + bottom * fr) as f32
 }
 
 /// The samples at index `i`, `i + 1` and the same two a row (`w`) below of decoded samples.

@@ -90,6 +90,12 @@ impl Context {
         // x, y ≥ 0 here, so truncation is floor (and needs no libm call on baseline x86-64).
         let (xi, yi) = (x as i64, y as i64);
         let (fx, fy) = (x - xi as f64, y - yi as f64);
+        let w = [
+            (1.0 - fx) * (1.0 - fy),
+            fx * (1.0 - fy),
+            (1.0 - fx) * fy,
+            fx * fy,
+        ];
         if xi + 1 < self.width as i64 && yi + 1 < self.height as i64 {
             // All four taps inside: without branches when they all hold data. A zero weight's
             // term adds ±0, which leaves the sums as skipping it would (they start at +0), so
@@ -102,12 +108,6 @@ impl Context {
                 self.heights[i + self.width + 1],
             ];
             if !t.iter().any(|v| v.is_nan()) {
-                let w = [
-                    (1.0 - fx) * (1.0 - fy),
-                    fx * (1.0 - fy),
-                    (1.0 - fx) * fy,
-                    fx * fy,
-                ];
                 let (mut acc, mut wsum) = (0.0f64, 0.0f64);
                 for (&wk, &tk) in w.iter().zip(&t) {
                     acc += wk * tk as f64;
@@ -118,12 +118,7 @@ impl Context {
         }
         let mut acc = 0.0f64;
         let mut wsum = 0.0f64;
-        for (dx, dy, w) in [
-            (0, 0, (1.0 - fx) * (1.0 - fy)),
-            (1, 0, fx * (1.0 - fy)),
-            (0, 1, (1.0 - fx) * fy),
-            (1, 1, fx * fy),
-        ] {
+        for ((dx, dy), w) in [(0, 0), (1, 0), (0, 1), (1, 1)].into_iter().zip(w) {
             if w == 0.0 {
                 continue;
             }

@@ -104,20 +104,23 @@ unsafe fn degrees_avx2(slope: &[f64], dst: &mut [f32]) {
 fn degrees_generic(slope: &[f64], dst: &mut [f32]) {
     const DEG: f64 = 180.0 / std::f64::consts::PI;
     let dst = &mut dst[..slope.len()];
-    let mut sure = true;
+    // Whether `v`, the degrees of finite slope `x`, rounds to the same f32 anywhere within the
+    // arc tangent's error.
+    let sure = |x: f64, v: f64| {
+        let (lo, hi) = (v * (1.0 - 1e-13), v * (1.0 + 1e-13));
+        x.is_finite() & ((lo as f32).to_bits() == (hi as f32).to_bits())
+    };
+    let mut all_sure = true;
     for (d, &x) in dst.iter_mut().zip(slope) {
         let v = atan_cephes(x) * DEG;
-        let (lo, hi) = (v * (1.0 - 1e-13), v * (1.0 + 1e-13));
         *d = v as f32;
-        sure &= x.is_finite() & ((lo as f32).to_bits() == (hi as f32).to_bits());
+        all_sure &= sure(x, v);
     }
-    if sure {
+    if all_sure {
         return;
     }
     for (d, &x) in dst.iter_mut().zip(slope) {
-        let v = atan_cephes(x) * DEG;
-        let (lo, hi) = (v * (1.0 - 1e-13), v * (1.0 + 1e-13));
-        if !(x.is_finite() && (lo as f32).to_bits() == (hi as f32).to_bits()) {
+        if !sure(x, atan_cephes(x) * DEG) {
             *d = if x.is_nan() {
                 f32::NAN
             } else {
