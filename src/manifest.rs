@@ -251,6 +251,14 @@ pub struct HorizonLevelDistance {
     pub needed_km: f64,
     pub max_margin_px: u64,
     pub tiles_capped: u64,
+    /// Tiles whose reach went beyond the fast method's full-resolution margin and was seen
+    /// through far rings of coarser levels.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub tiles_with_far_rings: u64,
+}
+
+fn is_zero(v: &u64) -> bool {
+    *v == 0
 }
 
 /// Tiles present at one level, as row runs `[y, x_first, x_last]` per face.

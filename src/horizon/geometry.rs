@@ -271,12 +271,27 @@ impl Ray {
     #[inline]
     pub(super) fn from_parts(ctx: &Context, x: usize, y: usize, g: &PixelGeo, az: &Azimuth) -> Ray {
         let h0 = ctx.at(x as i64, y as i64) as f64;
+        Ray::from_point(ctx, x as f64, y as f64, h0, g, az)
+    }
+
+    /// The ray from fractional raster position (x, y) at height `h0`, whose plane point's
+    /// direction and length are `g` (an observer of a finer raster of the same face plane seen
+    /// in a coarser one: its position is not a pixel centre there, nor its height a sample).
+    #[inline]
+    pub(super) fn from_point(
+        ctx: &Context,
+        x: f64,
+        y: f64,
+        h0: f64,
+        g: &PixelGeo,
+        az: &Azimuth,
+    ) -> Ray {
         let r0 = ctx.radius_m + h0;
         let (a1, b1) = az.along(g);
         let gm = r0 * b1 / g.n0;
         Ray {
-            x0: x as f64,
-            y0: y as f64,
+            x0: x,
+            y0: y,
             cx: az.cos,
             cy: -az.sin,
             h0,

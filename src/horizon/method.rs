@@ -4,6 +4,7 @@
 
 use rayon::prelude::*;
 
+use super::far::{FarPass, FarRing, RingMap};
 use super::geometry::{pixel_geometry, plane_azimuth, Azimuth, Context, Rect};
 use super::near;
 use super::pyramid;
@@ -90,33 +91,7 @@ pub fn horizons_with(
                 pyramid::finish(ctx, &pyr, rect, &az, 0.0, &geo, &none, dst, &mut st);
             })
         }
-        Method::Fast => {
-            let geo = pixel_geometry(ctx, rect);
-            let nodata = near::NoData::new(ctx);
-            out.par_chunks_mut(plane).enumerate().for_each_init(
-                || FastBuffers::new(plane),
-                |b, (k, dst)| {
-                    let phi = plane_azimuth(k, a);
-                    let az = Azimuth::new(ctx, phi);
-                    let walk = near::NearWalk::new(&az, near_px);
-                    near::near_field(ctx, rect, &az, &walk, &geo, &nodata, &mut b.ns, &mut b.near);
-                    b.acc.fill(f64::NEG_INFINITY);
-                    b.acc_s.fill(f64::NAN);
-                    sweep(
-                        ctx,
-                        rect,
-                        phi,
-                        &b.near,
-                        &mut b.acc,
-                        &mut b.acc_s,
-                        &mut b.sweep,
-                    );
-                    finish(
-                        ctx, rect, &az, near_px, &geo, &b.near, &b.acc, &b.acc_s, dst,
-                    );
-                },
-            )
-        }
+        Method::Fast => return horizons_far(ctx, rect, a, near_px, &[]),
         Method::Reference => {
             let hmax = ctx.max_height();
             let geo = pixel_geometry(ctx, rect);
@@ -125,6 +100,86 @@ pub fn horizons_with(
             })
         }
     }
+    out
+}
+
+/// The fast method's horizons of `rect` (as [`horizons_with`]), seeing beyond `ctx` through
+/// coarser `rings` ([`FarRing`]; none: `ctx` alone).
+pub fn horizons_far(
+    ctx: &Context,
+    rect: Rect,
+    a: usize,
+    near_px: f64,
+    rings: &[FarRing],
+) -> Vec<f32> {
+    assert!(rect.x0 + rect.w <= ctx.width && rect.y0 + rect.h <= ctx.height);
+    assert!(
+        (0.0..=near::MAX_NEAR_PX).contains(&near_px),
+        "near field of {near_px} px outside 0..={}",
+        near::MAX_NEAR_PX
+    );
+    let plane = rect.w * rect.h;
+    let mut out = vec![0.0f32; plane * a];
+    if plane == 0 {
+        return out;
+    }
+    let geo = pixel_geometry(ctx, rect);
+    let nodata = near::NoData::new(ctx);
+    let maps: Vec<RingMap> = rings.iter().map(|r| r.map(ctx, rect)).collect();
+    let nowhere: Vec<Vec<f64>> = rings
+        .iter()
+        .map(|r| vec![f64::NEG_INFINITY; r.rect.w * r.rect.h])
+        .collect();
+    out.par_chunks_mut(plane).enumerate().for_each_init(
+        || FastBuffers::new(plane, rings),
+        |b, (k, dst)| {
+            let phi = plane_azimuth(k, a);
+            let az = Azimuth::new(ctx, phi);
+            let walk = near::NearWalk::new(&az, near_px);
+            near::near_field(ctx, rect, &az, &walk, &geo, &nodata, &mut b.ns, &mut b.near);
+            b.acc.fill(f64::NEG_INFINITY);
+            b.acc_s.fill(f64::NAN);
+            sweep(
+                ctx,
+                rect,
+                phi,
+                &b.near,
+                &mut b.acc,
+                &mut b.acc_s,
+                &mut b.sweep,
+                None,
+            );
+            for ((ring, (acc, acc_s)), none) in rings.iter().zip(&mut b.far).zip(&nowhere) {
+                acc.fill(f64::NEG_INFINITY);
+                acc_s.fill(f64::NAN);
+                sweep(
+                    &ring.ctx,
+                    ring.rect,
+                    phi,
+                    none,
+                    acc,
+                    acc_s,
+                    &mut b.sweep,
+                    Some(&ring.observers),
+                );
+            }
+            let passes: Vec<FarPass> = rings
+                .iter()
+                .zip(&maps)
+                .zip(&b.far)
+                .map(|((ring, map), (acc, acc_s))| FarPass {
+                    ring,
+                    map,
+                    az: Azimuth::new(&ring.ctx, phi),
+                    acc,
+                    acc_s,
+                })
+                .collect();
+            finish(
+                ctx, rect, &az, near_px, &geo, &b.near, &b.acc, &b.acc_s, &passes, dst,
+            );
+        },
+    );
     out
 }
 
@@ -151,16 +206,27 @@ struct FastBuffers {
     acc_s: Vec<f64>,
     sweep: Scratch,
     ns: near::NearScratch,
+    /// Per far ring: its observers' best slopes and their distances.
+    far: Vec<(Vec<f64>, Vec<f64>)>,
 }
 
 impl FastBuffers {
-    fn new(plane: usize) -> FastBuffers {
+    fn new(plane: usize, rings: &[FarRing]) -> FastBuffers {
         FastBuffers {
             near: vec![0.0; plane],
             acc: vec![0.0; plane],
             acc_s: vec![0.0; plane],
             sweep: Scratch::default(),
             ns: near::NearScratch::default(),
+            far: rings
+                .iter()
+                .map(|r| {
+                    (
+                        vec![0.0; r.rect.w * r.rect.h],
+                        vec![0.0; r.rect.w * r.rect.h],
+                    )
+                })
+                .collect(),
         }
     }
 }

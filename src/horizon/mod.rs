@@ -8,6 +8,7 @@
 //! `near` field, per-azimuth upper-hull `sweep` beyond). `stage` builds those rasters from
 //! a tileset and stores the raw maps (the point query is `crate::query::horizon`).
 
+mod far;
 mod geometry;
 pub mod io;
 mod method;
@@ -17,12 +18,14 @@ mod reference;
 pub(crate) mod stage;
 mod sweep;
 
+pub use self::far::FarRing;
 pub use self::geometry::{compass_azimuth_deg, plane_azimuth, Context, Rect};
 pub(crate) use self::geometry::{Axis, Ray};
-pub use self::method::{horizons, horizons_reference_step, horizons_with, Method};
+pub use self::method::{horizons, horizons_far, horizons_reference_step, horizons_with, Method};
 pub use self::near::{DEFAULT_NEAR_PX, MAX_NEAR_PX};
 pub use self::stage::{
     build_horizons, context_for, reach_rad, read_horizon_exr, terrain_range, tile_path,
     write_horizon_exr, HorizonOptions, HorizonPrecision, HorizonReport, Reach, StreamedFourier,
-    AZIMUTH_CONVENTION, PATTERN, STAGE, STAGE_BOTH, STAGE_FOURIER,
+    AZIMUTH_CONVENTION, DEFAULT_FINE_MARGIN_PX, FINE_MARGIN_PX, PATTERN, STAGE, STAGE_BOTH,
+    STAGE_FOURIER,
 };

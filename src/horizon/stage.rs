@@ -10,9 +10,10 @@ use std::sync::Arc;
 use rayon::prelude::*;
 use serde::Serialize;
 
+use super::far::FarRing;
 use super::geometry::{Context, Rect};
 pub use super::io::{read_horizon_exr, write_horizon_exr, HorizonPrecision};
-use super::method::{horizons_with, Method};
+use super::method::{horizons_far, horizons_with, Method};
 use super::near::{DEFAULT_NEAR_PX, MAX_NEAR_PX};
 use crate::cube::{Face, Projection};
 use crate::error::{Error, IoContext, Result};
@@ -30,12 +31,23 @@ pub const FORMAT: &str = "penumbra-horizon-1";
 /// Revision of the algorithms' results (part of the run key: a rerun after a change that moves
 /// the values recomputes instead of keeping maps made the old way). 2: the fast method's exact
 /// near field reaches 24 px instead of 4, and far candidates at the raster's edge are clamped.
-const ALGORITHM: &str = "2";
+/// 3: beyond `fine_margin_px` the fast method sees far rings of coarser levels.
+const ALGORITHM: &str = "3";
 pub const AZIMUTH_CONVENTION: &str = "plane azimuth on the tile's cube face: counter-clockwise \
      from the face's +U axis towards +V, degrees; plane k = 360*k/A; compass azimuth differs per \
      pixel (docs/horizons.md)";
 pub const LAYOUT: &str = "image tile_size wide and A*tile_size high: rows k*n..(k+1)*n hold \
      plane k, row-major like the height tile's interior (no halo)";
+/// A global pixel window or box (x0, y0, x1, y1), half-open.
+type PxBox = (i64, i64, i64, i64);
+/// Each (level, face)'s coverage box, computed once per run.
+pub(crate) type Covers = HashMap<(u8, Face), Option<PxBox>>;
+
+/// Default full-resolution margin of the fast method (`--fine-margin-px`), pixels.
+pub const DEFAULT_FINE_MARGIN_PX: u64 = 1024;
+/// Bounds of `--fine-margin-px`.
+pub const FINE_MARGIN_PX: std::ops::RangeInclusive<u64> = 16..=65536;
+
 /// Largest |u|, |v| a context reaches on a face's extended plane (71.6° from the face centre
 /// along an axis).
 const PLANE_LIMIT: f64 = 3.0;
@@ -55,6 +67,9 @@ pub struct HorizonOptions {
     pub max_output_gib: f64,
     /// The fast method's exact near field, plane pixels (0..=MAX_NEAR_PX).
     pub near_px: f64,
+    /// The fast method's full-resolution margin around a tile (pixels of its level); beyond
+    /// it, out to the whole reach, far rings of coarser levels ([`FarRing`]).
+    pub fine_margin_px: u64,
     /// Compress each tile's horizons into Fourier pyramids as they are computed.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fourier: Option<crate::fourier::FourierOptions>,
@@ -74,6 +89,7 @@ impl Default for HorizonOptions {
             max_margin_px: 4096,
             max_output_gib: 8.0,
             near_px: DEFAULT_NEAR_PX,
+            fine_margin_px: DEFAULT_FINE_MARGIN_PX,
             fourier: None,
             keep_raw: false,
         }
@@ -283,26 +299,206 @@ pub fn context_for(
     margin: u64,
     cover: Option<(i64, i64, i64, i64)>,
 ) -> Result<(Context, Rect)> {
+    let n = src.manifest().layout.tile_size as i64;
+    let (tx, ty) = (id.x as i64 * n, id.y as i64 * n);
+    let win = window(
+        src,
+        id.level,
+        (tx, ty, tx + n, ty + n),
+        margin as i64,
+        cover,
+    );
+    let ctx = context_window(src, id.level, id.face, win)?;
+    let rect = Rect {
+        x0: (tx - win.0) as usize,
+        y0: (ty - win.1) as usize,
+        w: n as usize,
+        h: n as usize,
+    };
+    Ok((ctx, rect))
+}
+
+/// The far rings ([`FarRing`]) of tile `id` beyond a full-resolution context over the global
+/// window `fine` (pixels of `id.level`; `fine_margin` around the tile before clipping), out to `needed_px` pixels of that level: ring k
+/// holds level L−k's heights `ring_px` ring pixels around the tile's footprint (at level 0,
+/// whatever reach is left), with what the previous window holds blanked out. `covers` caches
+/// each level's coverage box.
+pub(crate) fn far_rings(
+    src: &Store,
+    id: TileId,
+    fine: (i64, i64, i64, i64),
+    fine_margin: u64,
+    needed_px: u64,
+    ring_px: u64,
+    covers: &mut Covers,
+) -> Result<Vec<FarRing>> {
+    let ts = src.manifest();
+    let n = ts.layout.tile_size as i64;
+    let (tx, ty) = (id.x as i64 * n, id.y as i64 * n);
+    let mut rings = Vec::new();
+    let mut prev = fine;
+    // Reach of the windows so far (before clipping), in pixels of the tile's level.
+    let mut reach = fine_margin;
+    let mut k = 0u32;
+    while reach < needed_px && k < u32::from(id.level) {
+        k += 1;
+        let level = id.level - k as u8;
+        let f = 1i64 << k;
+        let foot = (
+            tx.div_euclid(f),
+            ty.div_euclid(f),
+            (tx + n + f - 1).div_euclid(f),
+            (ty + n + f - 1).div_euclid(f),
+        );
+        let rest = needed_px.div_ceil(f as u64);
+        let margin = if level == 0 { rest } else { rest.min(ring_px) } as i64;
+        let cover = *covers
+            .entry((level, id.face))
+            .or_insert_with(|| coverage_box(ts, level, id.face));
+        let win = window(src, level, foot, margin, cover);
+        let mut ctx = context_window(src, level, id.face, win)?;
+        let rect = Rect {
+            x0: (foot.0 - win.0) as usize,
+            y0: (foot.1 - win.1) as usize,
+            w: (foot.2 - foot.0) as usize,
+            h: (foot.3 - foot.1) as usize,
+        };
+        let mut observers = Vec::with_capacity(rect.w * rect.h);
+        for j in 0..rect.h {
+            let row = (rect.y0 + j) * ctx.width + rect.x0;
+            observers.extend_from_slice(&ctx.heights[row..row + rect.w]);
+        }
+        // Blank what the previous (finer) window holds: the ring pixels all of whose 2×2
+        // finer pixels lie in it, with a pit far below any terrain rather than no data (the
+        // bilinear surface renormalises over no-data corners, which would carry the boundary
+        // pixels' heights up to a ring pixel towards the tile: closer terrain, a horizon too
+        // high; next to a pit the surface falls away instead).
+        let inner = (
+            prev.0.div_euclid(2) + prev.0.rem_euclid(2),
+            prev.1.div_euclid(2) + prev.1.rem_euclid(2),
+            prev.2.div_euclid(2),
+            prev.3.div_euclid(2),
+        );
+        for gy in inner.1.max(win.1)..inner.3.min(win.3) {
+            let row = (gy - win.1) as usize * ctx.width;
+            let (a, b) = (inner.0.max(win.0), inner.2.min(win.2));
+            if a < b {
+                ctx.heights[row + (a - win.0) as usize..row + (b - win.0) as usize]
+                    .fill(FarRing::PIT_M);
+            }
+        }
+        // The same pit where the level has no data: renormalising there would carry the
+        // data's edge outwards by a whole ring pixel (a horizon too high where the terrain
+        // falls away towards the edge).
+        for h in &mut ctx.heights {
+            if h.is_nan() {
+                *h = FarRing::PIT_M;
+            }
+        }
+        // Least distance from the footprint to the ring's terrain (the gap between pixel
+        // edges along the farther axis, a lower bound of the plane distance), in pixels of the
+        // tile's level; None: the ring holds no terrain.
+        let mut gap: Option<i64> = None;
+        for (r, row) in ctx.heights.chunks_exact(ctx.width).enumerate() {
+            let gy = win.1 + r as i64;
+            let dy = (foot.1 - gy - 1).max(gy - foot.3).max(0);
+            for (c, h) in row.iter().enumerate() {
+                if *h > FarRing::PIT_M {
+                    let gx = win.0 + c as i64;
+                    let d = (foot.0 - gx - 1).max(gx - foot.2).max(0).max(dy);
+                    gap = Some(gap.map_or(d, |g| g.min(d)));
+                }
+            }
+        }
+        reach = reach.max((margin * f) as u64);
+        prev = win;
+        if let Some(gap) = gap {
+            rings.push(FarRing {
+                ctx,
+                rect,
+                observers,
+                factor: 1 << k,
+                inner_px: ((gap * f) as f64).max(1.0),
+            });
+        }
+    }
+    Ok(rings)
+}
+
+/// The rasters tile `id`'s horizons are computed over with `method`: the context `reach`
+/// asks for at full resolution, except that the fast method takes at most `fine_margin_px`
+/// there and sees the rest of the reach through far rings.
+pub(crate) fn tile_rasters(
+    src: &Store,
+    id: TileId,
+    reach: Reach,
+    method: Method,
+    fine_margin_px: u64,
+    covers: &mut Covers,
+) -> Result<(Context, Rect, Vec<FarRing>)> {
+    let ts = src.manifest();
+    let cover = *covers
+        .entry((id.level, id.face))
+        .or_insert_with(|| coverage_box(ts, id.level, id.face));
+    let fine = if method == Method::Fast {
+        reach.margin_px.min(fine_margin_px)
+    } else {
+        reach.margin_px
+    };
+    let (ctx, rect) = context_for(src, id, fine, cover)?;
+    let rings = if method == Method::Fast && fine < reach.needed_px {
+        let o = ctx.origin;
+        let win = (o.0, o.1, o.0 + ctx.width as i64, o.1 + ctx.height as i64);
+        far_rings(src, id, win, fine, reach.needed_px, fine_margin_px, covers)?
+    } else {
+        Vec::new()
+    };
+    Ok((ctx, rect, rings))
+}
+
+/// The window (global pixels of `level`, half-open) `margin` pixels around the footprint
+/// `foot`, clipped to the coverage box `cover` (never into the footprint) and to |u|, |v| ≤
+/// [`PLANE_LIMIT`].
+fn window(
+    src: &Store,
+    level: u8,
+    foot: (i64, i64, i64, i64),
+    margin: i64,
+    cover: Option<(i64, i64, i64, i64)>,
+) -> (i64, i64, i64, i64) {
+    let s = src.manifest().layout.face_pixels(level) as i64;
+    let (fx0, fy0, fx1, fy1) = foot;
+    let (mut x0, mut y0, mut x1, mut y1) = (fx0 - margin, fy0 - margin, fx1 + margin, fy1 + margin);
+    if let Some((bx0, by0, bx1, by1)) = cover {
+        x0 = x0.max(bx0.min(fx0));
+        y0 = y0.max(by0.min(fy0));
+        x1 = x1.min(bx1.max(fx1));
+        y1 = y1.min(by1.max(fy1));
+    }
+    let lim = ((PLANE_LIMIT - 1.0) / 2.0 * s as f64) as i64;
+    (x0.max(-lim), y0.max(-lim), x1.min(s + lim), y1.min(s + lim))
+}
+
+/// The heights of `level` on `face`'s extended plane over the global pixel window `win`: the
+/// face's own tiles inside the face, the neighbouring faces' resampled beyond its edges.
+fn context_window(
+    src: &Store,
+    level: u8,
+    face: Face,
+    win: (i64, i64, i64, i64),
+) -> Result<Context> {
     let ts = src.manifest();
     let lay = ts.layout;
-    let s = lay.face_pixels(id.level) as i64;
+    let s = lay.face_pixels(level) as i64;
     let n = lay.tile_size as i64;
     let halo = lay.halo as f64;
-    let m = margin as i64;
-    let (tx, ty) = (id.x as i64 * n, id.y as i64 * n);
-    let (mut x0, mut y0, mut x1, mut y1) = (tx - m, ty - m, tx + n + m, ty + n + m);
-    if let Some((bx0, by0, bx1, by1)) = cover {
-        x0 = x0.max(bx0.min(tx));
-        y0 = y0.max(by0.min(ty));
-        x1 = x1.min(bx1.max(tx + n));
-        y1 = y1.min(by1.max(ty + n));
-    }
-    // |u|, |v| ≤ PLANE_LIMIT.
-    let lim = ((PLANE_LIMIT - 1.0) / 2.0 * s as f64) as i64;
-    x0 = x0.max(-lim);
-    y0 = y0.max(-lim);
-    x1 = x1.min(s + lim);
-    y1 = y1.min(s + lim);
+    let (x0, y0, x1, y1) = win;
+    let id = TileId {
+        level,
+        face,
+        x: 0,
+        y: 0,
+    };
     let (w, h) = ((x1 - x0) as usize, (y1 - y0) as usize);
     let mut ctx = Context {
         face: id.face,
@@ -367,13 +563,7 @@ pub fn context_for(
     for r in rows {
         r?;
     }
-    let rect = Rect {
-        x0: (tx - x0) as usize,
-        y0: (ty - y0) as usize,
-        w: n as usize,
-        h: n as usize,
-    };
-    Ok((ctx, rect))
+    Ok(ctx)
 }
 
 pub fn tile_path(dir: &Path, id: TileId) -> PathBuf {
@@ -411,6 +601,17 @@ pub(crate) fn check_options(opts: &HorizonOptions) -> Result<()> {
     let a = opts.azimuths;
     if !(4..=4096).contains(&a) {
         return Err(Error::param("azimuths", format!("{a} is outside 4..=4096")));
+    }
+    if !FINE_MARGIN_PX.contains(&opts.fine_margin_px) {
+        return Err(Error::param(
+            "fine_margin_px",
+            format!(
+                "{} is outside {}..={}",
+                opts.fine_margin_px,
+                FINE_MARGIN_PX.start(),
+                FINE_MARGIN_PX.end()
+            ),
+        ));
     }
     if !(0.0..=MAX_NEAR_PX).contains(&opts.near_px) {
         return Err(Error::param(
@@ -589,6 +790,7 @@ pub fn build_horizons(
             needed_km: 0.0,
             max_margin_px: 0,
             tiles_capped: 0,
+            tiles_with_far_rings: 0,
         })
         .collect();
     let (mut written, mut kept, mut pixaz) = (0u64, 0u64, 0u64);
@@ -611,9 +813,18 @@ pub fn build_horizons(
             let reach = margin_for(ts, id, rad, opts.max_margin_px);
             let d = dist.iter_mut().find(|d| d.level == id.level).unwrap();
             d.needed_km = d.needed_km.max(rad * ts.body.radius_m / 1000.0);
-            d.max_margin_px = d.max_margin_px.max(reach.margin_px);
-            if reach.margin_px < reach.needed_px {
-                d.tiles_capped += 1;
+            if opts.method == Method::Fast {
+                // Far rings see the rest of the reach.
+                let fine = reach.margin_px.min(opts.fine_margin_px);
+                d.max_margin_px = d.max_margin_px.max(fine);
+                if fine < reach.needed_px {
+                    d.tiles_with_far_rings += 1;
+                }
+            } else {
+                d.max_margin_px = d.max_margin_px.max(reach.margin_px);
+                if reach.margin_px < reach.needed_px {
+                    d.tiles_capped += 1;
+                }
             }
             reach
         });
@@ -634,12 +845,20 @@ pub fn build_horizons(
         }
         let t0 = std::time::Instant::now();
         let elev = if let Some(reach) = reach {
-            let cover = *covers
-                .entry((id.level, id.face))
-                .or_insert_with(|| coverage_box(ts, id.level, id.face));
-            let (ctx, rect) = context_for(&store, id, reach.margin_px, cover)?;
+            let (ctx, rect, rings) = tile_rasters(
+                &store,
+                id,
+                reach,
+                opts.method,
+                opts.fine_margin_px,
+                &mut covers,
+            )?;
             pixaz += (n * n * opts.azimuths) as u64;
-            horizons_with(&ctx, rect, opts.azimuths, opts.method, opts.near_px)
+            if rings.is_empty() {
+                horizons_with(&ctx, rect, opts.azimuths, opts.method, opts.near_px)
+            } else {
+                horizons_far(&ctx, rect, opts.azimuths, opts.near_px, &rings)
+            }
         } else {
             vec![f32::NAN; n * n * opts.azimuths]
         };

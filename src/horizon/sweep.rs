@@ -2,6 +2,7 @@
 //! the upper convex hull of its profile, and the finish that evaluates its winners on each
 //! observer's own ray (docs/horizons.md).
 
+use super::far::FarPass;
 use super::geometry::{dot, normalize, Azimuth, Context, PixelGeo, Ray, Rect};
 use crate::cube::Vec3;
 
@@ -9,11 +10,11 @@ use crate::cube::Vec3;
 /// far candidate may lie and still be evaluated on the observer's own ray (≈ 1.7° at the
 /// horizontal). The lines pass up to ½ px beside the ray; beyond the near field that moves an
 /// elevation by far less (docs/horizons.md).
-const SKIP: f64 = 0.03;
+pub(super) const SKIP: f64 = 0.03;
 
 /// Elevations (degrees) from the near field, the sweep's winners evaluated exactly on each
-/// observer's own ray, an exact search of that ray around the winner, and the zero-distance
-/// slope.
+/// observer's own ray, an exact search of that ray around the winner, the far rings' terrain
+/// beyond the raster (`far`, [`super::far`]), and the zero-distance slope.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn finish(
     ctx: &Context,
@@ -24,6 +25,7 @@ pub(super) fn finish(
     near: &[f64],
     acc: &[f64],
     acc_s: &[f64],
+    far: &[FarPass],
     dst: &mut [f32],
 ) {
     let (cos, sin) = (az.cos, az.sin);
@@ -53,6 +55,12 @@ pub(super) fn finish(
                     );
                 } else {
                     t = t.max(ray.slope_at(ctx, sw));
+                }
+            }
+            if !far.is_empty() {
+                let ground = ray.ground_per_px();
+                for f in far {
+                    t = f.raise(i, j, h0 as f64, &geo[o], ground, t);
                 }
             }
             let s0 = ctx.slope0_g(x, y, cos, sin, ray.ground_per_px());
@@ -378,7 +386,10 @@ impl Grid<'_> {
 /// column for the hull vertex it sees highest; unless that is hopelessly below what the
 /// observer already has (`near`, earlier lines), the vertex and its hull neighbours are then
 /// evaluated on the observer's own ray at the same distance, and the highest wins. Writes the
-/// best slope per observer into `acc` (max) and its distance into `acc_s`.
+/// best slope per observer into `acc` (max) and its distance into `acc_s`. The observers'
+/// heights are the raster's, or `observers` (row-major over `rect`) where given: a far ring's
+/// raster holds no terrain where finer data took over, its observers included.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn sweep(
     ctx: &Context,
     rect: Rect,
@@ -387,6 +398,7 @@ pub(super) fn sweep(
     acc: &mut [f64],
     acc_s: &mut [f64],
     scratch: &mut Scratch,
+    observers: Option<&[f32]>,
 ) {
     let (dx, dy) = (phi.cos(), -phi.sin());
     let xmajor = dx.abs() >= dy.abs();
@@ -549,7 +561,11 @@ pub(super) fn sweep(
                     if w <= 0.0 || q0 < rq0 || q0 >= rq1 {
                         continue;
                     }
-                    let h0 = g.at(p, q0);
+                    let idx = (p - rp0) as usize * si + (q0 - rq0) as usize * sj;
+                    let h0 = match observers {
+                        Some(h) => h[idx],
+                        None => g.at(p, q0),
+                    };
                     if h0.is_nan() {
                         continue;
                     }
@@ -557,7 +573,6 @@ pub(super) fn sweep(
                     let Some(iv) = line.query(o, &mut fingers[side]) else {
                         continue;
                     };
-                    let idx = (p - rp0) as usize * si + (q0 - rq0) as usize * sj;
                     // The line only guides: where its best vertex, seen from the observer
                     // placed on the line, could beat what the observer has, the vertex and its
                     // hull neighbours are evaluated on the observer's own ray at the same

@@ -9,10 +9,12 @@ use crate::error::{Error, Result};
 use crate::fourier::sun::{self, Frame, Model, Sun};
 use crate::fourier::Pyramid;
 use crate::horizon::stage::{
-    check_layout, check_options, context_for, coverage_box, interior_max, margin_for, reach_rad,
-    terrain_range, HorizonOptions,
+    check_layout, check_options, interior_max, margin_for, reach_rad, terrain_range, tile_rasters,
+    HorizonOptions,
 };
-use crate::horizon::{compass_azimuth_deg, horizons_with, plane_azimuth, Method, Rect};
+use crate::horizon::{
+    compass_azimuth_deg, horizons_far, horizons_with, plane_azimuth, Method, Rect,
+};
 use crate::layout::TileId;
 use crate::manifest;
 use crate::tileset::Store;
@@ -236,16 +238,28 @@ fn profile(
     let top = interior_max(&t, lay.halo as usize, n).unwrap_or(px.height);
     let rad = reach_rad(ts.body.radius_m, tmin, tmax, top as f64);
     let reach = margin_for(ts, px.tile, rad, opts.max_margin_px);
-    let cover = coverage_box(ts, level, px.tile.face);
-    let (ctx, rect) = context_for(store, px.tile, reach.margin_px, cover)?;
+    let mut covers = std::collections::HashMap::new();
+    let (ctx, rect, rings) = tile_rasters(
+        store,
+        px.tile,
+        reach,
+        method,
+        opts.fine_margin_px,
+        &mut covers,
+    )?;
     let one = Rect {
         x0: rect.x0 + i,
         y0: rect.y0 + j,
         w: 1,
         h: 1,
     };
+    let samples = if rings.is_empty() {
+        horizons_with(&ctx, one, azimuths, method, opts.near_px)
+    } else {
+        horizons_far(&ctx, one, azimuths, opts.near_px, &rings)
+    };
     Ok((
-        Profile::Samples(horizons_with(&ctx, one, azimuths, method, opts.near_px)),
+        Profile::Samples(samples),
         "computed",
         method,
         reach.margin_px,

@@ -104,6 +104,30 @@ pub enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// The fast method's far rings: error against run time and peak RSS for several
+    /// full-resolution margins (`--fine-margin-px`) on real DEMs whose horizon reach is wider,
+    /// against the exact method and the fast method over the whole reach at full resolution.
+    FarField {
+        /// Folder holding the shared DEMs.
+        #[arg(long, default_value = "../shared/data")]
+        data: PathBuf,
+        /// Scratch folder for the tilesets (removed afterwards).
+        #[arg(long)]
+        work: Option<PathBuf>,
+        /// Full-resolution margins to measure (pixels).
+        #[arg(long, value_delimiter = ',', default_values_t = [128u64, 256, 512, 1024])]
+        margins: Vec<u64>,
+        /// Azimuths per pixel.
+        #[arg(long, default_value_t = 16)]
+        azimuths: usize,
+        /// Only the cases whose name contains this (case-insensitive).
+        #[arg(long)]
+        only: Option<String>,
+        #[arg(long)]
+        markdown: bool,
+        #[arg(long)]
+        json: bool,
+    },
     /// Horizon throughput on the peers' synthetic 30 m UTM DEM (the whole map as observers and
     /// as context, 1 thread and all cores), the brute-force reference on random pixels, the
     /// fast sweep's error against it, the peers' horizon tools from their results.tsv, and an
@@ -289,7 +313,7 @@ struct Row {
 }
 
 /// Run `cmd` under GNU time; (wall seconds, peak RSS MiB).
-fn timed(cmd: &mut Command, scratch: &Path) -> Result<(f64, f64)> {
+pub(crate) fn timed(cmd: &mut Command, scratch: &Path) -> Result<(f64, f64)> {
     let tf = scratch.join("time.txt");
     let prog = cmd.get_program().to_owned();
     let args: Vec<_> = cmd.get_args().map(|a| a.to_owned()).collect();
@@ -445,6 +469,24 @@ pub fn run(cmd: BenchCommand, quiet: bool) -> Result<()> {
             json,
         } => run_mip_memory(
             &data, work, &levels, tile_size, azimuths, markdown, json, quiet,
+        ),
+        BenchCommand::FarField {
+            data,
+            work,
+            margins,
+            azimuths,
+            only,
+            markdown,
+            json,
+        } => crate::far::run(
+            &data,
+            work,
+            &margins,
+            azimuths,
+            only.as_deref(),
+            markdown,
+            json,
+            quiet,
         ),
         BenchCommand::Horizon {
             peers,

@@ -404,6 +404,12 @@ struct HorizonFlags {
     /// measures the trade).
     #[arg(long, default_value_t = penumbra::horizon::DEFAULT_NEAR_PX)]
     near_px: f64,
+    /// How far (pixels) around a tile the fast method reads its level's terrain; beyond that,
+    /// out to the whole reach, it sees far rings of coarser levels, each ring pixel no wider
+    /// seen from the tile than a pixel at this distance (16..=65536; larger is slower, closer
+    /// to the exact method and needs more memory).
+    #[arg(long, default_value_t = penumbra::horizon::DEFAULT_FINE_MARGIN_PX)]
+    fine_margin_px: u64,
 }
 
 impl HorizonFlags {
@@ -413,6 +419,7 @@ impl HorizonFlags {
             method: self.method,
             max_margin_px: self.max_margin_px,
             near_px: self.near_px,
+            fine_margin_px: self.fine_margin_px,
             ..Default::default()
         }
     }
@@ -709,6 +716,7 @@ fn run(cli: Cli) -> Result<()> {
                 max_margin_px: flags.max_margin_px,
                 max_output_gib,
                 near_px: flags.near_px,
+                fine_margin_px: flags.fine_margin_px,
                 fourier: fourier
                     .then(|| fourier_flags.options(None, penumbra::runner::DEFAULT_MAX_OUTPUT_GIB)),
                 keep_raw,

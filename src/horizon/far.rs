@@ -1,0 +1,146 @@
+//! The fast method's far rings: terrain beyond the full-resolution context, seen through the
+//! tileset's coarser levels (docs/horizons.md, "Far rings").
+//!
+//! A tile's full-resolution context reaches `fine_margin_px` pixels around it. Beyond that,
+//! ring k holds level L−k's heights (2^k pixels of the tile's level per ring pixel) in a window
+//! of the same number of ring pixels around the tile's footprint, with what a finer raster
+//! already holds blanked out (no data). A far ring's terrain is at least its inner distance
+//! away, where a ring pixel of 2^k pixels subtends no more than a full-resolution pixel at
+//! 1/2^k of that distance: the rings give every pixel the same angular resolution as the
+//! near context gives its edge, and hold memory and time to the tile size and the ring count
+//! instead of the square of the reach.
+//!
+//! Per azimuth each ring runs the same sweep as the full-resolution raster over its own
+//! observers (the footprint's ring pixels, at the coarse level's heights); each tile pixel then
+//! searches its own ray exactly on the ring's surface around the winner of the ring observer it
+//! lies in, unless that winner, lifted by the observer's height difference over the ring's
+//! inner distance, is hopelessly below what the pixel already has.
+
+use super::geometry::{Azimuth, Context, PixelGeo, Ray, Rect};
+
+/// One ring of coarser terrain around a tile.
+#[derive(Clone, Debug)]
+pub struct FarRing {
+    /// Level L−k's heights around the tile's footprint on the tile's face plane; a pit
+    /// ([`FarRing::PIT_M`]) where a finer raster holds the terrain.
+    pub ctx: Context,
+    /// The tile's footprint in `ctx`: the ring's observers.
+    pub rect: Rect,
+    /// The observers' heights (level L−k's, row-major over `rect`; `ctx` has none there).
+    pub observers: Vec<f32>,
+    /// Pixels of the tile's level per ring pixel (2^k).
+    pub factor: u32,
+    /// Least distance from the tile to the ring's terrain, in pixels of the tile's level.
+    pub inner_px: f64,
+}
+
+impl FarRing {
+    /// Height (m) of the pit that fills a ring where a finer raster holds the terrain.
+    pub const PIT_M: f32 = -1.0e6;
+
+    /// Where the pixels of `rect` in the full-resolution raster `fine` fall in this ring: per
+    /// column (ring x, observer column) and per row (ring y, observer row).
+    pub(super) fn map(&self, fine: &Context, rect: Rect) -> RingMap {
+        let f = self.factor as i64;
+        let ff = self.factor as f64;
+        let axis = |origin: i64, start: usize, len: usize, ring_origin: i64, r0: usize| {
+            (0..len)
+                .map(|i| {
+                    let g = origin + (start + i) as i64;
+                    let pos = (g as f64 + 0.5) / ff - 0.5 - ring_origin as f64;
+                    let cell = (g.div_euclid(f) - ring_origin) as usize - r0;
+                    (pos, cell)
+                })
+                .collect::<Vec<_>>()
+        };
+        RingMap {
+            cols: axis(
+                fine.origin.0,
+                rect.x0,
+                rect.w,
+                self.ctx.origin.0,
+                self.rect.x0,
+            ),
+            rows: axis(
+                fine.origin.1,
+                rect.y0,
+                rect.h,
+                self.ctx.origin.1,
+                self.rect.y0,
+            ),
+        }
+    }
+}
+
+/// A full-resolution observer's place in a ring (see [`FarRing::map`]).
+pub(super) struct RingMap {
+    cols: Vec<(f64, usize)>,
+    rows: Vec<(f64, usize)>,
+}
+
+/// Half-width (ring pixels) of the window searched exactly on a pixel's own ray around the
+/// distance of its ring observer's winner: the pixel lies up to ½ ring pixel beside that
+/// observer in each axis.
+const FAR_WINDOW: f64 = 1.25;
+
+/// How far (slope) below a pixel's best so far a ring observer's winner, lifted to the pixel
+/// (see [`FarPass::raise`]), may lie and still be searched on the pixel's own ray.
+const FAR_SKIP: f64 = 0.002;
+
+/// One ring's sweep at one azimuth, ready for the tile's pixels.
+pub(super) struct FarPass<'a> {
+    pub(super) ring: &'a FarRing,
+    pub(super) map: &'a RingMap,
+    pub(super) az: Azimuth,
+    /// The ring observers' best slopes and their distances (ring pixels).
+    pub(super) acc: &'a [f64],
+    pub(super) acc_s: &'a [f64],
+}
+
+impl FarPass<'_> {
+    /// The best slope above `t` of this ring's terrain on the own ray of the pixel at column
+    /// `i`, row `j` of the tile (height `h0`, geometry `g`, `ground` metres per pixel of the
+    /// tile's level along the ray), or `t`.
+    #[inline]
+    pub(super) fn raise(
+        &self,
+        i: usize,
+        j: usize,
+        h0: f64,
+        g: &PixelGeo,
+        ground: f64,
+        t: f64,
+    ) -> f64 {
+        let (xr, ci) = self.map.cols[i];
+        let (yr, cj) = self.map.rows[j];
+        let c = cj * self.ring.rect.w + ci;
+        let best = self.acc[c];
+        // −∞: the ring observer saw nothing; NaN: it has no data.
+        if best.is_nan() || best == f64::NEG_INFINITY {
+            return t;
+        }
+        // Seen from the pixel instead of the ring observer, far terrain rises by about the
+        // height difference over its distance, and by what moving up to ¾ ring pixel along
+        // the ray changes a slope at that distance (∂slope/∂d ≈ (|slope| + d/R)/d; d/R stays
+        // below the reach's 0.2 rad even on the Moon).
+        let inner = self.ring.inner_px;
+        let lift = (self.ring.observers[c] as f64 - h0).max(0.0) / (inner * ground)
+            + 0.75 * self.ring.factor as f64 / inner * (best.abs() + 0.2);
+        if best + lift < t - FAR_SKIP {
+            return t;
+        }
+        let ray = Ray::from_point(&self.ring.ctx, xr, yr, h0, g, &self.az);
+        let (xc, yc) = (
+            (self.ring.rect.x0 + ci) as f64,
+            (self.ring.rect.y0 + cj) as f64,
+        );
+        let s = self.acc_s[c] + (xc - xr) * ray.cx + (yc - yr) * ray.cy;
+        let from = (s - FAR_WINDOW).max(0.5);
+        if from >= s + FAR_WINDOW {
+            return t;
+        }
+        ray.max_over(&self.ring.ctx, from, s + FAR_WINDOW, t)
+            .0
+            .max(t)
+    }
+}
