@@ -24,8 +24,8 @@ pub(crate) use self::geometry::{Axis, Ray};
 pub use self::method::{horizons, horizons_far, horizons_reference_step, horizons_with, Method};
 pub use self::near::{DEFAULT_NEAR_PX, MAX_NEAR_PX};
 pub use self::stage::{
-    build_horizons, context_for, reach_rad, read_horizon_exr, terrain_range, tile_path,
-    write_horizon_exr, HorizonOptions, HorizonPrecision, HorizonReport, Reach, StreamedFourier,
-    AZIMUTH_CONVENTION, DEFAULT_FINE_MARGIN_PX, FINE_MARGIN_PX, PATTERN, STAGE, STAGE_BOTH,
+    build_horizons, context_for, default_fine_margin_px, reach_rad, read_horizon_exr,
+    terrain_range, tile_path, write_horizon_exr, HorizonOptions, HorizonPrecision, HorizonReport,
+    Reach, StreamedFourier, AZIMUTH_CONVENTION, FINE_MARGIN_PX, PATTERN, STAGE, STAGE_BOTH,
     STAGE_FOURIER,
 };

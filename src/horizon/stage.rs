@@ -43,8 +43,11 @@ type PxBox = (i64, i64, i64, i64);
 /// Each (level, face)'s coverage box, computed once per run.
 pub(crate) type Covers = HashMap<(u8, Face), Option<PxBox>>;
 
-/// Default full-resolution margin of the fast method (`--fine-margin-px`), pixels.
-pub const DEFAULT_FINE_MARGIN_PX: u64 = 1024;
+/// The fast method's full-resolution margin (`--fine-margin-px`) when none is given: two tile
+/// widths, at least 256 px (1024 px around the default 512-px tiles).
+pub fn default_fine_margin_px(tile_size: u32) -> u64 {
+    (2 * u64::from(tile_size)).max(256)
+}
 /// Bounds of `--fine-margin-px`.
 pub const FINE_MARGIN_PX: std::ops::RangeInclusive<u64> = 16..=65536;
 
@@ -68,8 +71,9 @@ pub struct HorizonOptions {
     /// The fast method's exact near field, plane pixels (0..=MAX_NEAR_PX).
     pub near_px: f64,
     /// The fast method's full-resolution margin around a tile (pixels of its level); beyond
-    /// it, out to the whole reach, far rings of coarser levels ([`FarRing`]).
-    pub fine_margin_px: u64,
+    /// it, out to the whole reach, far rings of coarser levels ([`FarRing`]). None:
+    /// [`default_fine_margin_px`].
+    pub fine_margin_px: Option<u64>,
     /// Compress each tile's horizons into Fourier pyramids as they are computed.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fourier: Option<crate::fourier::FourierOptions>,
@@ -89,7 +93,7 @@ impl Default for HorizonOptions {
             max_margin_px: 4096,
             max_output_gib: 8.0,
             near_px: DEFAULT_NEAR_PX,
-            fine_margin_px: DEFAULT_FINE_MARGIN_PX,
+            fine_margin_px: None,
             fourier: None,
             keep_raw: false,
         }
@@ -602,12 +606,12 @@ pub(crate) fn check_options(opts: &HorizonOptions) -> Result<()> {
     if !(4..=4096).contains(&a) {
         return Err(Error::param("azimuths", format!("{a} is outside 4..=4096")));
     }
-    if !FINE_MARGIN_PX.contains(&opts.fine_margin_px) {
+    if let Some(m) = opts.fine_margin_px.filter(|m| !FINE_MARGIN_PX.contains(m)) {
         return Err(Error::param(
             "fine_margin_px",
             format!(
                 "{} is outside {}..={}",
-                opts.fine_margin_px,
+                m,
                 FINE_MARGIN_PX.start(),
                 FINE_MARGIN_PX.end()
             ),
@@ -783,6 +787,9 @@ pub fn build_horizons(
     };
 
     let mut covers = HashMap::new();
+    let fine_margin = opts
+        .fine_margin_px
+        .unwrap_or_else(|| default_fine_margin_px(lay.tile_size));
     let mut dist: Vec<HorizonLevelDistance> = levels
         .iter()
         .map(|&level| HorizonLevelDistance {
@@ -815,7 +822,7 @@ pub fn build_horizons(
             d.needed_km = d.needed_km.max(rad * ts.body.radius_m / 1000.0);
             if opts.method == Method::Fast {
                 // Far rings see the rest of the reach.
-                let fine = reach.margin_px.min(opts.fine_margin_px);
+                let fine = reach.margin_px.min(fine_margin);
                 d.max_margin_px = d.max_margin_px.max(fine);
                 if fine < reach.needed_px {
                     d.tiles_with_far_rings += 1;
@@ -845,14 +852,8 @@ pub fn build_horizons(
         }
         let t0 = std::time::Instant::now();
         let elev = if let Some(reach) = reach {
-            let (ctx, rect, rings) = tile_rasters(
-                &store,
-                id,
-                reach,
-                opts.method,
-                opts.fine_margin_px,
-                &mut covers,
-            )?;
+            let (ctx, rect, rings) =
+                tile_rasters(&store, id, reach, opts.method, fine_margin, &mut covers)?;
             pixaz += (n * n * opts.azimuths) as u64;
             if rings.is_empty() {
                 horizons_with(&ctx, rect, opts.azimuths, opts.method, opts.near_px)

@@ -9,8 +9,8 @@ use crate::error::{Error, Result};
 use crate::fourier::sun::{self, Frame, Model, Sun};
 use crate::fourier::Pyramid;
 use crate::horizon::stage::{
-    check_layout, check_options, interior_max, margin_for, reach_rad, terrain_range, tile_rasters,
-    HorizonOptions,
+    check_layout, check_options, default_fine_margin_px, interior_max, margin_for, reach_rad,
+    terrain_range, tile_rasters, HorizonOptions,
 };
 use crate::horizon::{
     compass_azimuth_deg, horizons_far, horizons_with, plane_azimuth, Method, Rect,
@@ -244,7 +244,8 @@ fn profile(
         px.tile,
         reach,
         method,
-        opts.fine_margin_px,
+        opts.fine_margin_px
+            .unwrap_or_else(|| default_fine_margin_px(lay.tile_size)),
         &mut covers,
     )?;
     let one = Rect {
