@@ -808,7 +808,12 @@ pub fn build_horizons(
     let mut tally = crate::fourier::stage::Tally::default();
     let (mut horizon_s, mut compress_s) = (0.0f64, 0.0f64);
     progress.start("horizons", tiles.len() as u64);
+    // The height tiles the previous tile read stay cached for this one, older ones go: the
+    // cache holds about one tile's contexts, not the level.
+    let mut mark = store.cache().now();
     for &id in &tiles {
+        store.cache().keep_since(mark);
+        mark = store.cache().now();
         let out = tile_path(run.out(), id);
         let fout = crate::fourier::stage::tile_path(run.out(), id);
         let tile = store.height(id)?.expect("listed tiles exist");

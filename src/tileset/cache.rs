@@ -60,6 +60,19 @@ impl TileCache {
         Ok(t)
     }
 
+    /// The cache's clock: every lookup advances it, and [`TileCache::keep_since`] drops what
+    /// was last used before a reading of it.
+    pub fn now(&self) -> u64 {
+        self.clock.load(Ordering::Relaxed)
+    }
+
+    /// Drop every tile last used before clock reading `since`: a stage that walks its tiles in
+    /// order keeps its working set (what the last few tiles read) instead of everything up to
+    /// the budget, so that its memory does not grow with the number of tiles.
+    pub fn keep_since(&self, since: u64) {
+        self.map.lock().unwrap().retain(|_, e| e.1 >= since);
+    }
+
     /// Tiles held now.
     pub fn len(&self) -> usize {
         self.map.lock().unwrap().len()
@@ -93,6 +106,22 @@ mod tests {
             c.get_or_load(id, || Ok(Some(tile()))).unwrap();
             assert!(c.len() <= 16, "{} tiles held", c.len());
         }
+        // Only what was used since a clock reading is kept.
+        let c2 = TileCache::new(1 << 30, 8);
+        let id = |x| TileId {
+            level: 3,
+            face: crate::cube::Face::Px,
+            x,
+            y: 0,
+        };
+        for x in 0..4 {
+            c2.get_or_load(id(x), || Ok(None)).unwrap();
+        }
+        let mark = c2.now();
+        c2.get_or_load(id(1), || Ok(None)).unwrap();
+        c2.get_or_load(id(9), || Ok(None)).unwrap();
+        c2.keep_since(mark);
+        assert_eq!(c2.len(), 2);
         // A cached tile is not loaded again.
         let id = TileId {
             level: 3,
