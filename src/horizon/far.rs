@@ -32,6 +32,9 @@ pub struct FarRing {
     pub factor: u32,
     /// Least distance from the tile to the ring's terrain, in pixels of the tile's level.
     pub inner_px: f64,
+    /// The lowest terrain in the ring (m): a point found below it lies on the slope down to a
+    /// pit, not on terrain.
+    pub lowest_m: f32,
 }
 
 impl FarRing {
@@ -139,8 +142,13 @@ impl FarPass<'_> {
         if from >= s + FAR_WINDOW {
             return t;
         }
-        ray.max_over(&self.ring.ctx, from, s + FAR_WINDOW, t)
-            .0
-            .max(t)
+        let (best, at) = ray.max_over(&self.ring.ctx, from, s + FAR_WINDOW, t);
+        if best > t {
+            let h = self.ring.ctx.bilinear64(xr + at * ray.cx, yr + at * ray.cy);
+            if h >= self.ring.lowest_m as f64 {
+                return best;
+            }
+        }
+        t
     }
 }

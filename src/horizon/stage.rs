@@ -403,11 +403,13 @@ pub(crate) fn far_rings(
         // edges along the farther axis, a lower bound of the plane distance), in pixels of the
         // tile's level; None: the ring holds no terrain.
         let mut gap: Option<i64> = None;
+        let mut lowest = f32::INFINITY;
         for (r, row) in ctx.heights.chunks_exact(ctx.width).enumerate() {
             let gy = win.1 + r as i64;
             let dy = (foot.1 - gy - 1).max(gy - foot.3).max(0);
             for (c, h) in row.iter().enumerate() {
                 if *h > FarRing::PIT_M {
+                    lowest = lowest.min(*h);
                     let gx = win.0 + c as i64;
                     let d = (foot.0 - gx - 1).max(gx - foot.2).max(0).max(dy);
                     gap = Some(gap.map_or(d, |g| g.min(d)));
@@ -423,6 +425,7 @@ pub(crate) fn far_rings(
                 observers,
                 factor: 1 << k,
                 inner_px: ((gap * f) as f64).max(1.0),
+                lowest_m: lowest,
             });
         }
     }

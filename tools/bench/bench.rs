@@ -123,6 +123,10 @@ pub enum BenchCommand {
         /// Only the cases whose name contains this (case-insensitive).
         #[arg(long)]
         only: Option<String>,
+        /// Instead: per-tile core time at the tile size and reach of a Mars 800 m/px and a
+        /// lunar south-pole 5 m/px bake, and the CPU-hours they extrapolate to.
+        #[arg(long)]
+        extrapolate: bool,
         #[arg(long)]
         markdown: bool,
         #[arg(long)]
@@ -471,11 +475,19 @@ pub fn run(cmd: BenchCommand, quiet: bool) -> Result<()> {
             &data, work, &levels, tile_size, azimuths, markdown, json, quiet,
         ),
         BenchCommand::FarField {
+            azimuths,
+            extrapolate: true,
+            markdown,
+            json,
+            ..
+        } => crate::far::extrapolate(azimuths, markdown, json),
+        BenchCommand::FarField {
             data,
             work,
             margins,
             azimuths,
             only,
+            extrapolate: false,
             markdown,
             json,
         } => crate::far::run(

@@ -301,3 +301,253 @@ pub fn run(
     }
     Ok(())
 }
+
+/// One extrapolated bake: a body, its pixel size, the area covered and the terrain range that
+/// sets the reach.
+struct Bake {
+    name: &'static str,
+    radius_m: f64,
+    pixel_m: f64,
+    /// Fraction of the body's surface covered.
+    area_fraction: f64,
+    hmin_m: f64,
+    hmax_m: f64,
+    /// Fritsch et al.'s figure, where they give one.
+    published_cpu_hours: Option<f64>,
+}
+
+const BAKES: &[Bake] = &[
+    Bake {
+        name: "Mars 800 m/px, whole body",
+        radius_m: 3_396_190.0,
+        pixel_m: 800.0,
+        area_fraction: 1.0,
+        hmin_m: -8_200.0,
+        hmax_m: 21_200.0,
+        published_cpu_hours: Some(150.0),
+    },
+    Bake {
+        name: "Moon 5 m/px, 80–90°S",
+        radius_m: 1_737_400.0,
+        pixel_m: 5.0,
+        // 2πR²(1 − cos 10°) of 4πR².
+        area_fraction: 0.007_596,
+        hmin_m: -9_130.0,
+        hmax_m: 10_790.0,
+        published_cpu_hours: None,
+    },
+];
+
+/// Synthetic terrain at global plane pixel (gx, gy) of a level with `px_m`-metre pixels:
+/// sinusoidal octaves from 200 km down to two pixels, amplitude ∝ wavelength^0.8 (3 km at
+/// 200 km), each at its own direction and phase: the same surface at every level, smoothed
+/// where a level's pixels are too coarse for an octave.
+fn synth(gx: f64, gy: f64, px_m: f64) -> f32 {
+    let (x, y) = (gx * px_m, gy * px_m);
+    let mut h = 0.0;
+    let mut lambda = 200_000.0f64;
+    let mut i = 0.0f64;
+    while lambda >= 2.0 * px_m && i < 24.0 {
+        let th = 2.399_963 * i; // golden angle: no two octaves aligned
+        let amp = 3000.0 * (lambda / 200_000.0).powf(0.8);
+        let k = std::f64::consts::TAU / lambda;
+        h += amp * (k * (x * th.cos() + y * th.sin()) + 1.7 * i).sin();
+        lambda *= 0.5;
+        i += 1.0;
+    }
+    h as f32
+}
+
+/// A context of `level_px_m`-metre pixels on face +X with `s` pixels across, over the global
+/// window `win`, filled with [`synth`].
+fn synth_context(
+    s: f64,
+    win: (i64, i64, i64, i64),
+    px_m: f64,
+    radius_m: f64,
+) -> penumbra::horizon::Context {
+    let (w, h) = ((win.2 - win.0) as usize, (win.3 - win.1) as usize);
+    let mut heights = vec![0.0f32; w * h];
+    use rayon::prelude::*;
+    heights.par_chunks_mut(w).enumerate().for_each(|(r, row)| {
+        for (c, v) in row.iter_mut().enumerate() {
+            *v = synth((win.0 + c as i64) as f64, (win.1 + r as i64) as f64, px_m);
+        }
+    });
+    penumbra::horizon::Context {
+        face: penumbra::cube::Face::Px,
+        face_pixels: s,
+        origin: (win.0, win.1),
+        width: w,
+        height: h,
+        heights,
+        radius_m,
+    }
+}
+
+/// Core seconds per 512² tile at 360 azimuths for `bake`, measured on one thread over
+/// synthetic terrain with the geometry of a tile at the face centre: the fine context and the
+/// far rings `penumbra horizon` would build for that reach (`azimuths` timed, scaled to 360).
+fn per_tile_core_s(bake: &Bake, azimuths: usize) -> Result<(f64, u64, usize)> {
+    use penumbra::horizon::{FarRing, Rect};
+    let n = 512i64;
+    let fine = penumbra::horizon::default_fine_margin_px(n as u32) as i64;
+    let reach_rad =
+        penumbra::horizon::reach_rad(bake.radius_m, bake.hmin_m, bake.hmax_m, bake.hmax_m);
+    // Pixels of arc at the face centre (a gnomonic pixel there is 2/S of the plane).
+    let needed = (reach_rad * bake.radius_m / bake.pixel_m).ceil() as i64;
+    let s =
+        (std::f64::consts::FRAC_PI_2 * bake.radius_m / bake.pixel_m / n as f64).round() * n as f64;
+    let t0 = (s as i64 / 2 / n) * n;
+    let m = needed.min(fine);
+    let win = (t0 - m, t0 - m, t0 + n + m, t0 + n + m);
+    let ctx = synth_context(s, win, bake.pixel_m, bake.radius_m);
+    let rect = Rect {
+        x0: m as usize,
+        y0: m as usize,
+        w: n as usize,
+        h: n as usize,
+    };
+    let mut rings = Vec::new();
+    let (mut prev, mut reach, mut k) = (win, m, 0u32);
+    while reach < needed {
+        k += 1;
+        let f = 1i64 << k;
+        let foot = (t0 / f, t0 / f, (t0 + n + f - 1) / f, (t0 + n + f - 1) / f);
+        let margin = fine.min((needed + f - 1) / f);
+        let w = (
+            foot.0 - margin,
+            foot.1 - margin,
+            foot.2 + margin,
+            foot.3 + margin,
+        );
+        let mut c = synth_context(s / f as f64, w, bake.pixel_m * f as f64, bake.radius_m);
+        let rect = Rect {
+            x0: (foot.0 - w.0) as usize,
+            y0: (foot.1 - w.1) as usize,
+            w: (foot.2 - foot.0) as usize,
+            h: (foot.3 - foot.1) as usize,
+        };
+        let mut observers = Vec::new();
+        for j in 0..rect.h {
+            let row = (rect.y0 + j) * c.width + rect.x0;
+            observers.extend_from_slice(&c.heights[row..row + rect.w]);
+        }
+        let inner = (
+            prev.0.div_euclid(2) + prev.0.rem_euclid(2),
+            prev.1.div_euclid(2) + prev.1.rem_euclid(2),
+            prev.2 / 2,
+            prev.3 / 2,
+        );
+        for gy in inner.1..inner.3 {
+            let row = (gy - w.1) as usize * c.width;
+            c.heights[row + (inner.0 - w.0) as usize..row + (inner.2 - w.0) as usize]
+                .fill(FarRing::PIT_M);
+        }
+        let lowest_m = c
+            .heights
+            .iter()
+            .copied()
+            .filter(|&h| h > FarRing::PIT_M)
+            .fold(f32::INFINITY, f32::min);
+        rings.push(FarRing {
+            lowest_m,
+            ctx: c,
+            rect,
+            observers,
+            factor: f as u32,
+            inner_px: ((foot.0 - inner.0) * f) as f64,
+        });
+        reach = margin * f;
+        prev = w;
+    }
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    let t = std::time::Instant::now();
+    pool.install(|| {
+        penumbra::horizon::horizons_far(
+            &ctx,
+            rect,
+            azimuths,
+            penumbra::horizon::DEFAULT_NEAR_PX,
+            &rings,
+        )
+    });
+    let secs = t.elapsed().as_secs_f64() * 360.0 / azimuths as f64;
+    Ok((secs, needed as u64, rings.len()))
+}
+
+/// The extrapolation table: per bake, the measured core seconds per tile and the CPU-hours.
+pub fn extrapolate(azimuths: usize, markdown: bool, json: bool) -> Result<()> {
+    #[derive(Serialize)]
+    struct X {
+        bake: &'static str,
+        pixels: f64,
+        tiles: f64,
+        reach_px: u64,
+        fine_margin_px: u64,
+        rings: usize,
+        core_s_per_tile: f64,
+        cpu_hours: f64,
+        published_cpu_hours: Option<f64>,
+    }
+    let mut rows = Vec::new();
+    for b in BAKES {
+        let pixels = 4.0 * std::f64::consts::PI * b.radius_m * b.radius_m * b.area_fraction
+            / (b.pixel_m * b.pixel_m);
+        let tiles = pixels / (512.0 * 512.0);
+        let (secs, reach, rings) = per_tile_core_s(b, azimuths)?;
+        rows.push(X {
+            bake: b.name,
+            pixels,
+            tiles,
+            reach_px: reach,
+            fine_margin_px: penumbra::horizon::default_fine_margin_px(512),
+            rings,
+            core_s_per_tile: secs,
+            cpu_hours: tiles * secs / 3600.0,
+            published_cpu_hours: b.published_cpu_hours,
+        });
+    }
+    if json {
+        return penumbra_cli::output::print_json(&rows);
+    }
+    if markdown {
+        println!("| bake | pixels | 512² tiles | reach px | fine margin px | far rings | core s per tile (360 az) | CPU-hours | published |");
+        println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    }
+    for r in &rows {
+        let p = r
+            .published_cpu_hours
+            .map_or("–".into(), |h| format!("≈ {h:.0}"));
+        if markdown {
+            println!(
+                "| {} | {:.3e} | {:.0} | {} | {} | {} | {:.1} | {:.1} | {} |",
+                r.bake,
+                r.pixels,
+                r.tiles,
+                r.reach_px,
+                r.fine_margin_px,
+                r.rings,
+                r.core_s_per_tile,
+                r.cpu_hours,
+                p
+            );
+        } else {
+            println!(
+                "{:<28} {:.3e} px, {:>7.0} tiles, reach {:>6} px, {} rings: {:.1} core-s/tile → {:.1} CPU-hours (published {p})",
+                r.bake, r.pixels, r.tiles, r.reach_px, r.rings, r.core_s_per_tile, r.cpu_hours
+            );
+        }
+    }
+    if markdown {
+        println!();
+        println!(
+            "One thread; {azimuths} azimuths timed and scaled to 360; synthetic terrain \
+             (sinusoidal octaves 200 km … 2 px, 3 km amplitude at 200 km ∝ λ^0.8) on the context \
+             and far rings `penumbra horizon` builds for a 512-px tile at the face centre with \
+             the reach of the body's terrain range (worst case: the tile at the highest \
+             terrain)."
+        );
+    }
+    Ok(())
+}
