@@ -5,20 +5,23 @@
 //! plain single-part OpenEXR that any reader opens), but the pixel blocks are packed and
 //! compressed here: OpenEXR's ZIP is "interleave the bytes, delta-predict, zlib", and `exr`'s
 //! writer runs that through miniz_oxide at level 4, one block after another, which was 87% of the
-//! mip stage. Here the same transform is deflated at a low level and all blocks of a file are
-//! compressed in parallel. Two deflate libraries are used, each where it was measured fastest at
-//! an acceptable size (see [`ZipLevel`] and docs/benchmarks.md, "EXR codec"): miniz_oxide
-//! level 1 for f32 data (height tiles, f32 mips) and horizon maps, libdeflate level 1 for f16
-//! mip files; in height tiles, channels that are noise to deflate are stored instead
-//! ([`mixed`]). miniz_oxide at level 4 also reproduces the `exr` crate's files byte for byte,
-//! which the tests use to prove the transform is OpenEXR's. Reading inflates the blocks in
-//! parallel with zune-inflate (the inflater `exr` itself uses), undoes the predictor and the
-//! interleave, and converts to f32. Blocks in any other compression (RLE, PIZ, … written by
-//! other tools) are decoded by `exr`'s own block decompressor, so every file the old
+//! mip stage. Here the same transform is deflated by this codec's own encoder, which looks for
+//! repeats only at the distances where a block's layout puts them ([`layout`]), and all blocks
+//! of a file are compressed in parallel. It was measured fastest on every product at 1.003–1.046×
+//! the `exr` crate's size (see [`ZipLevel`] and docs/benchmarks.md, "EXR codec"). Height tiles
+//! are the exception: miniz_oxide level 1 with the channels that are noise to deflate stored
+//! ([`mixed`]), which decodes faster. libdeflate stays selectable for the codec bench that
+//! compares them. miniz_oxide at level 4 also reproduces the `exr` crate's files
+//! byte for byte, which the tests use to prove the transform is OpenEXR's. Reading inflates the
+//! blocks in parallel with zune-inflate (the inflater `exr` itself uses), undoes the predictor
+//! and the interleave, and converts to f32. Blocks in any other compression (RLE, PIZ, …
+//! written by other tools) are decoded by `exr`'s own block decompressor, so every file the old
 //! `exr`-based reader opened still opens.
 //!
 //! The stored samples are the same bits whatever the library or level: only the deflate stream
-//! differs (and, for a given level, it is fixed by the library versions in Cargo.lock).
+//! differs (and, for a given level, it is fixed by the library versions in Cargo.lock and, for
+//! the codec's own encoder, by its code: the same bytes whatever vector instructions the CPU
+//! has).
 //! Output bytes do not depend on the thread count (blocks are compressed independently and
 //! written in offset-table order).
 
@@ -40,6 +43,7 @@ use rayon::prelude::*;
 
 use crate::tileio::TileCompression;
 
+mod layout;
 mod mixed;
 
 /// Which deflate library, at which level, compresses the ZIP blocks. Both write plain zlib
@@ -48,7 +52,7 @@ mod mixed;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ZipLevel {
     /// libdeflate (C, through the `libdeflater` crate) at this level, 1–12: what f16 mip files
-    /// are written with ([`ZipLevel::F16_MIP`]); on f32 data it is no faster than miniz_oxide.
+    /// were written with before [`ZipLevel::Layout`]; measured in the codec bench.
     Libdeflate(u8),
     /// miniz_oxide at this level, 0–10: the library the `exr` crate's writer uses, so the
     /// codec can reproduce that writer byte for byte ([`ZipLevel::EXR_CRATE`]).
@@ -59,26 +63,30 @@ pub enum ZipLevel {
     /// (src/exrcodec/mixed.rs). Blocks without noise get exactly `Miniz(level)`'s bytes. What
     /// height tiles are written with ([`ZipLevel::HEIGHT_TILE`]).
     StoreNoise(u8),
+    /// This codec's own deflate (src/exrcodec/layout.rs): matches looked for only at the few
+    /// distances where a block's layout puts repeats (the previous line of a channel, the
+    /// other channel a line or two up, runs), compared 64 positions at a time, then one
+    /// Huffman-coded deflate block per ZIP block. What every file but height tiles is
+    /// written with ([`ZipLevel::DEFAULT`]).
+    Layout,
 }
 
 impl ZipLevel {
-    /// Horizon maps, f32 mip files: miniz_oxide level 1, a greedy single-probe parser, the
-    /// fastest measured on f32 data (1.3–2× libdeflate level 1 per core on f32 mips and SRTM
-    /// height tiles; a tie on LDEM_4's height tiles and on horizon maps) for +0.6…+3.6% size
-    /// against level 4.
-    pub const DEFAULT: ZipLevel = ZipLevel::Miniz(1);
-    /// Height tiles (f32 height + f16 mask): as [`ZipLevel::DEFAULT`], but where the heights
-    /// of a block are noise to deflate (LDEM_4 oversampled: ratio 1.00) they are stored and
-    /// the mask run-length coded: 1.9× the encode speed for +1.7% size on LDEM_4's tiles
-    /// (codec bench, 21:18 run). Not for mip files: their max-pooled values repeat across
-    /// channels and blocks in ways an excerpt does not show (SRTM mips came out 1.118× the
-    /// exr crate's size, over issue 14's 10%).
+    /// What mip files (both precisions), horizon maps and lit-fraction maps are written with:
+    /// [`ZipLevel::Layout`]. In the codec bench of 2026-12-03 09:0x UTC (one core, the shared
+    /// DEMs) it was the fastest encoder on every product, 204–453 MB/s against 55–252 for
+    /// miniz_oxide level 1 and 70–185 for libdeflate level 1, at 1.003–1.046× the `exr`
+    /// crate's size (issue 14 allows 1.10×), smaller than miniz_oxide level 1 on all but
+    /// LDEM_4's f32 heights (docs/benchmarks.md, "EXR codec").
+    pub const DEFAULT: ZipLevel = ZipLevel::Layout;
+    /// Height tiles (f32 height + f16 mask): miniz_oxide level 1, except where a block's heights
+    /// are noise to deflate (LDEM_4 oversampled: ratio 1.00): there they are stored and the mask
+    /// run-length coded. [`ZipLevel::Layout`] writes these 3–18 % faster at 0.98–0.99× the size, but
+    /// its Huffman-coded noise decodes at 0.64–0.90× the speed of stored bytes (codec bench,
+    /// 2026-12-03), and the horizon, mip and shadow stages read height tiles far more often than
+    /// the tiling stage writes them: the whole mip stage on LDEM_4 took 5.2 s of CPU on
+    /// Layout-written height tiles against 4.5–4.8 s on these.
     pub const HEIGHT_TILE: ZipLevel = ZipLevel::StoreNoise(1);
-    /// f16 mip files (`--precision f16`): libdeflate level 1. miniz_oxide level 1 loses 9–17%
-    /// on these smooth, repetitive pyramids and its level 2 is slow; libdeflate level 1 is both
-    /// faster (1.1–2×) and smaller (+2.5…+2.6% against level 4, where miniz_oxide level 2 is
-    /// +3.0…+4.7%) than miniz_oxide level 2.
-    pub const F16_MIP: ZipLevel = ZipLevel::Libdeflate(1);
     /// What the `exr` crate's writer used, miniz_oxide at level 4 (and this codec reproduces its
     /// files byte for byte with it, which the tests check).
     pub const EXR_CRATE: ZipLevel = ZipLevel::Miniz(4);
@@ -203,24 +211,68 @@ fn level_sizes(h: &Header) -> Result<Vec<(usize, usize)>, String> {
 }
 
 /// OpenEXR's ZIP transform before deflate: even bytes then odd bytes, then each byte as the
-/// difference to the previous one plus 128.
+/// difference to the previous one plus 128. Written as one pass over byte pairs (each output
+/// byte from two input bytes), 16 pairs at a time with SSE2.
 fn predict(packed: &[u8], out: &mut Vec<u8>) {
     let n = packed.len();
     out.clear();
     out.resize(n, 0);
+    if n == 0 {
+        return;
+    }
     let half = n.div_ceil(2);
     let (a, b) = out.split_at_mut(half);
-    for (i, pair) in packed.chunks(2).enumerate() {
-        a[i] = pair[0];
-        if let Some(&v) = pair.get(1) {
-            b[i] = v;
+    let d = |x: u8, y: u8| x.wrapping_sub(y).wrapping_add(128);
+    a[0] = packed[0];
+    if let Some(&o) = packed.get(1) {
+        // The first odd byte follows the last even one.
+        b[0] = d(o, packed[2 * (half - 1)]);
+    }
+    // Pairs 1.. of the input against the pair before each.
+    let pairs = n / 2;
+    #[allow(unused_mut)]
+    let mut done = 1;
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::*;
+        // 16 pairs at a time: the byte differences of 32 bytes and the 32 before them by two,
+        // plus 128 (the top bit flipped), split into even and odd bytes.
+        while done + 16 <= pairs {
+            // SAFETY: SSE2 is part of x86_64; the loads read packed[2·done − 2 .. 2·done + 32]
+            // and the stores write a and b at done .. done + 16, all inside the slices (both
+            // hold `pairs` elements at least).
+            unsafe {
+                let at = |k: usize| packed.as_ptr().add(k).cast::<__m128i>();
+                let flip = _mm_set1_epi8(-128);
+                let lo = _mm_xor_si128(
+                    _mm_sub_epi8(
+                        _mm_loadu_si128(at(2 * done)),
+                        _mm_loadu_si128(at(2 * done - 2)),
+                    ),
+                    flip,
+                );
+                let hi = _mm_xor_si128(
+                    _mm_sub_epi8(
+                        _mm_loadu_si128(at(2 * done + 16)),
+                        _mm_loadu_si128(at(2 * done + 14)),
+                    ),
+                    flip,
+                );
+                let mask = _mm_set1_epi16(0xff);
+                let even = _mm_packus_epi16(_mm_and_si128(lo, mask), _mm_and_si128(hi, mask));
+                let odd = _mm_packus_epi16(_mm_srli_epi16(lo, 8), _mm_srli_epi16(hi, 8));
+                _mm_storeu_si128(a.as_mut_ptr().add(done).cast(), even);
+                _mm_storeu_si128(b.as_mut_ptr().add(done).cast(), odd);
+            }
+            done += 16;
         }
     }
-    let mut prev = out.first().copied().unwrap_or(0);
-    for v in out.iter_mut().skip(1) {
-        let cur = *v;
-        *v = cur.wrapping_sub(prev).wrapping_add(128);
-        prev = cur;
+    for i in done..pairs {
+        a[i] = d(packed[2 * i], packed[2 * i - 2]);
+        b[i] = d(packed[2 * i + 1], packed[2 * i - 1]);
+    }
+    if n % 2 == 1 && n > 1 {
+        a[half - 1] = d(packed[n - 1], packed[n - 3]);
     }
 }
 
@@ -248,6 +300,8 @@ fn deflate(data: &[u8], level: ZipLevel) -> Vec<u8> {
     match level {
         ZipLevel::Libdeflate(l) => deflate_libdeflate(data, l),
         ZipLevel::Miniz(l) | ZipLevel::StoreNoise(l) => deflate_miniz(data, l),
+        // Without a block layout: runs and repeated byte pairs only.
+        ZipLevel::Layout => layout::zlib(data, &[1, 2]),
     }
 }
 
@@ -402,6 +456,8 @@ pub fn encode(
                     };
                     let z = if noisy != 0 {
                         mixed::zlib(predicted, &bps[level], w, h, noisy)
+                    } else if enc.level == ZipLevel::Layout {
+                        layout::zlib(predicted, &layout::distances(&bps[level], w, h))
                     } else {
                         deflate(predicted, enc.level)
                     };
@@ -730,13 +786,29 @@ mod tests {
         }
     }
 
+    /// The one-pass predictor gives the bytes of OpenEXR's definition done in two steps
+    /// (split even and odd bytes, then the running difference).
+    #[test]
+    fn predictor_matches_the_two_step_definition() {
+        let mut rnd = crate::testutil::rng(3);
+        for n in (0usize..70).chain([255, 256, 257, 4096, 4097]) {
+            let data: Vec<u8> = (0..n).map(|_| (rnd() * 256.0) as u8).collect();
+            let mut want: Vec<u8> = data.iter().step_by(2).copied().collect();
+            want.extend(data.iter().skip(1).step_by(2));
+            for i in (1..n).rev() {
+                want[i] = want[i].wrapping_sub(want[i - 1]).wrapping_add(128);
+            }
+            let mut got = Vec::new();
+            predict(&data, &mut got);
+            assert_eq!(got, want, "n = {n}");
+        }
+    }
+
     use crate::horizon::io::{
         decode_horizon_exr, encode_horizon_exr, encode_horizon_exr_exr_crate, HorizonPrecision,
     };
     use crate::mip::schema::Precision;
-    use crate::mip::{
-        decode_mip_exr, encode_mip_exr, encode_mip_exr_exr_crate, level_sizes, zip_level,
-    };
+    use crate::mip::{decode_mip_exr, encode_mip_exr, encode_mip_exr_exr_crate, level_sizes};
     use crate::tileio::{
         decode_height_tile, encode_height_tile, encode_height_tile_exr_crate, HeightTile,
     };
@@ -804,7 +876,7 @@ mod tests {
                             encode_mip_exr(size, m, &max, precision, c, ZipLevel::EXR_CRATE, "t");
                         assert_eq!(same.unwrap(), old, "{size} {precision:?} {c:?}");
                         let new =
-                            encode_mip_exr(size, m, &max, precision, c, zip_level(precision), "t")
+                            encode_mip_exr(size, m, &max, precision, c, ZipLevel::DEFAULT, "t")
                                 .unwrap();
                         let (a, b) = (decode_mip_exr(&old).unwrap(), decode_mip_exr(&new).unwrap());
                         assert_eq!(a.sizes, sizes);
@@ -869,7 +941,8 @@ mod tests {
                     .collect(),
                 mask: (0..n * n).map(|i| u8::from(i % n > n / 2)).collect(),
             };
-            let z = encode_height_tile(&tile, TileCompression::Zip, ZipLevel::HEIGHT_TILE).unwrap();
+            let z =
+                encode_height_tile(&tile, TileCompression::Zip, ZipLevel::StoreNoise(1)).unwrap();
             let back = decode_height_tile(&z).unwrap();
             assert_eq!(bits(&back.height), bits(&tile.height), "n = {n}");
             assert_eq!(back.mask, tile.mask);
@@ -886,9 +959,9 @@ mod tests {
                 height: values(n * n, 5).iter().map(|v| v.round()).collect(),
                 ..tile
             };
-            let plain = encode_height_tile(&whole, TileCompression::Zip, ZipLevel::DEFAULT);
+            let plain = encode_height_tile(&whole, TileCompression::Zip, ZipLevel::Miniz(1));
             assert!(
-                encode_height_tile(&whole, TileCompression::Zip, ZipLevel::HEIGHT_TILE) == plain,
+                encode_height_tile(&whole, TileCompression::Zip, ZipLevel::StoreNoise(1)) == plain,
                 "n = {n}: compressible heights were not deflated as before"
             );
         }
@@ -909,7 +982,11 @@ mod tests {
             .num_threads(4)
             .build()
             .unwrap();
-        for level in [ZipLevel::DEFAULT, ZipLevel::HEIGHT_TILE] {
+        for level in [
+            ZipLevel::DEFAULT,
+            ZipLevel::StoreNoise(1),
+            ZipLevel::Miniz(1),
+        ] {
             let enc = || encode_height_tile(&tile, TileCompression::Zip, level).unwrap();
             assert_eq!(one.install(enc), four.install(enc));
         }

@@ -13,17 +13,6 @@ use super::schema::Precision;
 use crate::error::{Error, IoContext, Result};
 use crate::tileio::{self, TileCompression};
 
-/// Deflate library and level of a mip file: f32 files gain almost nothing above miniz_oxide
-/// level 1, the fastest; f16 files lose 9–17% there and are deflated with libdeflate level 1,
-/// both faster and smaller than miniz_oxide level 2
-/// (docs/benchmarks.md, "EXR codec").
-pub fn zip_level(precision: Precision) -> ZipLevel {
-    match precision {
-        Precision::F32 => ZipLevel::DEFAULT,
-        Precision::F16 => ZipLevel::F16_MIP,
-    }
-}
-
 fn samples(levels: &[Vec<f32>], precision: Precision, is_max: bool) -> Vec<Samples<'_>> {
     levels
         .iter()
@@ -88,7 +77,7 @@ pub fn write_mip_exr(
         max,
         precision,
         compression,
-        zip_level(precision),
+        ZipLevel::DEFAULT,
         name,
     )
     .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;

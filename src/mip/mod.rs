@@ -26,8 +26,7 @@ pub mod schema;
 mod stage;
 
 pub use self::io::{
-    decode_mip_exr, encode_mip_exr, encode_mip_exr_exr_crate, read_mip_exr, write_mip_exr,
-    zip_level, MipFile,
+    decode_mip_exr, encode_mip_exr, encode_mip_exr_exr_crate, read_mip_exr, write_mip_exr, MipFile,
 };
 pub use self::kernels::{
     f16_down, f16_up, face_pyramid, level_sizes, max_pyramid, max_pyramid_into, minmax_pyramid,

@@ -2,9 +2,9 @@
 //! stages really write (issue 14). Tiles LDEM_4 (4 levels) and SRTM N19W156, builds their mips
 //! and LDEM_4's level-1 horizon maps with the `penumbra` binary, then, on one thread, encodes
 //! and decodes a sample of the files with the `exr` crate's own writer/reader (what Penumbra
-//! used before), with src/exrcodec.rs at several miniz_oxide and libdeflate levels and
-//! uncompressed, against a memcpy of the same raw bytes in the same run. Every decode is checked
-//! bit for bit.
+//! used before), with src/exrcodec.rs at several miniz_oxide and libdeflate levels, with its own
+//! layout-aware encoder and uncompressed, against a memcpy of the same raw bytes in the same
+//! run. Every decode is checked bit for bit.
 
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
@@ -481,6 +481,10 @@ pub fn run_codec(
                 opts.push((
                     "codec ZIP miniz_oxide level 1, noisy channels stored (height tiles)".into(),
                     Some((TileCompression::Zip, ZipLevel::HEIGHT_TILE)),
+                ));
+                opts.push((
+                    "codec ZIP layout-aware encoder (default but height tiles)".into(),
+                    Some((TileCompression::Zip, ZipLevel::Layout)),
                 ));
                 for &lv in libdeflate_levels {
                     opts.push((
