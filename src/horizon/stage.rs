@@ -360,74 +360,10 @@ pub(crate) fn far_rings(
             .entry((level, id.face))
             .or_insert_with(|| coverage_box(ts, level, id.face));
         let win = window(src, level, foot, margin, cover);
-        let mut ctx = context_window(src, level, id.face, win)?;
-        let rect = Rect {
-            x0: (foot.0 - win.0) as usize,
-            y0: (foot.1 - win.1) as usize,
-            w: (foot.2 - foot.0) as usize,
-            h: (foot.3 - foot.1) as usize,
-        };
-        let mut observers = Vec::with_capacity(rect.w * rect.h);
-        for j in 0..rect.h {
-            let row = (rect.y0 + j) * ctx.width + rect.x0;
-            observers.extend_from_slice(&ctx.heights[row..row + rect.w]);
-        }
-        // Blank what the previous (finer) window holds: the ring pixels all of whose 2×2
-        // finer pixels lie in it, with a pit far below any terrain rather than no data (the
-        // bilinear surface renormalises over no-data corners, which would carry the boundary
-        // pixels' heights up to a ring pixel towards the tile: closer terrain, a horizon too
-        // high; next to a pit the surface falls away instead).
-        let inner = (
-            prev.0.div_euclid(2) + prev.0.rem_euclid(2),
-            prev.1.div_euclid(2) + prev.1.rem_euclid(2),
-            prev.2.div_euclid(2),
-            prev.3.div_euclid(2),
-        );
-        for gy in inner.1.max(win.1)..inner.3.min(win.3) {
-            let row = (gy - win.1) as usize * ctx.width;
-            let (a, b) = (inner.0.max(win.0), inner.2.min(win.2));
-            if a < b {
-                ctx.heights[row + (a - win.0) as usize..row + (b - win.0) as usize]
-                    .fill(FarRing::PIT_M);
-            }
-        }
-        // The same pit where the level has no data: renormalising there would carry the
-        // data's edge outwards by a whole ring pixel (a horizon too high where the terrain
-        // falls away towards the edge).
-        for h in &mut ctx.heights {
-            if h.is_nan() {
-                *h = FarRing::PIT_M;
-            }
-        }
-        // Least distance from the footprint to the ring's terrain (the gap between pixel
-        // edges along the farther axis, a lower bound of the plane distance), in pixels of the
-        // tile's level; None: the ring holds no terrain.
-        let mut gap: Option<i64> = None;
-        let mut lowest = f32::INFINITY;
-        for (r, row) in ctx.heights.chunks_exact(ctx.width).enumerate() {
-            let gy = win.1 + r as i64;
-            let dy = (foot.1 - gy - 1).max(gy - foot.3).max(0);
-            for (c, h) in row.iter().enumerate() {
-                if *h > FarRing::PIT_M {
-                    lowest = lowest.min(*h);
-                    let gx = win.0 + c as i64;
-                    let d = (foot.0 - gx - 1).max(gx - foot.2).max(0).max(dy);
-                    gap = Some(gap.map_or(d, |g| g.min(d)));
-                }
-            }
-        }
+        let ctx = context_window(src, level, id.face, win)?;
         reach = reach.max((margin * f) as u64);
+        rings.extend(FarRing::new(ctx, foot, prev, 1 << k));
         prev = win;
-        if let Some(gap) = gap {
-            rings.push(FarRing {
-                ctx,
-                rect,
-                observers,
-                factor: 1 << k,
-                inner_px: ((gap * f) as f64).max(1.0),
-                lowest_m: lowest,
-            });
-        }
     }
     Ok(rings)
 }

@@ -421,43 +421,8 @@ fn per_tile_core_s(bake: &Bake, azimuths: usize) -> Result<(f64, u64, usize)> {
             foot.2 + margin,
             foot.3 + margin,
         );
-        let mut c = synth_context(s / f as f64, w, bake.pixel_m * f as f64, bake.radius_m);
-        let rect = Rect {
-            x0: (foot.0 - w.0) as usize,
-            y0: (foot.1 - w.1) as usize,
-            w: (foot.2 - foot.0) as usize,
-            h: (foot.3 - foot.1) as usize,
-        };
-        let mut observers = Vec::new();
-        for j in 0..rect.h {
-            let row = (rect.y0 + j) * c.width + rect.x0;
-            observers.extend_from_slice(&c.heights[row..row + rect.w]);
-        }
-        let inner = (
-            prev.0.div_euclid(2) + prev.0.rem_euclid(2),
-            prev.1.div_euclid(2) + prev.1.rem_euclid(2),
-            prev.2 / 2,
-            prev.3 / 2,
-        );
-        for gy in inner.1..inner.3 {
-            let row = (gy - w.1) as usize * c.width;
-            c.heights[row + (inner.0 - w.0) as usize..row + (inner.2 - w.0) as usize]
-                .fill(FarRing::PIT_M);
-        }
-        let lowest_m = c
-            .heights
-            .iter()
-            .copied()
-            .filter(|&h| h > FarRing::PIT_M)
-            .fold(f32::INFINITY, f32::min);
-        rings.push(FarRing {
-            lowest_m,
-            ctx: c,
-            rect,
-            observers,
-            factor: f as u32,
-            inner_px: ((foot.0 - inner.0) * f) as f64,
-        });
+        let c = synth_context(s / f as f64, w, bake.pixel_m * f as f64, bake.radius_m);
+        rings.extend(FarRing::new(c, foot, prev, f as u32));
         reach = margin * f;
         prev = w;
     }
