@@ -69,13 +69,7 @@ pub fn horizons_with(
     method: Method,
     near_px: f64,
 ) -> Vec<f32> {
-    assert!(rect.x0 + rect.w <= ctx.width && rect.y0 + rect.h <= ctx.height);
-    assert!(
-        (0.0..=near::MAX_NEAR_PX).contains(&near_px),
-        "near field of {near_px} px outside 0..={}",
-        near::MAX_NEAR_PX
-    );
-    let plane = rect.w * rect.h;
+    let plane = checked_plane(ctx, rect, near_px);
     let mut out = vec![0.0f32; plane * a];
     if plane == 0 {
         return out;
@@ -103,6 +97,18 @@ pub fn horizons_with(
     out
 }
 
+/// The pixel count of `rect`, after checking that it lies in `ctx` and that `near_px` is a
+/// near field the methods take (both are the caller's bugs, not bad input).
+fn checked_plane(ctx: &Context, rect: Rect, near_px: f64) -> usize {
+    assert!(rect.x0 + rect.w <= ctx.width && rect.y0 + rect.h <= ctx.height);
+    assert!(
+        (0.0..=near::MAX_NEAR_PX).contains(&near_px),
+        "near field of {near_px} px outside 0..={}",
+        near::MAX_NEAR_PX
+    );
+    rect.w * rect.h
+}
+
 /// The fast method's horizons of `rect` (as [`horizons_with`]), seeing beyond `ctx` through
 /// coarser `rings` ([`FarRing`]; none: `ctx` alone).
 pub fn horizons_far(
@@ -112,13 +118,7 @@ pub fn horizons_far(
     near_px: f64,
     rings: &[FarRing],
 ) -> Vec<f32> {
-    assert!(rect.x0 + rect.w <= ctx.width && rect.y0 + rect.h <= ctx.height);
-    assert!(
-        (0.0..=near::MAX_NEAR_PX).contains(&near_px),
-        "near field of {near_px} px outside 0..={}",
-        near::MAX_NEAR_PX
-    );
-    let plane = rect.w * rect.h;
+    let plane = checked_plane(ctx, rect, near_px);
     let mut out = vec![0.0f32; plane * a];
     if plane == 0 {
         return out;
