@@ -76,6 +76,30 @@ impl Context {
         self.heights[y as usize * self.width + x as usize]
     }
 
+    /// Whether cell (ix, iy), spanning [ix, ix+1] × [iy, iy+1], has all four corners inside
+    /// the raster and holding data: only there is the bilinear surface evaluated between the
+    /// points where a ray leaves cells (see [`Ray::max_over`]).
+    #[inline]
+    pub fn cell_complete(&self, ix: i64, iy: i64) -> bool {
+        [(0, 0), (1, 0), (0, 1), (1, 1)]
+            .iter()
+            .all(|&(dx, dy)| !self.at(ix + dx, iy + dy).is_nan())
+    }
+
+    /// Whether (x, y) lies in a complete cell or on the border of one ([`Context::cell_complete`];
+    /// a point on a grid line belongs to the cells on both sides): the points of the bilinear
+    /// surface the horizon methods evaluate anywhere, not only where a ray leaves a cell.
+    #[inline]
+    pub fn on_complete_cell(&self, x: f64, y: f64) -> bool {
+        if !(x >= 0.0 && y >= 0.0) {
+            return false;
+        }
+        let (xi, yi) = (x as i64, y as i64);
+        let xs = if xi as f64 == x { xi - 1 } else { xi };
+        let ys = if yi as f64 == y { yi - 1 } else { yi };
+        (xs..=xi).any(|cx| (ys..=yi).any(|cy| self.cell_complete(cx, cy)))
+    }
+
     /// Bilinear height at fractional raster pixel (x, y), in f64 (near the observer the height
     /// differences are millimetres, below an f32's resolution of a height): taps with zero weight and no-data
     /// taps are left out and the rest renormalised; NaN when none is left or (x, y) is outside.
@@ -119,7 +143,10 @@ impl Context {
         let mut acc = 0.0f64;
         let mut wsum = 0.0f64;
         for ((dx, dy), w) in [(0, 0), (1, 0), (0, 1), (1, 1)].into_iter().zip(w) {
-            if w == 0.0 {
+            // A tap whose weight is a rounding error (a point computed to lie on a grid line
+            // may land 1e-14 px beside it) counts as none: renormalised alone, it would carry
+            // its height across the whole cell to where the line's own taps have no data.
+            if w < TAP_EPS {
                 continue;
             }
             let v = self.at(xi + dx, yi + dy);
@@ -166,9 +193,12 @@ impl Context {
     }
 }
 
+/// Weights of a bilinear tap below this are rounding errors (see [`Context::bilinear64`]).
+pub(super) const TAP_EPS: f64 = 1e-9;
+
 /// `x` moved onto [0, hi] when it is within 1e-9 of it.
 #[inline(always)]
-fn snap(x: f64, hi: f64) -> f64 {
+pub(super) fn snap(x: f64, hi: f64) -> f64 {
     if x < 0.0 && x > -1e-9 {
         0.0
     } else if x > hi && x < hi + 1e-9 {
@@ -337,6 +367,17 @@ impl Ray {
         (r * a - self.r0 * n) / (r * b)
     }
 
+    /// As [`Ray::slope_at`], but −∞ inside a cell with a no-data corner, where
+    /// [`Ray::max_over`] evaluates only the ray's crossing out of the cell: the points every
+    /// method agrees on ([`Context::on_complete_cell`]).
+    #[inline]
+    pub(crate) fn slope_on_surface(&self, ctx: &Context, s: f64) -> f64 {
+        if !ctx.on_complete_cell(self.x0 + s * self.cx, self.y0 + s * self.cy) {
+            return f64::NEG_INFINITY;
+        }
+        self.slope_at(ctx, s)
+    }
+
     /// Slope of terrain of height `h` at distance `s` (as [`Ray::slope_at`]).
     #[inline]
     pub(crate) fn slope_of(&self, ctx: &Context, s: f64, h: f64) -> f64 {
@@ -354,7 +395,12 @@ impl Ray {
     pub(crate) fn max_over(&self, ctx: &Context, s_from: f64, s_to: f64, floor: f64) -> (f64, f64) {
         let (mut best, mut at) = (floor, f64::NAN);
         let (w1, h1) = ((ctx.width - 1) as f64, (ctx.height - 1) as f64);
-        let (x, y) = (self.x0 + s_from * self.cx, self.y0 + s_from * self.cy);
+        // A start computed to lie on the raster's edge may land a rounding error outside (a
+        // ray along the edge row).
+        let (x, y) = (
+            snap(self.x0 + s_from * self.cx, w1),
+            snap(self.y0 + s_from * self.cy, h1),
+        );
         if !(x >= 0.0 && y >= 0.0 && x <= w1 && y <= h1) || s_from >= s_to {
             return (best, at);
         }
@@ -363,7 +409,8 @@ impl Ray {
         let (nx, ny) = (ctx.width as i64, ctx.height as i64);
         // The walk evaluates where the ray leaves each cell; inside the first cell the slope may
         // peak where the interval starts (a window around a sweep winner begins mid-cell).
-        if s_from > 0.0 {
+        // Only on a complete cell (see below): inside a partial one that point is no crossing.
+        if s_from > 0.0 && ctx.on_complete_cell(x, y) {
             let sl = self.slope_at(ctx, s_from);
             if sl > best {
                 best = sl;
@@ -423,9 +470,14 @@ impl Ray {
                         try_at(st);
                     }
                 }
-            } else {
+            } else if ax.next.min(ay.next) <= s_to + 1e-9 * (1.0 + s_to) {
                 // No-data corners, or the raster's last row/column: the general bilinear
-                // (no-data taps left out, outside the raster none).
+                // (no-data taps left out, outside the raster none) where the ray leaves the
+                // cell, and only there. Inside such a cell the renormalised surface is a
+                // plateau of its data corners reaching over the no-data; a window or chunk
+                // ending there would see terrain that a walk over the whole ray, which meets
+                // only crossings, does not: every method sees the same points this way. (An
+                // interval computed to end at the crossing may end an ulp before it.)
                 let sl = self.slope_at(ctx, s_next);
                 if sl > best {
                     best = sl;

@@ -1,7 +1,7 @@
 //! The brute-force reference: each observer's own ray searched to the end of the context
 //! raster (docs/horizons.md).
 
-use super::geometry::{Azimuth, Context, PixelGeo, Ray, Rect};
+use super::geometry::{snap, Azimuth, Context, PixelGeo, Ray, Rect};
 
 /// Brute-force horizons of `rect` in plane azimuth `phi`: from each pixel centre along the
 /// straight plane line (a great circle), exact spherical geometry; with `step` = 0 the
@@ -34,7 +34,11 @@ pub(super) fn reference(
             let chunk = if step > 0.0 { step } else { 8.0 };
             let mut s = 0.0;
             loop {
-                let (x, y) = (ray.x0 + s * ray.cx, ray.y0 + s * ray.cy);
+                // Snapped as the search snaps it (a ray along the raster's edge row).
+                let (x, y) = (
+                    snap(ray.x0 + s * ray.cx, (ctx.width - 1) as f64),
+                    snap(ray.y0 + s * ray.cy, (ctx.height - 1) as f64),
+                );
                 if !(x >= 0.0
                     && y >= 0.0
                     && x <= (ctx.width - 1) as f64

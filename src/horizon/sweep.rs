@@ -3,7 +3,7 @@
 //! observer's own ray (docs/horizons.md).
 
 use super::far::FarPass;
-use super::geometry::{dot, normalize, Azimuth, Context, PixelGeo, Ray, Rect};
+use super::geometry::{dot, normalize, snap, Azimuth, Context, PixelGeo, Ray, Rect, TAP_EPS};
 use crate::cube::Vec3;
 
 /// How far (in slope, tan of elevation) below an observer's best so far a line's estimate of a
@@ -54,7 +54,7 @@ pub(super) fn finish(
                             .0,
                     );
                 } else {
-                    t = t.max(ray.slope_at(ctx, sw));
+                    t = t.max(ray.slope_on_surface(ctx, sw));
                 }
             }
             if !far.is_empty() {
@@ -339,6 +339,16 @@ impl Grid<'_> {
     /// out (as [`Context::bilinear`]).
     #[inline(always)]
     fn bilinear(&self, p: f64, q: f64) -> f32 {
+        self.sample(p, q).0
+    }
+
+    /// [`Grid::bilinear`], and whether the exact search ([`Ray::max_over`]) evaluates the
+    /// surface at (p, q) on a ray through it: on a grid line, where a ray crosses from cell to
+    /// cell, or inside a cell whose four corners hold data. Inside a cell with a no-data corner
+    /// the renormalised surface is a plateau of its data corners that no method reports, so a
+    /// sweep candidate there would guide the search to a point it never finds.
+    #[inline(always)]
+    fn sample(&self, p: f64, q: f64) -> (f32, bool) {
         let (p0, q0) = (p as i64, q as i64);
         let (fp, fq) = (p - p0 as f64, q - q0 as f64);
         let i = p0 as usize * self.sp + q0 as usize * self.sq;
@@ -357,20 +367,40 @@ impl Grid<'_> {
             fp * fq,
         );
         if !(a.is_nan() || b.is_nan() || c.is_nan() || d.is_nan()) {
-            return (wa * a as f64 + wb * b as f64 + wc * c as f64 + wd * d as f64) as f32;
+            let v = (wa * a as f64 + wb * b as f64 + wc * c as f64 + wd * d as f64) as f32;
+            return (v, true);
         }
+        let on_line = fp == 0.0 || fq == 0.0;
         let (mut acc, mut ws) = (0.0, 0.0);
         for (v, w) in [(a, wa), (b, wb), (c, wc), (d, wd)] {
-            if w > 0.0 && !v.is_nan() {
+            // (Rounding-error weights count as none, as in [`Context::bilinear64`].)
+            if w >= TAP_EPS && !v.is_nan() {
                 acc += w * v as f64;
                 ws += w;
             }
         }
         if ws > 0.0 {
-            (acc / ws) as f32
+            ((acc / ws) as f32, on_line)
         } else {
-            f32::NAN
+            (f32::NAN, on_line)
         }
+    }
+
+    /// Where the ray q = q_o + t·(p − p_o) (t ≠ 0) enters and leaves the cell that holds its
+    /// point (p, q) off the grid lines: on the cell's columns or rows, exactly.
+    fn crossings(&self, p_o: f64, q_o: f64, t: f64, p: f64, q: f64) -> [(f64, f64); 2] {
+        let (pc, qc) = (p.floor(), q.floor());
+        let at_row = |qr: f64| (p_o + (qr - q_o) / t, qr);
+        let at_col = |pc: f64| (pc, q_o + t * (pc - p_o));
+        let (r0, r1) = (at_row(qc), at_row(qc + 1.0));
+        let (lo, hi) = if r0.0 < r1.0 { (r0, r1) } else { (r1, r0) };
+        let enter = if lo.0 > pc { lo } else { at_col(pc) };
+        let leave = if hi.0 < pc + 1.0 {
+            hi
+        } else {
+            at_col(pc + 1.0)
+        };
+        [enter, leave]
     }
 
     #[inline(always)]
@@ -585,7 +615,9 @@ pub(super) fn sweep(
                     for c in iv.saturating_sub(1)..=hi {
                         let v = line.pts[c];
                         let mut pv = v.p;
-                        let mut qv = q0 as f64 + t * (pv - p as f64);
+                        // (A ray along the raster's edge row computes a rounding error
+                        // outside it: snapped back, as the exact search snaps it.)
+                        let mut qv = snap(q0 as f64 + t * (pv - p as f64), (nq - 1) as f64);
                         if !(qv >= 0.0 && qv <= (nq - 1) as f64) {
                             // Beyond where the observer's ray leaves the raster (the line
                             // runs on beside it): take that exit point instead.
@@ -595,17 +627,30 @@ pub(super) fn sweep(
                         if !g.inside(pv, qv) {
                             continue;
                         }
-                        let hv = g.bilinear(pv, qv);
-                        if hv.is_nan() {
-                            continue;
-                        }
-                        let c = if pv == v.p {
-                            line.at_radius(v, radius + hv as f64)
-                        } else {
-                            line.pos(pv, radius + hv as f64)
+                        let mut consider = |pv: f64, hv: f32| {
+                            if hv.is_nan() {
+                                return;
+                            }
+                            let c = if pv == v.p {
+                                line.at_radius(v, radius + hv as f64)
+                            } else {
+                                line.pos(pv, radius + hv as f64)
+                            };
+                            if best.is_none_or(|b| cross(o, c, b) > 0.0) {
+                                best = Some(c);
+                            }
                         };
-                        if best.is_none_or(|b| cross(o, c, b) > 0.0) {
-                            best = Some(c);
+                        let (hv, evaluated) = g.sample(pv, qv);
+                        if evaluated {
+                            consider(pv, hv);
+                        } else {
+                            // Inside a cell with a no-data corner: where the ray enters and
+                            // leaves it instead, the points the exact search evaluates there.
+                            for (pe, qe) in g.crossings(p as f64, q0 as f64, t, pv, qv) {
+                                if g.inside(pe, qe) {
+                                    consider(pe, g.bilinear(pe, qe));
+                                }
+                            }
                         }
                     }
                     if let Some(b) = best {
