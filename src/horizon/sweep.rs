@@ -641,15 +641,34 @@ pub(super) fn sweep(
                             }
                         };
                         let (hv, evaluated) = g.sample(pv, qv);
-                        if evaluated {
+                        if evaluated && !hv.is_nan() {
                             consider(pv, hv);
-                        } else {
+                        } else if t != 0.0 {
                             // Inside a cell with a no-data corner: where the ray enters and
-                            // leaves it instead, the points the exact search evaluates there.
-                            for (pe, qe) in g.crossings(p as f64, q0 as f64, t, pv, qv) {
-                                if g.inside(pe, qe) {
-                                    consider(pe, g.bilinear(pe, qe));
+                            // leaves the cell instead, the points the exact search evaluates
+                            // there. Over no data (the line runs on beside a data edge that
+                            // the ray has already crossed): the same, stepping back towards the
+                            // observer over up to three cells until the ray meets terrain,
+                            // its last before the edge, where a view falling away peaks.
+                            let over_nodata = evaluated && hv.is_nan();
+                            let back = (p as f64 - pv).signum();
+                            let (mut pb, mut found) = (pv, false);
+                            for _ in 0..3 {
+                                pb += back * 1e-6;
+                                let qb = q0 as f64 + t * (pb - p as f64);
+                                let ends = g.crossings(p as f64, q0 as f64, t, pb, qb);
+                                for (pe, qe) in ends {
+                                    if g.inside(pe, qe) {
+                                        let he = g.bilinear(pe, qe);
+                                        found |= !he.is_nan();
+                                        consider(pe, he);
+                                    }
                                 }
+                                if found || !over_nodata {
+                                    break;
+                                }
+                                // The crossing nearer the observer.
+                                pb = if back > 0.0 { ends[1].0 } else { ends[0].0 };
                             }
                         }
                     }
