@@ -234,14 +234,12 @@ impl FastBuffers {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cube::Face;
 
     /// Rough terrain cut off by a ragged data edge (as a regional DEM's), with holes of one
     /// pixel and more: the cells with a no-data corner lie wherever windows, chunks and
     /// blocks of the three methods begin and end.
     fn ragged(w: usize, h: usize, seed: u64) -> Context {
         let mut rnd = crate::testutil::rng(seed);
-        let r = 1_737_400.0;
         let mut heights = vec![0.0f32; w * h];
         for y in 0..h {
             for x in 0..w {
@@ -264,16 +262,7 @@ mod tests {
                 heights[y * w + x] = f32::NAN;
             }
         }
-        let s = (2.0 * r / 100.0f64).round();
-        Context {
-            face: Face::Px,
-            face_pixels: s,
-            origin: ((s as i64 - w as i64) / 2, (s as i64 - h as i64) / 2),
-            width: w,
-            height: h,
-            heights,
-            radius_m: r,
-        }
+        crate::testutil::lunar_context(w, h, heights, 100.0)
     }
 
     /// At data edges and holes the exact method gives the reference's answer (up to the f32

@@ -262,12 +262,10 @@ pub(super) fn finish(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cube::Face;
     use crate::horizon::geometry::plane_azimuth;
 
     fn context(w: usize, h: usize, relief: f32, pixel_m: f64, seed: u64) -> Context {
         let mut rnd = crate::testutil::rng(seed);
-        let r = 1_737_400.0;
         // Smooth hills plus noise, a few spikes and a no-data hole.
         let mut heights = vec![0.0f32; w * h];
         for y in 0..h {
@@ -286,16 +284,7 @@ mod tests {
                 heights[y * w + x] = f32::NAN;
             }
         }
-        let s = (2.0 * r / pixel_m).round();
-        Context {
-            face: Face::Px,
-            face_pixels: s,
-            origin: ((s as i64 - w as i64) / 2, (s as i64 - h as i64) / 2),
-            width: w,
-            height: h,
-            heights,
-            radius_m: r,
-        }
+        crate::testutil::lunar_context(w, h, heights, pixel_m)
     }
 
     /// The walk gives the exact search's answer over the same stretch of ray, from floors
