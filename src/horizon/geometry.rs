@@ -88,7 +88,11 @@ impl Context {
 
     /// Whether (x, y) lies in a complete cell or on the border of one ([`Context::cell_complete`];
     /// a point on a grid line belongs to the cells on both sides): the points of the bilinear
-    /// surface the horizon methods evaluate anywhere, not only where a ray leaves a cell.
+    /// surface the horizon methods evaluate anywhere, not only where a ray leaves a cell. Any
+    /// point on a grid line would not do: a ray running along a grid line between two partial
+    /// cells meets their renormalised plateau all the way, and [`Ray::max_over`] evaluates it
+    /// only where the ray crosses the other grid lines (tried: the exact method then left the
+    /// reference by degrees at data edges).
     #[inline]
     pub fn on_complete_cell(&self, x: f64, y: f64) -> bool {
         if !(x >= 0.0 && y >= 0.0) {

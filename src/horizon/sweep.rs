@@ -342,11 +342,13 @@ impl Grid<'_> {
         self.sample(p, q).0
     }
 
-    /// [`Grid::bilinear`], and whether the exact search ([`Ray::max_over`]) evaluates the
-    /// surface at (p, q) on a ray through it: on a grid line, where a ray crosses from cell to
-    /// cell, or inside a cell whose four corners hold data. Inside a cell with a no-data corner
-    /// the renormalised surface is a plateau of its data corners that no method reports, so a
-    /// sweep candidate there would guide the search to a point it never finds.
+    /// [`Grid::bilinear`], and whether (p, q) is a good guide for the exact search
+    /// ([`Ray::max_over`]) on a ray through it: on a grid line, where a ray crosses from cell
+    /// to cell, or inside a cell whose four corners hold data. Inside a cell with a no-data
+    /// corner the renormalised surface is a plateau of its data corners that no method
+    /// reports, so a sweep candidate there would guide the search to a point it never finds.
+    /// (Looser than [`Context::on_complete_cell`], which decides what is reported: a ray
+    /// along a grid line is only guided here, then searched exactly around the candidate.)
     #[inline(always)]
     fn sample(&self, p: f64, q: f64) -> (f32, bool) {
         let (p0, q0) = (p as i64, q as i64);
