@@ -80,7 +80,7 @@ impl Context {
     /// the raster and holding data: only there is the bilinear surface evaluated between the
     /// points where a ray leaves cells (see [`Ray::max_over`]).
     #[inline]
-    pub fn cell_complete(&self, ix: i64, iy: i64) -> bool {
+    fn cell_complete(&self, ix: i64, iy: i64) -> bool {
         [(0, 0), (1, 0), (0, 1), (1, 1)]
             .iter()
             .all(|&(dx, dy)| !self.at(ix + dx, iy + dy).is_nan())
@@ -94,7 +94,7 @@ impl Context {
     /// only where the ray crosses the other grid lines (tried: the exact method then left the
     /// reference by degrees at data edges).
     #[inline]
-    pub fn on_complete_cell(&self, x: f64, y: f64) -> bool {
+    pub(crate) fn on_complete_cell(&self, x: f64, y: f64) -> bool {
         if !(x >= 0.0 && y >= 0.0) {
             return false;
         }
