@@ -7,8 +7,9 @@
 //! already holds blanked out (no data). A far ring's terrain is at least its inner distance
 //! away, where a ring pixel of 2^k pixels subtends no more than a full-resolution pixel at
 //! 1/2^k of that distance: the rings give every pixel the same angular resolution as the
-//! near context gives its edge, and hold memory and time to the tile size and the ring count
-//! instead of the square of the reach.
+//! near context gives its edge, and hold time to the tile size and the ring count instead of
+//! the square of the reach. Rings are read and used one at a time
+//! ([`super::method::FarHorizons`]), so memory holds one of them whatever their count.
 //!
 //! Per azimuth each ring runs the same sweep as the full-resolution raster over its own
 //! observers (the footprint's ring pixels, at the coarse level's heights); each tile pixel then

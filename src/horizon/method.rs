@@ -4,12 +4,12 @@
 
 use rayon::prelude::*;
 
-use super::far::{FarPass, FarRing, RingMap};
-use super::geometry::{pixel_geometry, plane_azimuth, Azimuth, Context, Rect};
+use super::far::{FarPass, FarRing};
+use super::geometry::{pixel_geometry, plane_azimuth, Azimuth, Context, PixelGeo, Ray, Rect};
 use super::near;
 use super::pyramid;
 use super::reference::reference;
-use super::sweep::{finish, sweep, Scratch};
+use super::sweep::{finish, ground_slope, sweep, tangents, Scratch};
 
 /// Which algorithm computes the horizons.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -110,7 +110,8 @@ fn checked_plane(ctx: &Context, rect: Rect, near_px: f64) -> usize {
 }
 
 /// The fast method's horizons of `rect` (as [`horizons_with`]), seeing beyond `ctx` through
-/// coarser `rings` ([`FarRing`]; none: `ctx` alone).
+/// coarser `rings` ([`FarRing`]; none: `ctx` alone), taken one after another as
+/// [`FarHorizons`] does.
 pub fn horizons_far(
     ctx: &Context,
     rect: Rect,
@@ -118,6 +119,18 @@ pub fn horizons_far(
     near_px: f64,
     rings: &[FarRing],
 ) -> Vec<f32> {
+    if rings.is_empty() {
+        return fast(ctx, rect, a, near_px, true);
+    }
+    let mut far = FarHorizons::new(ctx, rect, a, near_px);
+    for ring in rings {
+        far.add_ring(ring);
+    }
+    far.finish()
+}
+
+/// The fast method over `ctx` alone, with the zero-distance slope (`with_slope0`) or without.
+fn fast(ctx: &Context, rect: Rect, a: usize, near_px: f64, with_slope0: bool) -> Vec<f32> {
     let plane = checked_plane(ctx, rect, near_px);
     let mut out = vec![0.0f32; plane * a];
     if plane == 0 {
@@ -125,13 +138,8 @@ pub fn horizons_far(
     }
     let geo = pixel_geometry(ctx, rect);
     let nodata = near::NoData::new(ctx);
-    let maps: Vec<RingMap> = rings.iter().map(|r| r.map(ctx, rect)).collect();
-    let nowhere: Vec<Vec<f64>> = rings
-        .iter()
-        .map(|r| vec![f64::NEG_INFINITY; r.rect.w * r.rect.h])
-        .collect();
     out.par_chunks_mut(plane).enumerate().for_each_init(
-        || FastBuffers::new(plane, rings),
+        || FastBuffers::new(plane),
         |b, (k, dst)| {
             let phi = plane_azimuth(k, a);
             let az = Azimuth::new(ctx, phi);
@@ -149,38 +157,130 @@ pub fn horizons_far(
                 &mut b.sweep,
                 None,
             );
-            for ((ring, (acc, acc_s)), none) in rings.iter().zip(&mut b.far).zip(&nowhere) {
-                acc.fill(f64::NEG_INFINITY);
-                acc_s.fill(f64::NAN);
-                sweep(
-                    &ring.ctx,
-                    ring.rect,
-                    phi,
-                    none,
-                    acc,
-                    acc_s,
-                    &mut b.sweep,
-                    Some(&ring.observers),
-                );
-            }
-            let passes: Vec<FarPass> = rings
-                .iter()
-                .zip(&maps)
-                .zip(&b.far)
-                .map(|((ring, map), (acc, acc_s))| FarPass {
-                    ring,
-                    map,
-                    az: Azimuth::new(&ring.ctx, phi),
-                    acc,
-                    acc_s,
-                })
-                .collect();
             finish(
-                ctx, rect, &az, near_px, &geo, &b.near, &b.acc, &b.acc_s, &passes, dst,
+                ctx,
+                rect,
+                &az,
+                near_px,
+                &geo,
+                &b.near,
+                &b.acc,
+                &b.acc_s,
+                &[],
+                with_slope0,
+                dst,
             );
         },
     );
     out
+}
+
+/// The fast method's horizons of a tile that sees far rings ([`FarRing`]) beyond its
+/// full-resolution context, built up one ring at a time so that only one ring need be in
+/// memory: [`FarHorizons::new`] computes the context's own horizons, each
+/// [`FarHorizons::add_ring`] raises them to what a ring's terrain adds, and
+/// [`FarHorizons::finish`] to the zero-distance slope.
+///
+/// Between the steps each sample is held as its final f32 degrees, not as an f64 slope (which
+/// would double the tile's memory): a ring's threshold is the tangent of the degrees so far,
+/// and what it finds above that replaces them only where its own degrees are higher. The
+/// degrees of a maximum are the maximum of the degrees, and a slope between the stored degrees'
+/// tangent and the exact slope they came from has those same degrees, so the result is the
+/// same bytes as holding every ring at once and the f64 slope throughout.
+pub struct FarHorizons<'a> {
+    ctx: &'a Context,
+    rect: Rect,
+    a: usize,
+    geo: Vec<PixelGeo>,
+    out: Vec<f32>,
+}
+
+impl<'a> FarHorizons<'a> {
+    /// The horizons of `rect` within `ctx` (as [`horizons_with`], before the zero-distance
+    /// slope).
+    pub fn new(ctx: &'a Context, rect: Rect, a: usize, near_px: f64) -> FarHorizons<'a> {
+        FarHorizons {
+            ctx,
+            rect,
+            a,
+            geo: pixel_geometry(ctx, rect),
+            out: fast(ctx, rect, a, near_px, false),
+        }
+    }
+
+    /// Raise the horizons to what `ring`'s terrain adds.
+    pub fn add_ring(&mut self, ring: &FarRing) {
+        let (ctx, rect, geo) = (self.ctx, self.rect, &self.geo);
+        let plane = rect.w * rect.h;
+        if plane == 0 {
+            return;
+        }
+        let map = ring.map(ctx, rect);
+        let observers = ring.rect.w * ring.rect.h;
+        let nowhere = vec![f64::NEG_INFINITY; observers];
+        let a = self.a;
+        self.out.par_chunks_mut(plane).enumerate().for_each_init(
+            || RingBuffers::new(observers, rect.w),
+            |b, (k, dst)| {
+                let phi = plane_azimuth(k, a);
+                b.acc.fill(f64::NEG_INFINITY);
+                b.acc_s.fill(f64::NAN);
+                sweep(
+                    &ring.ctx,
+                    ring.rect,
+                    phi,
+                    &nowhere,
+                    &mut b.acc,
+                    &mut b.acc_s,
+                    &mut b.sweep,
+                    Some(&ring.observers),
+                );
+                let pass = FarPass {
+                    ring,
+                    map: &map,
+                    az: Azimuth::new(&ring.ctx, phi),
+                    acc: &b.acc,
+                    acc_s: &b.acc_s,
+                };
+                let az = Azimuth::new(ctx, phi);
+                for (j, row) in dst.chunks_exact_mut(rect.w).enumerate() {
+                    tangents(row, &mut b.t);
+                    for (i, (d, &t)) in row.iter_mut().zip(&b.t).enumerate() {
+                        if t.is_nan() {
+                            continue;
+                        }
+                        let (x, y) = (rect.x0 + i, rect.y0 + j);
+                        let g = &geo[j * rect.w + i];
+                        let ray = Ray::from_parts(ctx, x, y, g, &az);
+                        let h0 = f64::from(ctx.at(x as i64, y as i64));
+                        let best = pass.raise(i, j, h0, g, ray.ground_per_px(), t);
+                        if best > t {
+                            let v = best.atan().to_degrees() as f32;
+                            if v > *d {
+                                *d = v;
+                            }
+                        }
+                    }
+                }
+            },
+        );
+    }
+
+    /// The horizons, raised to the zero-distance slope (as [`horizons_with`]).
+    pub fn finish(mut self) -> Vec<f32> {
+        let (ctx, rect, a) = (self.ctx, self.rect, self.a);
+        let plane = rect.w * rect.h;
+        if plane > 0 {
+            let geo = &self.geo;
+            self.out
+                .par_chunks_mut(plane)
+                .enumerate()
+                .for_each(|(k, dst)| {
+                    ground_slope(ctx, rect, &Azimuth::new(ctx, plane_azimuth(k, a)), geo, dst)
+                });
+        }
+        self.out
+    }
 }
 
 /// The reference sampling every `step` plane pixels instead of the exact cell-by-cell search
@@ -206,27 +306,37 @@ struct FastBuffers {
     acc_s: Vec<f64>,
     sweep: Scratch,
     ns: near::NearScratch,
-    /// Per far ring: its observers' best slopes and their distances.
-    far: Vec<(Vec<f64>, Vec<f64>)>,
 }
 
 impl FastBuffers {
-    fn new(plane: usize, rings: &[FarRing]) -> FastBuffers {
+    fn new(plane: usize) -> FastBuffers {
         FastBuffers {
             near: vec![0.0; plane],
             acc: vec![0.0; plane],
             acc_s: vec![0.0; plane],
             sweep: Scratch::default(),
             ns: near::NearScratch::default(),
-            far: rings
-                .iter()
-                .map(|r| {
-                    (
-                        vec![0.0; r.rect.w * r.rect.h],
-                        vec![0.0; r.rect.w * r.rect.h],
-                    )
-                })
-                .collect(),
+        }
+    }
+}
+
+/// Per-thread buffers of a far ring's pass, one azimuth at a time: the ring observers' best
+/// slopes and their distances.
+struct RingBuffers {
+    acc: Vec<f64>,
+    acc_s: Vec<f64>,
+    sweep: Scratch,
+    /// The slopes (tangents) a row's degrees so far stand for.
+    t: Vec<f64>,
+}
+
+impl RingBuffers {
+    fn new(observers: usize, row: usize) -> RingBuffers {
+        RingBuffers {
+            acc: vec![0.0; observers],
+            acc_s: vec![0.0; observers],
+            sweep: Scratch::default(),
+            t: vec![0.0; row],
         }
     }
 }
@@ -234,6 +344,193 @@ impl FastBuffers {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The fast method with every ring held at once and each sample's slope in f64 until the
+    /// end (the method before rings were taken one at a time): the oracle for
+    /// [`FarHorizons`].
+    fn all_rings_at_once(
+        ctx: &Context,
+        rect: Rect,
+        a: usize,
+        near_px: f64,
+        rings: &[FarRing],
+    ) -> Vec<f32> {
+        let plane = rect.w * rect.h;
+        let mut out = vec![0.0f32; plane * a];
+        let geo = pixel_geometry(ctx, rect);
+        let nodata = near::NoData::new(ctx);
+        let maps: Vec<_> = rings.iter().map(|r| r.map(ctx, rect)).collect();
+        for (k, dst) in out.chunks_mut(plane).enumerate() {
+            let mut b = FastBuffers::new(plane);
+            let phi = plane_azimuth(k, a);
+            let az = Azimuth::new(ctx, phi);
+            let walk = near::NearWalk::new(&az, near_px);
+            near::near_field(ctx, rect, &az, &walk, &geo, &nodata, &mut b.ns, &mut b.near);
+            b.acc.fill(f64::NEG_INFINITY);
+            b.acc_s.fill(f64::NAN);
+            let (acc, acc_s) = (&mut b.acc, &mut b.acc_s);
+            sweep(ctx, rect, phi, &b.near, acc, acc_s, &mut b.sweep, None);
+            let swept: Vec<RingBuffers> = rings
+                .iter()
+                .map(|ring| {
+                    let n = ring.rect.w * ring.rect.h;
+                    let mut rb = RingBuffers::new(n, 0);
+                    rb.acc.fill(f64::NEG_INFINITY);
+                    rb.acc_s.fill(f64::NAN);
+                    let none = vec![f64::NEG_INFINITY; n];
+                    let obs = Some(&ring.observers[..]);
+                    let (acc, acc_s) = (&mut rb.acc, &mut rb.acc_s);
+                    sweep(
+                        &ring.ctx,
+                        ring.rect,
+                        phi,
+                        &none,
+                        acc,
+                        acc_s,
+                        &mut rb.sweep,
+                        obs,
+                    );
+                    rb
+                })
+                .collect();
+            let passes: Vec<FarPass> = rings
+                .iter()
+                .zip(&maps)
+                .zip(&swept)
+                .map(|((ring, map), rb)| FarPass {
+                    ring,
+                    map,
+                    az: Azimuth::new(&ring.ctx, phi),
+                    acc: &rb.acc,
+                    acc_s: &rb.acc_s,
+                })
+                .collect();
+            let (near, acc, acc_s) = (&b.near, &b.acc, &b.acc_s);
+            finish(
+                ctx, rect, &az, near_px, &geo, near, acc, acc_s, &passes, true, dst,
+            );
+        }
+        out
+    }
+
+    /// Taking far rings one at a time, with each sample held as f32 degrees in between, gives
+    /// the same bytes as holding them all at once with f64 slopes: on rough terrain with far
+    /// mountains (which raise many samples) and holes in the rings.
+    #[test]
+    fn rings_one_at_a_time_give_the_same_bytes() {
+        // A 256² raster at level L (100 m pixels on the Moon's face +X); the tile is 32² at
+        // its centre, the fine raster 96² around it; ring 1 is a 2×2 mean (level L−1) over
+        // the central 160² and ring 2 a 4×4 mean (level L−2) over all of it.
+        let (w, s) = (256usize, 34_748i64);
+        let o = (s - w as i64) / 2 / 4 * 4;
+        let mut rnd = crate::testutil::rng(0xFA2_71265);
+        let mut big = vec![0.0f32; w * w];
+        for y in 0..w {
+            for x in 0..w {
+                let (fx, fy) = (x as f64, y as f64);
+                let mut v = 150.0 * (fx / 9.0).sin() * (fy / 13.0).cos() + 40.0 * rnd();
+                for (mx, my, mh) in [
+                    (20.0, 30.0, 9000.0),
+                    (230.0, 200.0, 7000.0),
+                    (40.0, 240.0, 5000.0),
+                ] {
+                    v += mh * (-((fx - mx).powi(2) + (fy - my).powi(2)) / 300.0).exp();
+                }
+                big[y * w + x] = v as f32;
+            }
+        }
+        // Holes: one in the tile, the rest anywhere.
+        for _ in 0..30 {
+            let (x, y) = ((rnd() * w as f64) as usize, (rnd() * w as f64) as usize);
+            let (x, y) = if big[120 * w + 120].is_nan() {
+                (x, y)
+            } else {
+                (120, 120)
+            };
+            for yy in y..(y + 5).min(w) {
+                for xx in x..(x + 5).min(w) {
+                    big[yy * w + xx] = f32::NAN;
+                }
+            }
+        }
+        let context = |f: usize, x0: usize, y0: usize, n: usize| {
+            let mut heights = vec![0.0f32; n * n];
+            for (r, row) in heights.chunks_exact_mut(n).enumerate() {
+                for (c, h) in row.iter_mut().enumerate() {
+                    let mut sum = 0.0f32;
+                    for dy in 0..f {
+                        for dx in 0..f {
+                            sum += big[((y0 + r) * f + dy) * w + (x0 + c) * f + dx];
+                        }
+                    }
+                    *h = sum / (f * f) as f32;
+                }
+            }
+            let f64f = f as i64;
+            Context {
+                face: crate::cube::Face::Px,
+                face_pixels: (s / f64f) as f64,
+                origin: (o / f64f + x0 as i64, o / f64f + y0 as i64),
+                width: n,
+                height: n,
+                heights,
+                radius_m: 1_737_400.0,
+            }
+        };
+        let ctx = context(1, 80, 80, 96);
+        let rect = Rect {
+            x0: 32,
+            y0: 32,
+            w: 32,
+            h: 32,
+        };
+        let win = |c: &Context| {
+            let (x0, y0) = c.origin;
+            (x0, y0, x0 + c.width as i64, y0 + c.height as i64)
+        };
+        let t = o + 112;
+        let foot = |f: i64| {
+            (
+                t.div_euclid(f),
+                t.div_euclid(f),
+                (t + 32 + f - 1).div_euclid(f),
+                (t + 32 + f - 1).div_euclid(f),
+            )
+        };
+        let c1 = context(2, 24, 24, 80);
+        let c2 = context(4, 0, 0, 64);
+        let (w1, w2) = (win(&c1), win(&ctx));
+        let r1 = FarRing::new(c1, foot(2), w2, 2).expect("ring 1 has terrain");
+        let r2 = FarRing::new(c2, foot(4), w1, 4).expect("ring 2 has terrain");
+        let (a, near_px) = (36, near::DEFAULT_NEAR_PX);
+        let rings = [r1, r2];
+        let once = all_rings_at_once(&ctx, rect, a, near_px, &rings);
+        let got = horizons_far(&ctx, rect, a, near_px, &rings);
+        let alone = horizons_far(&ctx, rect, a, near_px, &[]);
+        let raised = got.iter().zip(&alone).filter(|(g, a)| g > a).count();
+        assert!(
+            raised > got.len() / 20,
+            "the rings raised only {raised} of {} samples",
+            got.len()
+        );
+        assert!(got.iter().any(|v| v.is_nan()) && got.iter().any(|v| !v.is_nan()));
+        for (k, (g, e)) in got.iter().zip(&once).enumerate() {
+            assert_eq!(
+                g.to_bits(),
+                e.to_bits(),
+                "sample {k}: {g} one at a time, {e} at once"
+            );
+        }
+        // Without rings, one pass with the zero-distance slope and the phases give the same.
+        assert_eq!(
+            alone.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+            FarHorizons::new(&ctx, rect, a, near_px)
+                .finish()
+                .iter()
+                .map(|v| v.to_bits())
+                .collect::<Vec<_>>()
+        );
+    }
 
     /// Rough terrain cut off by a ragged data edge (as a regional DEM's), with holes of one
     /// pixel and more: the cells with a no-data corner lie wherever windows, chunks and

@@ -21,7 +21,9 @@ mod sweep;
 pub use self::far::FarRing;
 pub use self::geometry::{compass_azimuth_deg, plane_azimuth, Context, Rect};
 pub(crate) use self::geometry::{Axis, Ray};
-pub use self::method::{horizons, horizons_far, horizons_reference_step, horizons_with, Method};
+pub use self::method::{
+    horizons, horizons_far, horizons_reference_step, horizons_with, FarHorizons, Method,
+};
 pub use self::near::{DEFAULT_NEAR_PX, MAX_NEAR_PX};
 pub use self::stage::{
     build_horizons, context_for, default_fine_margin_px, reach_rad, read_horizon_exr,

@@ -13,7 +13,7 @@ use serde::Serialize;
 use super::far::FarRing;
 use super::geometry::{Context, Rect};
 pub use super::io::{read_horizon_exr, write_horizon_exr, HorizonPrecision};
-use super::method::{horizons_far, horizons_with, Method};
+use super::method::{horizons_with, FarHorizons, Method};
 use super::near::{DEFAULT_NEAR_PX, MAX_NEAR_PX};
 use crate::cube::{Face, Projection};
 use crate::error::{Error, IoContext, Result};
@@ -50,6 +50,10 @@ pub fn default_fine_margin_px(tile_size: u32) -> u64 {
 }
 /// Bounds of `--fine-margin-px`.
 pub const FINE_MARGIN_PX: std::ops::RangeInclusive<u64> = 16..=65536;
+
+/// How many of a tile's far rings (the nearest) keep their height tiles cached for the next
+/// tile; the farther rings' tiles are read again for every tile.
+const CACHED_RINGS: usize = 2;
 
 /// Largest |u|, |v| a context reaches on a face's extended plane (71.6° from the face centre
 /// along an axis).
@@ -322,11 +326,34 @@ pub fn context_for(
     Ok((ctx, rect))
 }
 
-/// The far rings ([`FarRing`]) of tile `id` beyond a full-resolution context over the global
-/// window `fine` (pixels of `id.level`; `fine_margin` around the tile before clipping), out to `needed_px` pixels of that level: ring k
-/// holds level L−k's heights `ring_px` ring pixels around the tile's footprint (at level 0,
-/// whatever reach is left), with what the previous window holds blanked out. `covers` caches
-/// each level's coverage box.
+/// One far ring ([`FarRing`]) of a tile, planned but not read: level `level`'s heights in the
+/// global window `win` around the tile's footprint `foot` (pixels of that level), with what the
+/// previous (finer) window `prev` holds blanked out; `factor` pixels of the tile's level per
+/// ring pixel.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RingSpec {
+    level: u8,
+    face: Face,
+    foot: (i64, i64, i64, i64),
+    win: (i64, i64, i64, i64),
+    prev: (i64, i64, i64, i64),
+    factor: u32,
+}
+
+impl RingSpec {
+    /// The ring's heights read; None when no terrain is left in it.
+    pub(crate) fn build(&self, src: &Store) -> Result<Option<FarRing>> {
+        let ctx = context_window(src, self.level, self.face, self.win)?;
+        Ok(FarRing::new(ctx, self.foot, self.prev, self.factor))
+    }
+}
+
+/// The far rings of tile `id` beyond a full-resolution context over the global window `fine`
+/// (pixels of `id.level`; `fine_margin` around the tile before clipping), out to `needed_px`
+/// pixels of that level: ring k holds level L−k's heights `ring_px` ring pixels around the
+/// tile's footprint (at level 0, whatever reach is left), with what the previous window holds
+/// blanked out. Nothing is read: each ring is read when it is built ([`RingSpec::build`]), so
+/// that a caller holds one at a time. `covers` caches each level's coverage box.
 pub(crate) fn far_rings(
     src: &Store,
     id: TileId,
@@ -335,7 +362,7 @@ pub(crate) fn far_rings(
     needed_px: u64,
     ring_px: u64,
     covers: &mut Covers,
-) -> Result<Vec<FarRing>> {
+) -> Vec<RingSpec> {
     let ts = src.manifest();
     let n = ts.layout.tile_size as i64;
     let (tx, ty) = (id.x as i64 * n, id.y as i64 * n);
@@ -360,17 +387,23 @@ pub(crate) fn far_rings(
             .entry((level, id.face))
             .or_insert_with(|| coverage_box(ts, level, id.face));
         let win = window(src, level, foot, margin, cover);
-        let ctx = context_window(src, level, id.face, win)?;
         reach = reach.max((margin * f) as u64);
-        rings.extend(FarRing::new(ctx, foot, prev, 1 << k));
+        rings.push(RingSpec {
+            level,
+            face: id.face,
+            foot,
+            win,
+            prev,
+            factor: 1 << k,
+        });
         prev = win;
     }
-    Ok(rings)
+    rings
 }
 
 /// The rasters tile `id`'s horizons are computed over with `method`: the context `reach`
 /// asks for at full resolution, except that the fast method takes at most `fine_margin_px`
-/// there and sees the rest of the reach through far rings.
+/// there and sees the rest of the reach through far rings (planned, not yet read).
 pub(crate) fn tile_rasters(
     src: &Store,
     id: TileId,
@@ -378,7 +411,7 @@ pub(crate) fn tile_rasters(
     method: Method,
     fine_margin_px: u64,
     covers: &mut Covers,
-) -> Result<(Context, Rect, Vec<FarRing>)> {
+) -> Result<(Context, Rect, Vec<RingSpec>)> {
     let ts = src.manifest();
     let cover = *covers
         .entry((id.level, id.face))
@@ -392,7 +425,7 @@ pub(crate) fn tile_rasters(
     let rings = if method == Method::Fast && fine < reach.needed_px {
         let o = ctx.origin;
         let win = (o.0, o.1, o.0 + ctx.width as i64, o.1 + ctx.height as i64);
-        far_rings(src, id, win, fine, reach.needed_px, fine_margin_px, covers)?
+        far_rings(src, id, win, fine, reach.needed_px, fine_margin_px, covers)
     } else {
         Vec::new()
     };
@@ -802,7 +835,21 @@ pub fn build_horizons(
             if rings.is_empty() {
                 horizons_with(&ctx, rect, opts.azimuths, opts.method, opts.near_px)
             } else {
-                horizons_far(&ctx, rect, opts.azimuths, opts.near_px, &rings)
+                // One ring in memory at a time. The first rings' tiles stay cached for the
+                // next tile, which reads nearly the same ones; the farther rings' tiles are
+                // dropped once read, so that the cache does not grow with the level count.
+                let mut far = FarHorizons::new(&ctx, rect, opts.azimuths, opts.near_px);
+                for (k, spec) in rings.iter().enumerate() {
+                    let read = store.cache().now();
+                    let ring = spec.build(&store)?;
+                    if k >= CACHED_RINGS {
+                        store.cache().drop_since(read);
+                    }
+                    if let Some(ring) = ring {
+                        far.add_ring(&ring);
+                    }
+                }
+                far.finish()
             }
         } else {
             vec![f32::NAN; n * n * opts.azimuths]

@@ -14,7 +14,10 @@ pub(super) const SKIP: f64 = 0.03;
 
 /// Elevations (degrees) from the near field, the sweep's winners evaluated exactly on each
 /// observer's own ray, an exact search of that ray around the winner, the far rings' terrain
-/// beyond the raster (`far`, [`super::far`]), and the zero-distance slope.
+/// beyond the raster (`far`, [`super::far`]; the fast method adds rings one at a time instead,
+/// see [`super::method::FarHorizons`], and its tests pass them here all at once) and
+/// (`with_slope0`) the zero-distance slope, which [`ground_slope`] adds later where rings
+/// come in between.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn finish(
     ctx: &Context,
@@ -26,6 +29,7 @@ pub(super) fn finish(
     acc: &[f64],
     acc_s: &[f64],
     far: &[FarPass],
+    with_slope0: bool,
     dst: &mut [f32],
 ) {
     let (cos, sin) = (az.cos, az.sin);
@@ -63,13 +67,48 @@ pub(super) fn finish(
                     t = f.raise(i, j, h0 as f64, &geo[o], ground, t);
                 }
             }
-            let s0 = ctx.slope0_g(x, y, cos, sin, ray.ground_per_px());
-            if s0 > t {
-                t = s0;
+            if with_slope0 {
+                let s0 = ctx.slope0_g(x, y, cos, sin, ray.ground_per_px());
+                if s0 > t {
+                    t = s0;
+                }
             }
             *slope = t;
         }
         degrees(&slopes, row);
+    }
+}
+
+/// `dst` (degrees, as [`finish`] without the zero-distance slope gives them, then raised by
+/// far rings) raised to the zero-distance slope where that is higher: the same bytes as
+/// [`finish`] with it, since the degrees of a maximum are the maximum of the degrees.
+pub(super) fn ground_slope(
+    ctx: &Context,
+    rect: Rect,
+    az: &Azimuth,
+    geo: &[PixelGeo],
+    dst: &mut [f32],
+) {
+    let (cos, sin) = (az.cos, az.sin);
+    let mut slopes = vec![0.0f64; rect.w];
+    let mut deg = vec![0.0f32; rect.w];
+    for j in 0..rect.h {
+        let row = &mut dst[j * rect.w..(j + 1) * rect.w];
+        for (i, slope) in slopes.iter_mut().enumerate() {
+            let (x, y) = (rect.x0 + i, rect.y0 + j);
+            *slope = if row[i].is_nan() {
+                0.0
+            } else {
+                let ray = Ray::from_parts(ctx, x, y, &geo[j * rect.w + i], az);
+                ctx.slope0_g(x, y, cos, sin, ray.ground_per_px())
+            };
+        }
+        degrees(&slopes, &mut deg);
+        for (d, s0) in row.iter_mut().zip(&deg) {
+            if *s0 > *d {
+                *d = *s0;
+            }
+        }
     }
 }
 
@@ -135,6 +174,70 @@ fn degrees_generic(slope: &[f64], dst: &mut [f32]) {
                 x.atan().to_degrees() as f32
             };
         }
+    }
+}
+
+/// `dst[k]` = the tangent of `deg[k]` degrees (|deg| ≤ 90; NaN stays NaN) for a row at once,
+/// branch-free so that the compiler vectorises it (Cephes' `tan`, within a few ulp of libm's):
+/// the slopes that stored degrees stand for, where only ≈ 1e-7 (an f32 ulp) matters.
+pub(super) fn tangents(deg: &[f32], dst: &mut [f64]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU has AVX-512F, checked just above.
+            unsafe { tangents_avx512(deg, dst) };
+            return;
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2, checked just above.
+            unsafe { tangents_avx2(deg, dst) };
+            return;
+        }
+    }
+    tangents_generic(deg, dst)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn tangents_avx512(deg: &[f32], dst: &mut [f64]) {
+    tangents_generic(deg, dst)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn tangents_avx2(deg: &[f32], dst: &mut [f64]) {
+    tangents_generic(deg, dst)
+}
+
+#[inline(always)]
+fn tangents_generic(deg: &[f32], dst: &mut [f64]) {
+    // Cephes `tan` reduced to |x| ≤ π/2: x = π/2·y + z with y = 0 or 2 (j = 2: −1/tan z).
+    const DP1: f64 = 7.853_981_554_508_209e-1;
+    const DP2: f64 = 7.946_627_356_147_928e-9;
+    const DP3: f64 = 3.061_616_997_868_383e-17;
+    const P: [f64; 3] = [
+        -1.309_369_391_813_837_8e4,
+        1.153_516_648_385_874_2e6,
+        -1.795_652_519_764_848_8e7,
+    ];
+    const Q: [f64; 4] = [
+        1.368_129_634_706_929_6e4,
+        -1.320_892_344_402_109_7e6,
+        2.500_838_018_233_579e7,
+        -5.386_957_559_294_546e7,
+    ];
+    for (t, &d) in dst[..deg.len()].iter_mut().zip(deg) {
+        let x = f64::from(d).to_radians();
+        let a = x.abs();
+        let far = a * std::f64::consts::FRAC_2_PI * 2.0 >= 1.0;
+        let y = if far { 2.0 } else { 0.0 };
+        let z = ((a - y * DP1) - y * DP2) - y * DP3;
+        let zz = z * z;
+        let p = (P[0] * zz + P[1]) * zz + P[2];
+        let q = (((zz + Q[0]) * zz + Q[1]) * zz + Q[2]) * zz + Q[3];
+        let r = if zz > 1e-14 { z + z * (zz * p / q) } else { z };
+        let r = if far { -1.0 / r } else { r };
+        *t = r.copysign(x);
     }
 }
 
@@ -712,6 +815,38 @@ pub(crate) struct Scratch {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The row tangent is libm's within 1e-15 relatively (a few ulp) over the whole range of
+    /// degrees, its reduction's boundary (45°) and ±90° included; NaN stays NaN.
+    #[test]
+    fn tangents_match_libm() {
+        let mut rnd = crate::testutil::rng(0x7A4_6E47);
+        let mut deg = vec![
+            0.0f32, -0.0, 45.0, -45.0, 90.0, -90.0, 89.999_99, 1e-30, -1e-30,
+        ];
+        for k in -64i32..=64 {
+            deg.push(f32::from_bits((45.0f32.to_bits() as i32 + k) as u32));
+        }
+        for _ in 0..400_000 {
+            deg.push(((rnd() - 0.5) * 180.0) as f32);
+        }
+        deg.push(f32::NAN);
+        let mut t = vec![0.0f64; deg.len()];
+        tangents(&deg, &mut t);
+        for (&d, &got) in deg.iter().zip(&t) {
+            let want = f64::from(d).to_radians().tan();
+            if d.is_nan() {
+                assert!(got.is_nan());
+                continue;
+            }
+            assert_eq!(got.is_sign_negative(), want.is_sign_negative(), "{d}°");
+            let err = ((got - want) / want).abs();
+            assert!(
+                want == got || err < 1e-15,
+                "{d}°: {got} against {want} ({err:e})"
+            );
+        }
+    }
 
     /// The row arc tangent gives libm's bytes: random slopes over many scales, both signs,
     /// the reduction's boundaries, zeros, infinities and NaN.

@@ -13,7 +13,7 @@ use crate::horizon::stage::{
     terrain_range, tile_rasters, HorizonOptions,
 };
 use crate::horizon::{
-    compass_azimuth_deg, horizons_far, horizons_with, plane_azimuth, Method, Rect,
+    compass_azimuth_deg, horizons_with, plane_azimuth, FarHorizons, Method, Rect,
 };
 use crate::layout::TileId;
 use crate::manifest;
@@ -257,7 +257,13 @@ fn profile(
     let samples = if rings.is_empty() {
         horizons_with(&ctx, one, azimuths, method, opts.near_px)
     } else {
-        horizons_far(&ctx, one, azimuths, opts.near_px, &rings)
+        let mut far = FarHorizons::new(&ctx, one, azimuths, opts.near_px);
+        for spec in &rings {
+            if let Some(ring) = spec.build(store)? {
+                far.add_ring(&ring);
+            }
+        }
+        far.finish()
     };
     Ok((
         Profile::Samples(samples),

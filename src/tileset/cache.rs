@@ -73,6 +73,12 @@ impl TileCache {
         self.map.lock().unwrap().retain(|_, e| e.1 >= since);
     }
 
+    /// Drop every tile last used at or after clock reading `since`: what a stage read since
+    /// then and will not need again soon.
+    pub fn drop_since(&self, since: u64) {
+        self.map.lock().unwrap().retain(|_, e| e.1 < since);
+    }
+
     /// Tiles held now.
     pub fn len(&self) -> usize {
         self.map.lock().unwrap().len()
@@ -122,6 +128,14 @@ mod tests {
         c2.get_or_load(id(9), || Ok(None)).unwrap();
         c2.keep_since(mark);
         assert_eq!(c2.len(), 2);
+        // What was used since a reading goes, the rest stays.
+        let mark = c2.now();
+        c2.get_or_load(id(5), || Ok(None)).unwrap();
+        c2.get_or_load(id(9), || Ok(None)).unwrap();
+        c2.drop_since(mark);
+        assert_eq!(c2.len(), 1);
+        c2.get_or_load(id(1), || panic!("id 1 was dropped"))
+            .unwrap();
         // A cached tile is not loaded again.
         let id = TileId {
             level: 3,
