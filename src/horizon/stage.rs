@@ -511,23 +511,30 @@ fn context_window(
                     last = Some((t, a.clone()));
                     Ok(a)
                 };
-                for (xi, out) in row.iter_mut().enumerate() {
+                let mut xi = 0usize;
+                while xi < w {
                     let gx = x0 + xi as i64;
                     if (0..s).contains(&gx) && (0..s).contains(&gy) {
+                        // The run of this row inside one tile, copied at once.
                         let t = tile_at(id.face, (gx / n).min(per - 1), (gy / n).min(per - 1));
+                        let len = ((t.x as i64 + 1) * n).min(s).min(x1) - gx;
+                        let len = len.max(1) as usize;
                         if let Some(tile) = get(t)? {
                             let (i, j) = (
                                 (gx - t.x as i64 * n) as usize + lay.halo as usize,
                                 (gy - t.y as i64 * n) as usize + lay.halo as usize,
                             );
-                            *out = tile.height[j * tile.size + i];
+                            let from = j * tile.size + i;
+                            row[xi..xi + len].copy_from_slice(&tile.height[from..from + len]);
                         }
+                        xi += len;
                     } else {
                         let d = c.dir(xi as f64, r as f64);
                         let loc = lay.locate(id.level, d);
                         if let Some(tile) = get(loc.tile)? {
-                            *out = tile.bilinear(loc.px + halo, loc.py + halo);
+                            row[xi] = tile.bilinear(loc.px + halo, loc.py + halo);
                         }
+                        xi += 1;
                     }
                 }
                 Ok(())
