@@ -120,7 +120,7 @@ pub fn horizons_far(
     rings: &[FarRing],
 ) -> Vec<f32> {
     if rings.is_empty() {
-        return fast(ctx, rect, a, near_px, true);
+        return fast(ctx, rect, &pixel_geometry(ctx, rect), a, near_px, true);
     }
     let mut far = FarHorizons::new(ctx, rect, a, near_px);
     for ring in rings {
@@ -129,14 +129,21 @@ pub fn horizons_far(
     far.finish()
 }
 
-/// The fast method over `ctx` alone, with the zero-distance slope (`with_slope0`) or without.
-fn fast(ctx: &Context, rect: Rect, a: usize, near_px: f64, with_slope0: bool) -> Vec<f32> {
+/// The fast method over `ctx` alone (`geo`: [`pixel_geometry`] of `rect`), with the
+/// zero-distance slope (`with_slope0`) or without.
+fn fast(
+    ctx: &Context,
+    rect: Rect,
+    geo: &[PixelGeo],
+    a: usize,
+    near_px: f64,
+    with_slope0: bool,
+) -> Vec<f32> {
     let plane = checked_plane(ctx, rect, near_px);
     let mut out = vec![0.0f32; plane * a];
     if plane == 0 {
         return out;
     }
-    let geo = pixel_geometry(ctx, rect);
     let nodata = near::NoData::new(ctx);
     out.par_chunks_mut(plane).enumerate().for_each_init(
         || FastBuffers::new(plane),
@@ -144,7 +151,7 @@ fn fast(ctx: &Context, rect: Rect, a: usize, near_px: f64, with_slope0: bool) ->
             let phi = plane_azimuth(k, a);
             let az = Azimuth::new(ctx, phi);
             let walk = near::NearWalk::new(&az, near_px);
-            near::near_field(ctx, rect, &az, &walk, &geo, &nodata, &mut b.ns, &mut b.near);
+            near::near_field(ctx, rect, &az, &walk, geo, &nodata, &mut b.ns, &mut b.near);
             b.acc.fill(f64::NEG_INFINITY);
             b.acc_s.fill(f64::NAN);
             sweep(
@@ -162,7 +169,7 @@ fn fast(ctx: &Context, rect: Rect, a: usize, near_px: f64, with_slope0: bool) ->
                 rect,
                 &az,
                 near_px,
-                &geo,
+                geo,
                 &b.near,
                 &b.acc,
                 &b.acc_s,
@@ -199,12 +206,14 @@ impl<'a> FarHorizons<'a> {
     /// The horizons of `rect` within `ctx` (as [`horizons_with`], before the zero-distance
     /// slope).
     pub fn new(ctx: &'a Context, rect: Rect, a: usize, near_px: f64) -> FarHorizons<'a> {
+        let geo = pixel_geometry(ctx, rect);
+        let out = fast(ctx, rect, &geo, a, near_px, false);
         FarHorizons {
             ctx,
             rect,
             a,
-            geo: pixel_geometry(ctx, rect),
-            out: fast(ctx, rect, a, near_px, false),
+            geo,
+            out,
         }
     }
 
@@ -440,13 +449,9 @@ mod tests {
             }
         }
         // Holes: one in the tile, the rest anywhere.
-        for _ in 0..30 {
-            let (x, y) = ((rnd() * w as f64) as usize, (rnd() * w as f64) as usize);
-            let (x, y) = if big[120 * w + 120].is_nan() {
-                (x, y)
-            } else {
-                (120, 120)
-            };
+        let mut corners = vec![(120, 120)];
+        corners.extend((0..29).map(|_| ((rnd() * w as f64) as usize, (rnd() * w as f64) as usize)));
+        for (x, y) in corners {
             for yy in y..(y + 5).min(w) {
                 for xx in x..(x + 5).min(w) {
                     big[yy * w + xx] = f32::NAN;

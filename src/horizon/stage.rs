@@ -432,6 +432,37 @@ pub(crate) fn tile_rasters(
     Ok((ctx, rect, rings))
 }
 
+/// The horizons of `rect` over `ctx` with `method` (as [`horizons_with`]), raised to what
+/// the far rings `rings` (from [`tile_rasters`]) add: each ring is read, used and dropped
+/// before the next ([`FarHorizons`]). The nearest rings' tiles stay cached for the next tile,
+/// which reads nearly the same ones; the farther rings' tiles are dropped once read, so that
+/// the cache does not grow with the level count.
+pub(crate) fn horizons_seeing_rings(
+    src: &Store,
+    ctx: &Context,
+    rect: Rect,
+    rings: &[RingSpec],
+    azimuths: usize,
+    method: Method,
+    near_px: f64,
+) -> Result<Vec<f32>> {
+    if rings.is_empty() {
+        return Ok(horizons_with(ctx, rect, azimuths, method, near_px));
+    }
+    let mut far = FarHorizons::new(ctx, rect, azimuths, near_px);
+    for (k, spec) in rings.iter().enumerate() {
+        let read = src.cache().now();
+        let ring = spec.build(src)?;
+        if k >= CACHED_RINGS {
+            src.cache().drop_since(read);
+        }
+        if let Some(ring) = ring {
+            far.add_ring(&ring);
+        }
+    }
+    Ok(far.finish())
+}
+
 /// The window (global pixels of `level`, half-open) `margin` pixels around the footprint
 /// `foot`, clipped to the coverage box `cover` (never into the footprint) and to |u|, |v| ≤
 /// [`PLANE_LIMIT`].
@@ -839,25 +870,15 @@ pub fn build_horizons(
             let (ctx, rect, rings) =
                 tile_rasters(&store, id, reach, opts.method, fine_margin, &mut covers)?;
             pixaz += (n * n * opts.azimuths) as u64;
-            if rings.is_empty() {
-                horizons_with(&ctx, rect, opts.azimuths, opts.method, opts.near_px)
-            } else {
-                // One ring in memory at a time. The first rings' tiles stay cached for the
-                // next tile, which reads nearly the same ones; the farther rings' tiles are
-                // dropped once read, so that the cache does not grow with the level count.
-                let mut far = FarHorizons::new(&ctx, rect, opts.azimuths, opts.near_px);
-                for (k, spec) in rings.iter().enumerate() {
-                    let read = store.cache().now();
-                    let ring = spec.build(&store)?;
-                    if k >= CACHED_RINGS {
-                        store.cache().drop_since(read);
-                    }
-                    if let Some(ring) = ring {
-                        far.add_ring(&ring);
-                    }
-                }
-                far.finish()
-            }
+            horizons_seeing_rings(
+                &store,
+                &ctx,
+                rect,
+                &rings,
+                opts.azimuths,
+                opts.method,
+                opts.near_px,
+            )?
         } else {
             vec![f32::NAN; n * n * opts.azimuths]
         };

@@ -9,12 +9,10 @@ use crate::error::{Error, Result};
 use crate::fourier::sun::{self, Frame, Model, Sun};
 use crate::fourier::Pyramid;
 use crate::horizon::stage::{
-    check_layout, check_options, default_fine_margin_px, interior_max, margin_for, reach_rad,
-    terrain_range, tile_rasters, HorizonOptions,
+    check_layout, check_options, default_fine_margin_px, horizons_seeing_rings, interior_max,
+    margin_for, reach_rad, terrain_range, tile_rasters, HorizonOptions,
 };
-use crate::horizon::{
-    compass_azimuth_deg, horizons_with, plane_azimuth, FarHorizons, Method, Rect,
-};
+use crate::horizon::{compass_azimuth_deg, plane_azimuth, Method, Rect};
 use crate::layout::TileId;
 use crate::manifest;
 use crate::tileset::Store;
@@ -254,17 +252,7 @@ fn profile(
         w: 1,
         h: 1,
     };
-    let samples = if rings.is_empty() {
-        horizons_with(&ctx, one, azimuths, method, opts.near_px)
-    } else {
-        let mut far = FarHorizons::new(&ctx, one, azimuths, opts.near_px);
-        for spec in &rings {
-            if let Some(ring) = spec.build(store)? {
-                far.add_ring(&ring);
-            }
-        }
-        far.finish()
-    };
+    let samples = horizons_seeing_rings(store, &ctx, one, &rings, azimuths, method, opts.near_px)?;
     Ok((
         Profile::Samples(samples),
         "computed",
