@@ -99,6 +99,11 @@ pub enum BenchCommand {
         /// Azimuths of the horizon runs.
         #[arg(long, default_value_t = 16)]
         azimuths: usize,
+        /// Another build's `penumbra` to compare with: it runs the finest-level horizon on a
+        /// copy of each tileset just before this build does, and the table gains its RSS and
+        /// wall time and the ratios.
+        #[arg(long)]
+        against: Option<PathBuf>,
         #[arg(long)]
         markdown: bool,
         #[arg(long)]
@@ -469,10 +474,19 @@ pub fn run(cmd: BenchCommand, quiet: bool) -> Result<()> {
             levels,
             tile_size,
             azimuths,
+            against,
             markdown,
             json,
         } => run_mip_memory(
-            &data, work, &levels, tile_size, azimuths, markdown, json, quiet,
+            &data,
+            work,
+            &levels,
+            tile_size,
+            azimuths,
+            against.as_deref(),
+            markdown,
+            json,
+            quiet,
         ),
         BenchCommand::FarField {
             azimuths,
@@ -721,6 +735,11 @@ struct MemRow {
     fixed_level: u8,
     fixed_wall_s: f64,
     fixed_rss_mib: f64,
+    /// The finest-level horizon run by the `--against` build, just before this build's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    against_wall_s: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    against_rss_mib: Option<f64>,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -730,11 +749,20 @@ fn run_mip_memory(
     levels: &[u8],
     tile_size: u32,
     azimuths: usize,
+    against: Option<&Path>,
     markdown: bool,
     json: bool,
     quiet: bool,
 ) -> Result<()> {
     let src = data.join("lola_shoemaker_1k/Shoemaker_final_adj_5mpp_surf_1k.tif");
+    if let Some(a) = against {
+        if !a.is_file() {
+            bail!(
+                "{}: --against names no file; give another build's penumbra",
+                a.display()
+            );
+        }
+    }
     if !src.exists() {
         bail!("{}: not found; give --data", src.display());
     }
@@ -769,12 +797,32 @@ fn run_mip_memory(
         let (mip_wall, mip_rss) = timed(&mut pen(&["mip"], &out), &tmp)?;
         let ts = Tileset::load(&out)?;
         let finest = ts.layout.levels - 1;
-        let hz = |level: u8| {
+        let hz_args = |level: u8| {
             let (lv, az) = (level.to_string(), azimuths.to_string());
-            timed(
-                &mut pen(&["horizon", "--levels", &lv, "--azimuths", &az], &out),
-                &tmp,
-            )
+            ["horizon", "--levels", &lv, "--azimuths", &az].map(String::from)
+        };
+        let hz = |level: u8| {
+            let args = hz_args(level);
+            let args: Vec<&str> = args.iter().map(String::as_str).collect();
+            timed(&mut pen(&args, &out), &tmp)
+        };
+        // The other build first, on a copy (a second run in the same tileset is up to date).
+        let (against_wall, against_rss) = match against {
+            Some(exe) => {
+                let copy = tmp.join(format!("shoemaker-{l}-against"));
+                let st = Command::new("cp").arg("-r").arg(&out).arg(&copy).status()?;
+                if !st.success() {
+                    bail!("cp -r {} {}: failed", out.display(), copy.display());
+                }
+                let mut c = Command::new(exe);
+                c.args(["--quiet", "--threads", &threads])
+                    .args(hz_args(finest))
+                    .arg(&copy);
+                let r = timed(&mut c, &tmp)?;
+                let _ = std::fs::remove_dir_all(&copy);
+                (Some(r.0), Some(r.1))
+            }
+            None => (None, None),
         };
         let (hz_wall, hz_rss) = hz(finest)?;
         // A second run of the same level would be "up to date": reuse the finest's figures.
@@ -805,6 +853,8 @@ fn run_mip_memory(
             fixed_level: fixed,
             fixed_wall_s: fixed_wall,
             fixed_rss_mib: fixed_rss,
+            against_wall_s: against_wall,
+            against_rss_mib: against_rss,
         });
         let _ = std::fs::remove_dir_all(&out);
     }
@@ -847,6 +897,39 @@ fn run_mip_memory(
              GNU time around each whole process; ratios against the {}-level run.",
             base.levels
         );
+    }
+    if let Some(exe) = against {
+        if markdown {
+            println!();
+            println!("| levels | horizon level | other build wall s | other build RSS MiB | this build wall s | this build RSS MiB | RSS ÷ other | wall ÷ other |");
+            println!("|---:|---:|---:|---:|---:|---:|---:|---:|");
+        }
+        for r in &rows {
+            let (aw, ar) = (
+                r.against_wall_s.unwrap_or(f64::NAN),
+                r.against_rss_mib.unwrap_or(f64::NAN),
+            );
+            let (rr, rw) = (r.horizon_rss_mib / ar, r.horizon_wall_s / aw);
+            if markdown {
+                println!(
+                    "| {} | {} | {aw:.2} | {ar:.1} | {:.2} | {:.1} | {rr:.2} | {rw:.2} |",
+                    r.levels, r.horizon_level, r.horizon_wall_s, r.horizon_rss_mib
+                );
+            } else {
+                println!(
+                    "{:>2} levels, horizon L{}: this build {:.2} s {:.1} MiB, other {aw:.2} s {ar:.1} MiB (RSS ×{rr:.2}, wall ×{rw:.2})",
+                    r.levels, r.horizon_level, r.horizon_wall_s, r.horizon_rss_mib
+                );
+            }
+        }
+        if markdown {
+            println!();
+            println!(
+                "The finest-level horizon of each tileset by the other build ({}) on a copy, \
+                 just before this build's run.",
+                exe.display()
+            );
+        }
     }
     Ok(())
 }
