@@ -754,7 +754,6 @@ fn run_mip_memory(
     json: bool,
     quiet: bool,
 ) -> Result<()> {
-    let src = data.join("lola_shoemaker_1k/Shoemaker_final_adj_5mpp_surf_1k.tif");
     if let Some(a) = against {
         if !a.is_file() {
             bail!(
@@ -763,6 +762,7 @@ fn run_mip_memory(
             );
         }
     }
+    let src = data.join("lola_shoemaker_1k/Shoemaker_final_adj_5mpp_surf_1k.tif");
     if !src.exists() {
         bail!("{}: not found; give --data", src.display());
     }
@@ -2345,5 +2345,33 @@ fn print_horizon(
     println!();
     for n in notes {
         println!("- {n}");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A `--against` that names no file is refused before any work, naming the path.
+    #[test]
+    fn mip_memory_refuses_a_missing_other_build() {
+        let dir = std::env::temp_dir().join(format!("no-such-penumbra-{}", std::process::id()));
+        let err = run_mip_memory(
+            Path::new("/nonexistent-data"),
+            None,
+            &[12],
+            64,
+            16,
+            Some(&dir),
+            false,
+            false,
+            true,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains(&dir.display().to_string()) && err.contains("--against"),
+            "{err}"
+        );
     }
 }
