@@ -104,6 +104,13 @@ pub enum BenchCommand {
         /// wall time and the ratios.
         #[arg(long)]
         against: Option<PathBuf>,
+        /// Also measure level counts on the same terrain at their finest level: the crop
+        /// mirrored N×N times and given the finest level's pixel spacing (0 = skip).
+        #[arg(long, default_value_t = 3)]
+        same_terrain: usize,
+        /// Level counts of the same-terrain runs.
+        #[arg(long, value_delimiter = ',', default_values_t = [12u8, 16, 20])]
+        same_terrain_levels: Vec<u8>,
         #[arg(long)]
         markdown: bool,
         #[arg(long)]
@@ -475,6 +482,8 @@ pub fn run(cmd: BenchCommand, quiet: bool) -> Result<()> {
             tile_size,
             azimuths,
             against,
+            same_terrain,
+            same_terrain_levels,
             markdown,
             json,
         } => run_mip_memory(
@@ -484,6 +493,7 @@ pub fn run(cmd: BenchCommand, quiet: bool) -> Result<()> {
             tile_size,
             azimuths,
             against.as_deref(),
+            (same_terrain, &same_terrain_levels),
             markdown,
             json,
             quiet,
@@ -750,6 +760,7 @@ fn run_mip_memory(
     tile_size: u32,
     azimuths: usize,
     against: Option<&Path>,
+    (mirror, same_levels): (usize, &[u8]),
     markdown: bool,
     json: bool,
     quiet: bool,
@@ -762,24 +773,24 @@ fn run_mip_memory(
             );
         }
     }
+    if levels.is_empty() {
+        bail!("give at least one level count");
+    }
+    if levels.iter().chain(same_levels).any(|&l| l == 0) {
+        bail!("--levels / --same-terrain-levels: a tileset has at least one level");
+    }
+    if mirror > 16 {
+        bail!("--same-terrain {mirror}: at most 16 (the crop mirrored 16×16 is 4096² samples)");
+    }
     let src = data.join("lola_shoemaker_1k/Shoemaker_final_adj_5mpp_surf_1k.tif");
     if !src.exists() {
         bail!("{}: not found; give --data", src.display());
-    }
-    if levels.is_empty() {
-        bail!("give at least one level count");
     }
     let exe = penumbra_exe()?;
     let tmp = tempfile_dir(work)?;
     let threads = rayon::current_num_threads().to_string();
     let fixed = levels[0] - 1;
-    let pen = |args: &[&str], dir: &Path| {
-        let mut c = Command::new(&exe);
-        c.args(["--quiet", "--threads", &threads])
-            .args(args)
-            .arg(dir);
-        c
-    };
+    let pen = |args: &[&str], dir: &Path| pen_cmd(&exe, &threads, args, dir);
     let mut rows = Vec::new();
     for &l in levels {
         let out = tmp.join(format!("shoemaker-{l}"));
@@ -858,9 +869,30 @@ fn run_mip_memory(
         });
         let _ = std::fs::remove_dir_all(&out);
     }
+    let same = if mirror > 0 {
+        let ctx = MemCtx {
+            exe: &exe,
+            threads: &threads,
+            tmp: &tmp,
+            tile_size,
+            azimuths,
+            quiet,
+        };
+        same_terrain(&ctx, &src, same_levels, mirror)?
+    } else {
+        Vec::new()
+    };
     let _ = std::fs::remove_dir_all(&tmp);
     if json {
-        return penumbra_cli::output::print_json(&rows);
+        #[derive(Serialize)]
+        struct Out<'a> {
+            one_dem: &'a [MemRow],
+            same_terrain: &'a [DepthRow],
+        }
+        return penumbra_cli::output::print_json(&Out {
+            one_dem: &rows,
+            same_terrain: &same,
+        });
     }
     let base = &rows[0];
     let ratio = |v: f64, b: f64| v / b;
@@ -898,6 +930,50 @@ fn run_mip_memory(
             base.levels
         );
     }
+    if let Some(b) = same.first() {
+        if markdown {
+            println!();
+            println!("| levels | finest-level pixel m | tiles | finest-level tiles | mip wall s | mip RSS MiB | mip RSS ÷ first | finest-level horizon wall s | horizon RSS MiB | horizon RSS ÷ first |");
+            println!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+        } else {
+            println!("same terrain at each finest level:");
+        }
+        for r in &same {
+            let (rm, rh) = (
+                r.mip_rss_mib / b.mip_rss_mib,
+                r.horizon_rss_mib / b.horizon_rss_mib,
+            );
+            if markdown {
+                println!(
+                    "| {} | {:.3} | {} | {} | {:.2} | {:.1} | {rm:.2} | {:.2} | {:.1} | {rh:.2} |",
+                    r.levels,
+                    r.finest_pixel_m,
+                    r.tiles,
+                    r.finest_tiles,
+                    r.mip_wall_s,
+                    r.mip_rss_mib,
+                    r.horizon_wall_s,
+                    r.horizon_rss_mib
+                );
+            } else {
+                println!(
+                    "{:>2} levels at {:.3} m/px, {:>5} tiles ({:>4} finest): mip {:>6.2} s {:>6.1} MiB (×{rm:.2}); horizon L{} {:>6.2} s {:>6.1} MiB (×{rh:.2})",
+                    r.levels, r.finest_pixel_m, r.tiles, r.finest_tiles, r.mip_wall_s,
+                    r.mip_rss_mib, r.levels - 1, r.horizon_wall_s, r.horizon_rss_mib
+                );
+            }
+        }
+        if markdown {
+            println!();
+            println!(
+                "Same terrain at every finest level: the crop mirrored {mirror}×{mirror} times, \
+                 centred on the south pole, with the finest level's pixel spacing as its own; \
+                 {threads} threads, {tile_size}-px tiles, {azimuths} azimuths; ratios against \
+                 the {}-level run.",
+                b.levels
+            );
+        }
+    }
     if let Some(exe) = against {
         if markdown {
             println!();
@@ -932,6 +1008,125 @@ fn run_mip_memory(
         }
     }
     Ok(())
+}
+
+/// `penumbra --quiet --threads N <args> <dir>`.
+fn pen_cmd(exe: &Path, threads: &str, args: &[&str], dir: &Path) -> Command {
+    let mut c = Command::new(exe);
+    c.args(["--quiet", "--threads", threads])
+        .args(args)
+        .arg(dir);
+    c
+}
+
+/// What the same-terrain runs of `mip-memory` share.
+struct MemCtx<'a> {
+    exe: &'a Path,
+    threads: &'a str,
+    tmp: &'a Path,
+    tile_size: u32,
+    azimuths: usize,
+    quiet: bool,
+}
+
+/// One level count of `mip-memory`'s same-terrain rows.
+#[derive(Serialize)]
+struct DepthRow {
+    levels: u8,
+    /// Pixel spacing of the finest level at the face centre, which the source DEM is given.
+    finest_pixel_m: f64,
+    tiles: u64,
+    finest_tiles: u64,
+    mip_wall_s: f64,
+    mip_rss_mib: f64,
+    horizon_wall_s: f64,
+    horizon_rss_mib: f64,
+}
+
+/// Memory against level count with the work per level held fixed: the Shoemaker crop mirrored
+/// `mirror`×`mirror` times into one raster centred on the south pole whose pixel spacing is,
+/// for each level count, that of its finest level. Every tileset's finest level then holds the
+/// same terrain pixels and tiles (enough to fill the horizon's context windows); only the depth
+/// of the pyramid above it, and so the number of far rings, changes.
+fn same_terrain(ctx: &MemCtx, src: &Path, levels: &[u8], mirror: usize) -> Result<Vec<DepthRow>> {
+    let dem = penumbra::dem::open(src, 0)?;
+    let (w, h) = (dem.width(), dem.height());
+    let (sw, sh) = (w * mirror, h * mirror);
+    // Mirror so that the copies meet without a step.
+    let fold = |i: usize, n: usize| {
+        let (k, r) = (i / n, i % n);
+        if k % 2 == 0 {
+            r
+        } else {
+            n - 1 - r
+        }
+    };
+    let mut bytes = Vec::with_capacity(sw * sh * 4);
+    for row in 0..sh {
+        for col in 0..sw {
+            let (v, _) = dem.value(fold(col, w), fold(row, h));
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    let body = penumbra::body::Body::preset("moon").context("the moon preset")?;
+    let raw = ctx.tmp.join("same-terrain.bin");
+    std::fs::write(&raw, &bytes).with_context(|| format!("writing {}", raw.display()))?;
+    let mut rows = Vec::new();
+    for &l in levels {
+        let layout = penumbra::layout::Layout {
+            projection: Default::default(),
+            tile_size: ctx.tile_size,
+            halo: 0,
+            levels: l,
+        };
+        let dx = layout.centre_pixel_m(l - 1, body.radius_m);
+        let sidecar = serde_json::json!({
+            "width": sw, "height": sh, "sample_type": "f32", "byte_order": "little",
+            "crs": {"kind": "polar-stereographic", "north": false, "lon0_deg": 0.0,
+                    "lat_ts_deg": -90.0, "radius_m": body.radius_m},
+            "x0": -dx * (sw as f64 - 1.0) / 2.0, "y0": dx * (sh as f64 - 1.0) / 2.0,
+            "dx": dx, "dy": dx, "target": "moon",
+        });
+        let side = ctx.tmp.join("same-terrain.json");
+        std::fs::write(&side, sidecar.to_string())
+            .with_context(|| format!("writing {}", side.display()))?;
+        let out = ctx.tmp.join(format!("same-terrain-{l}"));
+        let _ = std::fs::remove_dir_all(&out);
+        if !ctx.quiet {
+            eprintln!("bench mip-memory: same terrain, {l} levels ({dx:.3} m/px)");
+        }
+        let size = ctx.tile_size.to_string();
+        let lv = l.to_string();
+        let mut tile = Command::new(ctx.exe);
+        tile.args(["--quiet", "--threads", ctx.threads, "tile"])
+            .arg(&raw)
+            .args(["--tile-size", &size, "--levels", &lv, "--out"])
+            .arg(&out);
+        timed(&mut tile, ctx.tmp)?;
+        let (mip_wall, mip_rss) =
+            timed(&mut pen_cmd(ctx.exe, ctx.threads, &["mip"], &out), ctx.tmp)?;
+        let finest = (l - 1).to_string();
+        let az = ctx.azimuths.to_string();
+        let hz = ["horizon", "--levels", &finest, "--azimuths", &az];
+        let (hz_wall, hz_rss) = timed(&mut pen_cmd(ctx.exe, ctx.threads, &hz, &out), ctx.tmp)?;
+        let ts = Tileset::load(&out)?;
+        rows.push(DepthRow {
+            levels: l,
+            finest_pixel_m: dx,
+            tiles: ts.coverage.iter().map(|c| c.tiles).sum(),
+            finest_tiles: ts
+                .coverage
+                .iter()
+                .find(|c| c.level == l - 1)
+                .map_or(0, |c| c.tiles),
+            mip_wall_s: mip_wall,
+            mip_rss_mib: mip_rss,
+            horizon_wall_s: hz_wall,
+            horizon_rss_mib: hz_rss,
+        });
+        let _ = std::fs::remove_dir_all(&out);
+    }
+    Ok(rows)
 }
 
 /// Files below `dir` (recursively) whose path satisfies `keep`.
@@ -2363,6 +2558,7 @@ mod tests {
             64,
             16,
             Some(&dir),
+            (0, &[]),
             false,
             false,
             true,
@@ -2373,5 +2569,30 @@ mod tests {
             err.contains(&dir.display().to_string()) && err.contains("--against"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn mip_memory_refuses_bad_same_terrain_options_before_any_work() {
+        let run = |levels: &[u8], mirror: usize, same: &[u8]| {
+            run_mip_memory(
+                Path::new("/nonexistent-data"),
+                None,
+                levels,
+                64,
+                16,
+                None,
+                (mirror, same),
+                false,
+                false,
+                true,
+            )
+            .unwrap_err()
+            .to_string()
+        };
+        assert!(run(&[12], 17, &[12]).contains("--same-terrain 17"));
+        assert!(run(&[12], 3, &[0, 12]).contains("at least one level"));
+        assert!(run(&[0], 0, &[]).contains("at least one level"));
+        // Good options get as far as the missing data.
+        assert!(run(&[12], 3, &[12, 20]).contains("give --data"));
     }
 }
