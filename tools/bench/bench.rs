@@ -716,11 +716,35 @@ pub(crate) fn penumbra_exe() -> Result<PathBuf> {
     Ok(exe)
 }
 
-pub(crate) fn tempfile_dir(work: Option<PathBuf>) -> Result<PathBuf> {
+/// A bench's scratch folder (`penumbra-bench-<pid>` under `--work` or the system's temp
+/// folder), removed when it goes out of scope, so that a bench that fails half-way leaves no
+/// tilesets or rasters behind.
+pub(crate) struct ScratchDir(PathBuf);
+
+impl std::ops::Deref for ScratchDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for ScratchDir {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for ScratchDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+pub(crate) fn tempfile_dir(work: Option<PathBuf>) -> Result<ScratchDir> {
     let base = work.unwrap_or_else(std::env::temp_dir);
     let p = base.join(format!("penumbra-bench-{}", std::process::id()));
     std::fs::create_dir_all(&p).with_context(|| format!("creating {}", p.display()))?;
-    Ok(p)
+    Ok(ScratchDir(p))
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -2569,6 +2593,18 @@ mod tests {
             err.contains(&dir.display().to_string()) && err.contains("--against"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn scratch_folder_goes_with_its_guard() {
+        let work = std::env::temp_dir().join(format!("scratch-guard-{}", std::process::id()));
+        let dir = tempfile_dir(Some(work.clone())).unwrap();
+        std::fs::write(dir.join("left.bin"), b"x").unwrap();
+        let path = dir.to_path_buf();
+        assert!(path.join("left.bin").is_file());
+        drop(dir);
+        assert!(!path.exists());
+        std::fs::remove_dir(&work).unwrap();
     }
 
     #[test]
