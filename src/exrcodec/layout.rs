@@ -444,7 +444,7 @@ fn code_lengths(counts: &[u32], limit: usize, lens: &mut [u8]) {
     }
     debug_assert!(m >= 2 && counts.iter().all(|&c| c < 1 << 23));
     let keys = &mut keys[..m];
-    keys.sort_unstable();
+    sort_keys(keys);
     let mut a = [0u32; NLIT];
     for (x, &k) in a.iter_mut().zip(keys.iter()) {
         *x = k >> 9;
@@ -478,6 +478,47 @@ fn code_lengths(counts: &[u32], limit: usize, lens: &mut [u8]) {
             lens[(keys[k] & 511) as usize] = l as u8;
             k += 1;
         }
+    }
+}
+
+/// Sort the keys of [`code_lengths`] (count · 512 + symbol, made in ascending symbol order,
+/// so already in order within each count) ascending. Alphabets of more than 32 symbols go
+/// through a stable radix sort on the count's bytes (a 32 KiB block's counts have two):
+/// about a third of the time of a comparison sort on the literal alphabet, for the same order.
+fn sort_keys(keys: &mut [u32]) {
+    let m = keys.len();
+    if m <= 32 {
+        keys.sort_unstable();
+        return;
+    }
+    let top = keys.iter().map(|&k| k >> 9).max().unwrap_or(0);
+    let mut tmp = [0u32; NLIT];
+    let mut in_keys = true;
+    let mut shift = 9;
+    while shift < 32 && top >> (shift - 9) != 0 {
+        let (src, dst): (&[u32], &mut [u32]) = if in_keys {
+            (&*keys, &mut tmp[..m])
+        } else {
+            (&tmp[..m], &mut *keys)
+        };
+        let mut at = [0u16; 256];
+        for &k in src {
+            at[((k >> shift) & 255) as usize] += 1;
+        }
+        let mut sum = 0u16;
+        for a in at.iter_mut() {
+            (*a, sum) = (sum, sum + *a);
+        }
+        for &k in src {
+            let d = ((k >> shift) & 255) as usize;
+            dst[at[d] as usize] = k;
+            at[d] += 1;
+        }
+        in_keys = !in_keys;
+        shift += 8;
+    }
+    if !in_keys {
+        keys.copy_from_slice(&tmp[..m]);
     }
 }
 
@@ -531,24 +572,50 @@ fn minimum_redundancy(a: &mut [u32]) {
     }
 }
 
-/// Canonical codes for these lengths, bit-reversed for deflate's LSB-first order.
+/// Canonical codes for these lengths, bit-reversed for deflate's LSB-first order (0 for unused
+/// symbols). Symbols of one length get consecutive codes in symbol order; the symbols are
+/// counted and given codes in four interleaved quarters, each starting per length where the
+/// quarters before it end, so that a run of one length does not wait on a single counter.
 fn codes(lens: &[u8], out: &mut [u16]) {
-    let mut count = [0u16; 16];
-    for &l in lens {
-        count[l as usize] += 1;
+    let n = lens.len();
+    let q = n.div_ceil(4);
+    let mut count = [[0u16; 16]; 4];
+    for i in 0..q {
+        for (k, c) in count.iter_mut().enumerate() {
+            if let Some(&l) = lens.get(k * q + i) {
+                c[l as usize] += 1;
+            }
+        }
     }
-    count[0] = 0;
     let mut next = [0u16; 16];
     let mut code = 0u16;
     for b in 1..16 {
-        code = (code + count[b - 1]) << 1;
+        let below = if b > 1 {
+            count.iter().map(|c| c[b - 1]).sum()
+        } else {
+            0
+        };
+        code = (code + below) << 1;
         next[b] = code;
     }
-    for (s, &l) in lens.iter().enumerate() {
-        if l > 0 {
-            let c = next[l as usize];
-            next[l as usize] += 1;
-            out[s] = c.reverse_bits() >> (16 - l);
+    let mut base = [next; 4];
+    for k in 1..4 {
+        for l in 1..16 {
+            base[k][l] = base[k - 1][l] + count[k - 1][l];
+        }
+    }
+    for i in 0..q {
+        for (k, b) in base.iter_mut().enumerate() {
+            let s = k * q + i;
+            if let Some(&l) = lens.get(s) {
+                let c = b[l as usize];
+                b[l as usize] = c.wrapping_add(1);
+                out[s] = if l > 0 {
+                    c.reverse_bits() >> (16 - l)
+                } else {
+                    0
+                };
+            }
         }
     }
 }
@@ -1051,6 +1118,62 @@ mod tests {
                 }
                 if has!("avx512bw") {
                     assert_eq!(unsafe { x86::Avx512::eq(&x, &y) }, want);
+                }
+            }
+        }
+    }
+
+    /// The radix sort of the Huffman keys gives a comparison sort's order, for alphabets of
+    /// every size and counts of one to three bytes.
+    #[test]
+    fn keys_sort_as_a_comparison_sort_does() {
+        let mut rnd = crate::testutil::rng(29);
+        for m in [2usize, 19, 30, 32, 33, 100, 257, 288] {
+            for top in [3u32, 200, 255, 256, 40_000, 65_535, 65_536, (1 << 23) - 1] {
+                let mut keys: Vec<u32> = (0..m)
+                    .map(|s| ((((rnd() * f64::from(top)) as u32).max(1)) << 9) | s as u32)
+                    .collect();
+                let mut want = keys.clone();
+                want.sort_unstable();
+                sort_keys(&mut keys);
+                assert_eq!(keys, want, "{m} symbols, counts up to {top}");
+            }
+        }
+    }
+
+    /// The quartered canonical codes are RFC 1951's: symbols in order, each length's codes
+    /// consecutive from where the shorter ones end (§3.2.2's algorithm, here bit by bit).
+    #[test]
+    fn codes_are_the_canonical_ones() {
+        let mut rnd = crate::testutil::rng(31);
+        for n in [19usize, 30, 288] {
+            for _ in 0..50 {
+                let mut counts: Vec<u32> =
+                    (0..n).map(|_| (rnd() * rnd() * 5000.0) as u32).collect();
+                at_least_two(&mut counts);
+                let mut lens = vec![0u8; n];
+                code_lengths(&counts, if n == 19 { 7 } else { 15 }, &mut lens);
+                let mut got = vec![0u16; n];
+                codes(&lens, &mut got);
+                let mut bl_count = [0u16; 16];
+                for &l in &lens {
+                    bl_count[l as usize] += 1;
+                }
+                bl_count[0] = 0;
+                let (mut code, mut next) = (0u16, [0u16; 16]);
+                for b in 1..16 {
+                    code = (code + bl_count[b - 1]) << 1;
+                    next[b] = code;
+                }
+                for (s, &l) in lens.iter().enumerate() {
+                    if l == 0 {
+                        assert_eq!(got[s], 0);
+                        continue;
+                    }
+                    let c = next[l as usize];
+                    next[l as usize] += 1;
+                    let reversed = (0..l).fold(0u16, |r, b| (r << 1) | ((c >> b) & 1));
+                    assert_eq!(got[s], reversed, "symbol {s} of {n}, length {l}");
                 }
             }
         }
