@@ -14,6 +14,12 @@
 //! each block is Huffman-coded with length-limited codes built for it, or with the fixed codes,
 //! or stored, whichever is shortest. The result is one ordinary zlib stream: the file stays
 //! plain OpenEXR ZIP that every reader inflates.
+//!
+//! [`zlib_unless_weak`] (what f32 blocks get) parses a sixteenth of the block first and gives
+//! up on a block that would not deflate below 90 % of its size: the caller stores it raw, as
+//! OpenEXR stores a block deflate does not shrink. A quarter of LDEM_4's mip bytes are in such
+//! blocks; storing them cost 2.8 % in size and saved 22 % of the encoder's time
+//! (docs/benchmarks.md, "Weak blocks stored").
 
 /// Length symbols' base lengths and extra bits (RFC 1951 §3.2.5), symbols 257–285.
 const LEN_BASE: [u16; 29] = [
@@ -92,31 +98,62 @@ pub(super) fn distances(bps: &[usize], width: usize, lines: usize) -> Vec<usize>
 /// The zlib stream of `data` (one block's predicted bytes), with matches at the distances
 /// `dist` (ascending, 1–32768, at most [`MAX_DISTANCES`]) only.
 pub(super) fn zlib(data: &[u8], dist: &[usize]) -> Vec<u8> {
+    dispatch(data, dist, false).expect("a block is always compressed without the probe")
+}
+
+/// As [`zlib`], except that blocks of [`PROBE_MIN`] bytes or more are first parsed for a
+/// sixteenth of their length, and a block whose sixteenth would not compress to
+/// [`WEAK`] of its size is given up: `None`, to be stored as it is. The blocks that go on
+/// are the same bytes as [`zlib`]'s (the parse continues where the probe stopped).
+pub(super) fn zlib_unless_weak(data: &[u8], dist: &[usize]) -> Option<Vec<u8>> {
+    dispatch(data, dist, true)
+}
+
+fn dispatch(data: &[u8], dist: &[usize], probe: bool) -> Option<Vec<u8>> {
     debug_assert!(dist.len() <= MAX_DISTANCES && dist.windows(2).all(|w| w[0] < w[1]));
     debug_assert!(dist.iter().all(|&d| (1..=WINDOW).contains(&d)));
     #[cfg(target_arch = "x86_64")]
     {
         #[target_feature(enable = "avx512bw,bmi2")]
-        unsafe fn avx512(data: &[u8], dist: &[usize]) -> Vec<u8> {
-            zlib_with::<x86::Avx512>(data, dist)
+        unsafe fn avx512(data: &[u8], dist: &[usize], probe: bool) -> Option<Vec<u8>> {
+            zlib_with::<x86::Avx512>(data, dist, probe)
         }
         #[target_feature(enable = "avx2,bmi2")]
-        unsafe fn avx2(data: &[u8], dist: &[usize]) -> Vec<u8> {
-            zlib_with::<x86::Avx2>(data, dist)
+        unsafe fn avx2(data: &[u8], dist: &[usize], probe: bool) -> Option<Vec<u8>> {
+            zlib_with::<x86::Avx2>(data, dist, probe)
         }
         use std::arch::is_x86_feature_detected as has;
         if has!("avx512bw") && has!("bmi2") {
             // SAFETY: the CPU has AVX-512BW and BMI2, checked just above.
-            return unsafe { avx512(data, dist) };
+            return unsafe { avx512(data, dist, probe) };
         }
         if has!("avx2") && has!("bmi2") {
             // SAFETY: the CPU has AVX2 and BMI2, checked just above.
-            return unsafe { avx2(data, dist) };
+            return unsafe { avx2(data, dist, probe) };
         }
-        zlib_with::<x86::Sse2>(data, dist)
+        zlib_with::<x86::Sse2>(data, dist, probe)
     }
     #[cfg(not(target_arch = "x86_64"))]
-    zlib_with::<Portable>(data, dist)
+    zlib_with::<Portable>(data, dist, probe)
+}
+
+/// Blocks shorter than this are never probed (the mip files' 64² tiles are 16 and 32 KiB at
+/// f32; their small coarse levels are a few percent of the bytes).
+pub(super) const PROBE_MIN: usize = 4096;
+/// The probe's verdict: a block is weak when its first sixteenth's estimated deflate bits
+/// exceed this share of its raw bits (numerator, denominator).
+const WEAK: (usize, usize) = (9, 10);
+/// The bits the probe counts for a literal and for a match. The predicted bytes of f32 mip
+/// blocks are nearly uniform (order-0 entropy 7.6–7.8 bits per byte on LDEM_4's), so a literal
+/// costs about 8 bits; a match, its length and distance codes with their extra bits.
+const LITERAL_BITS: usize = 8;
+const MATCH_BITS: usize = 13;
+
+/// Whether a probe of `len` bytes that found `tokens` says the block is weak.
+fn weak(tokens: &[Match], len: usize) -> bool {
+    let covered: usize = tokens.iter().map(|t| usize::from(t.len)).sum();
+    let bits = (len - covered) * LITERAL_BITS + tokens.len() * MATCH_BITS;
+    bits * WEAK.1 > len * 8 * WEAK.0
 }
 
 /// Inputs longer than this are cut into several deflate blocks (it bounds the symbol counts
@@ -126,7 +163,7 @@ const MAX_BLOCK: usize = 1 << 20;
 /// [`zlib`] with the window comparisons of `C`; compiled once per instruction set, with
 /// everything it calls inlined, so that all of it uses that set's instructions.
 #[inline(always)]
-fn zlib_with<C: Compare>(data: &[u8], dist: &[usize]) -> Vec<u8> {
+fn zlib_with<C: Compare>(data: &[u8], dist: &[usize], probe: bool) -> Option<Vec<u8>> {
     let n = data.len();
     let mut w = BitWriter::with_capacity(n + 5 * n.div_ceil(65535) + 64);
     // CMF: deflate, 32 KiB window; FLG: fastest, no dictionary, check bits.
@@ -138,7 +175,14 @@ fn zlib_with<C: Compare>(data: &[u8], dist: &[usize]) -> Vec<u8> {
         let e = n.min(s + MAX_BLOCK);
         tokens.clear();
         counts.clear();
-        parse_with::<C>(data, s, e, dist, &mut tokens, &mut counts);
+        let mut from = s;
+        if probe && s == 0 && e == n && n >= PROBE_MIN {
+            from = parse_with::<C>(data, s, s, s + n / 16, e, dist, &mut tokens, &mut counts);
+            if weak(&tokens, from - s) {
+                return None;
+            }
+        }
+        parse_with::<C>(data, s, from, e, e, dist, &mut tokens, &mut counts);
         write_block(&mut w, data, s, e, dist, &tokens, &mut counts, e == n);
         if e == n {
             break;
@@ -147,7 +191,7 @@ fn zlib_with<C: Compare>(data: &[u8], dist: &[usize]) -> Vec<u8> {
     }
     w.align();
     w.bytes(&simd_adler32::adler32(&data).to_be_bytes());
-    w.finish()
+    Some(w.finish())
 }
 
 /// Symbol counts of one deflate block; literals are counted in four tables (a repeated byte
@@ -328,17 +372,23 @@ fn best_match(data: &[u8], i: usize, max: usize, dist: &[usize]) -> (usize, usiz
     best
 }
 
-/// Greedy parse of `data[s..e]` (matches may reach back before `s`): at each position the
-/// longest match among `dist`, else a literal.
+/// Greedy parse of `data[s..e]` (matches may reach back before `s`; token positions count
+/// from `s`): at each position the longest match among `dist`, else a literal. It starts at
+/// `from` and stops at the first window boundary at or past `until`, returning it; a parse
+/// that stops at `until < e` and goes on from there with `until = e` finds what one parse
+/// does. The counts are complete (and the end of block counted) only once `until = e`.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn parse_with<C: Compare>(
     data: &[u8],
     s: usize,
+    from: usize,
+    until: usize,
     e: usize,
     dist: &[usize],
     out: &mut Vec<Match>,
     c: &mut Counts,
-) {
+) -> usize {
     let mut dsym = [0u8; MAX_DISTANCES];
     for (k, &d) in dist.iter().enumerate() {
         dsym[k] = dist_symbol(d) as u8;
@@ -352,13 +402,13 @@ fn parse_with<C: Compare>(
         c.lit[257 + LEN_SYM[len - MIN_MATCH] as usize] += 1;
         c.dist[dsym[k] as usize] += 1;
     };
-    let mut i = s;
+    let mut i = from;
     // Windows of 62 positions (64 bytes compared, a match needs three), each compared with
     // every usable distance at once: bit j of eq[k] says whether byte ws + j repeats the byte
     // dist[k] before it.
     let mut eq = [0u64; MAX_DISTANCES];
     let far = dist.last().copied().unwrap_or(0);
-    while e - i >= 64 {
+    while i < until && e - i >= 64 {
         let nd = if i >= far {
             dist.len()
         } else {
@@ -411,6 +461,9 @@ fn parse_with<C: Compare>(
         c.bytes(&data[ws..counted]);
         i = i.max(wend);
     }
+    if until < e {
+        return i;
+    }
     // The last bytes one by one.
     while i < e {
         let usable = &dist[..dist.partition_point(|&d| d <= i)];
@@ -425,6 +478,7 @@ fn parse_with<C: Compare>(
     }
     c.merge();
     c.lit[256] += 1;
+    i
 }
 
 /// Huffman code lengths, at most `limit` bits, for the symbol counts `counts` (0 for unused
@@ -1123,6 +1177,51 @@ mod tests {
         }
     }
 
+    /// The probe gives up on noise and on nothing else: random bytes are left to be stored;
+    /// every block it lets through gets exactly the bytes [`zlib`] writes (the parse goes on
+    /// where the probe stopped); a block it gives up on would not have deflated to less than
+    /// 80 % of its size; and blocks under [`PROBE_MIN`] bytes are never probed.
+    #[test]
+    fn the_probe_stores_noise_and_keeps_the_bytes_of_the_rest() {
+        let mut rnd = crate::testutil::rng(17);
+        let noise: Vec<u8> = (0..32768).map(|_| (rnd() * 256.0) as u8).collect();
+        let dist = distances(&[4, 4], 64, 64);
+        assert!(zlib_unless_weak(&noise, &dist).is_none());
+        let small = &noise[..PROBE_MIN - 1];
+        assert_eq!(zlib_unless_weak(small, &dist), Some(zlib(small, &dist)));
+        // Repeats only after the probed sixteenth: the probe is fooled, and says so.
+        let mut late = noise.clone();
+        late[noise.len() / 8..].fill(7);
+        assert!(zlib_unless_weak(&late, &dist).is_none());
+        // Repeats in the first sixteenth, noise after it: deflated, as `zlib` would.
+        let mut early = noise.clone();
+        early[..noise.len() / 16].fill(7);
+        assert_eq!(zlib_unless_weak(&early, &dist), Some(zlib(&early, &dist)));
+        let (mut kept, mut stored) = (0, 0);
+        for n in [130, 260] {
+            for block in mip_blocks(n) {
+                let z = zlib(&block, &dist);
+                match zlib_unless_weak(&block, &dist) {
+                    Some(p) => {
+                        assert_eq!(p, z);
+                        kept += 1;
+                    }
+                    None => {
+                        assert!(block.len() >= PROBE_MIN);
+                        assert!(
+                            z.len() * 5 > block.len() * 4,
+                            "a block that deflates to {} of {} bytes was given up",
+                            z.len(),
+                            block.len()
+                        );
+                        stored += 1;
+                    }
+                }
+            }
+        }
+        assert!(kept > 0 && stored > 0, "{kept} kept, {stored} stored");
+    }
+
     /// The radix sort of the Huffman keys gives a comparison sort's order, for alphabets of
     /// every size and counts of one to three bytes.
     #[test]
@@ -1185,16 +1284,18 @@ mod tests {
         let (bps, w, h) = ([4usize, 4], 64, 64);
         let block = mip_blocks(130).swap_remove(0);
         let dist = distances(&bps, w, h);
-        let want = zlib_with::<Portable>(&block, &dist);
-        assert_eq!(zlib(&block, &dist), want);
-        #[cfg(target_arch = "x86_64")]
-        {
-            assert_eq!(zlib_with::<x86::Sse2>(&block, &dist), want);
-            if std::arch::is_x86_feature_detected!("avx2") {
-                assert_eq!(zlib_with::<x86::Avx2>(&block, &dist), want);
-            }
-            if std::arch::is_x86_feature_detected!("avx512bw") {
-                assert_eq!(zlib_with::<x86::Avx512>(&block, &dist), want);
+        for probe in [false, true] {
+            let want = zlib_with::<Portable>(&block, &dist, probe);
+            assert_eq!(dispatch(&block, &dist, probe), want);
+            #[cfg(target_arch = "x86_64")]
+            {
+                assert_eq!(zlib_with::<x86::Sse2>(&block, &dist, probe), want);
+                if std::arch::is_x86_feature_detected!("avx2") {
+                    assert_eq!(zlib_with::<x86::Avx2>(&block, &dist, probe), want);
+                }
+                if std::arch::is_x86_feature_detected!("avx512bw") {
+                    assert_eq!(zlib_with::<x86::Avx512>(&block, &dist, probe), want);
+                }
             }
         }
     }

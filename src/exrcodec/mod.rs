@@ -7,8 +7,9 @@
 //! writer runs that through miniz_oxide at level 4, one block after another, which was 87% of the
 //! mip stage. Here the same transform is deflated by this codec's own encoder, which looks for
 //! repeats only at the distances where a block's layout puts them ([`layout`]), and all blocks
-//! of a file are compressed in parallel. It was measured fastest on every product at 1.003–1.046×
-//! the `exr` crate's size (see [`ZipLevel`] and docs/benchmarks.md, "EXR codec"). Height tiles
+//! of a file are compressed in parallel; f32 blocks it probes as noise are stored raw. It was
+//! measured fastest on every product at 1.003–1.057× the `exr` crate's size (see [`ZipLevel`]
+//! and docs/benchmarks.md, "EXR codec" and "Weak blocks stored"). Height tiles
 //! are the exception: miniz_oxide level 1 with the channels that are noise to deflate stored
 //! ([`mixed`]), which decodes faster. libdeflate stays selectable for the codec bench that
 //! compares them. miniz_oxide at level 4 also reproduces the `exr` crate's files
@@ -66,8 +67,10 @@ pub enum ZipLevel {
     /// This codec's own deflate (src/exrcodec/layout.rs): matches looked for only at the few
     /// distances where a block's layout puts repeats (the previous line of a channel, the
     /// other channel a line or two up, runs), compared 64 positions at a time, then one
-    /// Huffman-coded deflate block per ZIP block. What every file but height tiles is
-    /// written with ([`ZipLevel::DEFAULT`]).
+    /// Huffman-coded deflate block per ZIP block. All-f32 blocks of 4 KiB or more whose first
+    /// sixteenth would not deflate below 90 % are stored raw instead (the probe in
+    /// src/exrcodec/layout.rs). What every file but height tiles is written with
+    /// ([`ZipLevel::DEFAULT`]).
     Layout,
 }
 
@@ -77,7 +80,9 @@ impl ZipLevel {
     /// DEMs) it was the fastest encoder on every product, 204–453 MB/s against 55–252 for
     /// miniz_oxide level 1 and 70–185 for libdeflate level 1, at 1.003–1.046× the `exr`
     /// crate's size (issue 14 allows 1.10×), smaller than miniz_oxide level 1 on all but
-    /// LDEM_4's f32 heights (docs/benchmarks.md, "EXR codec").
+    /// LDEM_4's f32 heights (docs/benchmarks.md, "EXR codec"). Storing the f32 blocks that
+    /// probe as noise made f32 mips 1.26–1.36× faster to write at 1.050–1.057× (same
+    /// document, "Weak blocks stored").
     pub const DEFAULT: ZipLevel = ZipLevel::Layout;
     /// Height tiles (f32 height + f16 mask): miniz_oxide level 1, except where a block's heights
     /// are noise to deflate (LDEM_4 oversampled: ratio 1.00): there they are stored and the mask
@@ -518,7 +523,18 @@ pub fn encode(
                     let z = if noisy != 0 {
                         mixed::zlib(predicted, &bps[level], w, h, noisy)
                     } else if enc.level == ZipLevel::Layout {
-                        layout::zlib(predicted, &layout::distances(&bps[level], w, h))
+                        let bps = &bps[level];
+                        let dd = layout::distances(bps, w, h);
+                        if bps.iter().all(|&b| b == 4) {
+                            // f32 blocks whose predicted bytes are noise to deflate are stored
+                            // as they are (OpenEXR reads a chunk of the raw size as raw).
+                            match layout::zlib_unless_weak(predicted, &dd) {
+                                Some(z) => z,
+                                None => packed.clone(),
+                            }
+                        } else {
+                            layout::zlib(predicted, &dd)
+                        }
                     } else {
                         deflate(predicted, enc.level)
                     };
@@ -1041,6 +1057,73 @@ mod tests {
                 "n = {n}: compressible heights were not deflated as before"
             );
         }
+    }
+
+    /// f32 mip blocks whose predicted bytes are noise to deflate (random low mantissa bits, as
+    /// LDEM_4's) are stored as they are, although deflate would shave a few percent off them:
+    /// the samples come back bit for bit, and the file is the size of the uncompressed one.
+    /// Blocks with repeats (whole metres, a plateau) are still deflated.
+    #[test]
+    fn mip_files_store_noisy_f32_blocks_and_keep_the_samples() {
+        let mut rnd = crate::testutil::rng(13);
+        let size = 260;
+        let sizes = level_sizes(size);
+        let mut noise =
+            |s: usize| -> Vec<f32> { (0..s * s).map(|_| 1000.0 + 0.5 * rnd() as f32).collect() };
+        let max: Vec<Vec<f32>> = sizes.iter().map(|&s| noise(s)).collect();
+        let min: Vec<Vec<f32>> = sizes.iter().map(|&s| noise(s)).collect();
+        let file = |min: &[Vec<f32>], max: &[Vec<f32>], c| {
+            encode_mip_exr(
+                size,
+                Some(min),
+                max,
+                Precision::F32,
+                c,
+                ZipLevel::DEFAULT,
+                "t",
+            )
+            .unwrap()
+        };
+        let z = file(&min, &max, TileCompression::Zip);
+        let raw = file(&min, &max, TileCompression::None);
+        let back = decode_mip_exr(&z).unwrap();
+        for (name, want) in [("max", &max), ("min", &min)] {
+            for (l, w) in back.channels[name].iter().zip(want.iter()) {
+                assert_eq!(bits(l), bits(w), "{name}");
+            }
+        }
+        // The 64² tiles are stored; only the coarse levels' small blocks (under PROBE_MIN)
+        // are deflated, by a little.
+        assert!(
+            z.len() + raw.len() / 100 > raw.len(),
+            "{} bytes against {} uncompressed: noise was deflated",
+            z.len(),
+            raw.len()
+        );
+        // Deflate does shrink such blocks a little: the probe, not the size check, stored them.
+        let packed: Vec<u8> = max[0][..64 * 64]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        let mut predicted = Vec::new();
+        predict(&packed, &mut predicted);
+        let deflated = layout::zlib(&predicted, &layout::distances(&[4], 64, 64)).len();
+        assert!(
+            deflated < packed.len(),
+            "{deflated} of {} bytes",
+            packed.len()
+        );
+        let whole: Vec<Vec<f32>> = max
+            .iter()
+            .map(|l| l.iter().map(|v| v.round()).collect())
+            .collect();
+        let z = file(&whole, &whole, TileCompression::Zip);
+        assert!(
+            z.len() < raw.len() / 4,
+            "{} of {} bytes",
+            z.len(),
+            raw.len()
+        );
     }
 
     #[test]
