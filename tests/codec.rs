@@ -212,6 +212,47 @@ fn openexr_reads_height_and_mip_tiles_bit_for_bit() {
         );
         heights.insert(0, noisy);
 
+        // f32 mip tiles that probe as noise are stored raw (src/exrcodec/layout.rs): a file of
+        // them is about its uncompressed size, and every reader must see it bit for bit.
+        if precision == Precision::F32 {
+            let noisy = dir.path().join("noisy-mip.exr");
+            let sizes = mip::level_sizes(260);
+            let mut level = |s: usize| -> Vec<f32> {
+                (0..s * s)
+                    .map(|_| {
+                        seed ^= seed << 13;
+                        seed ^= seed >> 7;
+                        seed ^= seed << 17;
+                        1000.0 + (seed >> 40) as f32 / (1u64 << 25) as f32
+                    })
+                    .collect()
+            };
+            let max: Vec<Vec<f32>> = sizes.iter().map(|&s| level(s)).collect();
+            let min: Vec<Vec<f32>> = sizes.iter().map(|&s| level(s)).collect();
+            mip::write_mip_exr(
+                &noisy,
+                260,
+                Some(&min),
+                &max,
+                Precision::F32,
+                TileCompression::Zip,
+                "noisy",
+            )
+            .unwrap();
+            let raw: usize = sizes.iter().map(|s| 8 * s * s).sum();
+            let len = std::fs::metadata(&noisy).unwrap().len() as usize;
+            assert!(
+                len > raw * 99 / 100,
+                "{len} bytes for {raw} of samples: the noisy mip tiles were deflated"
+            );
+            let back = mip::read_mip_exr(&noisy).unwrap();
+            assert!(back.channels["max"]
+                .iter()
+                .zip(&max)
+                .all(|(a, b)| bits(a) == bits(b)));
+            mips.insert(0, noisy);
+        }
+
         // The exr crate's reader (independent of src/exrcodec.rs) sees every mip level the same.
         for f in &mips {
             let ours = mip::read_mip_exr(f).unwrap();
