@@ -18,7 +18,7 @@
 //! [`zlib_unless_weak`] (what f32 blocks get) parses a sixteenth of the block first and gives
 //! up on a block that would not deflate below 90 % of its size: the caller stores it raw, as
 //! OpenEXR stores a block deflate does not shrink. A quarter of LDEM_4's mip bytes are in such
-//! blocks; storing them cost 2.8 % in size and saved 22 % of the encoder's time
+//! blocks; storing them cost 2.7 % in size and saved 22 % of the encoder's time
 //! (docs/benchmarks.md, "Weak blocks stored").
 
 /// Length symbols' base lengths and extra bits (RFC 1951 §3.2.5), symbols 257–285.
@@ -537,8 +537,8 @@ fn code_lengths(counts: &[u32], limit: usize, lens: &mut [u8]) {
 
 /// Sort the keys of [`code_lengths`] (count · 512 + symbol, made in ascending symbol order,
 /// so already in order within each count) ascending. Alphabets of more than 32 symbols go
-/// through a stable radix sort on the count's bytes (a 32 KiB block's counts have two):
-/// about a third of the time of a comparison sort on the literal alphabet, for the same order.
+/// through a stable radix sort on the count's bytes (a 32 KiB block's counts have two), for
+/// the same order: in a perf profile of the encoder the sorts went from 3.1 % to 2.2 %.
 fn sort_keys(keys: &mut [u32]) {
     let m = keys.len();
     if m <= 32 {
