@@ -427,20 +427,54 @@ struct TileStats {
 
 fn interior_stats(layout: &Layout, t: &HeightTile, kept: bool) -> Option<TileStats> {
     let (h, n) = (layout.halo as usize, layout.tile_size as usize);
+    // Eight lanes of minima, maxima and counts, so that the loop runs in vector registers
+    // rather than through one minimum's and one maximum's latency per sample (10 % of the
+    // tiling stage's CPU time on LDEM_4 at 4 levels). No-data samples enter as ±∞.
+    const L: usize = 8;
+    let (mut lo, mut hi) = ([f32::INFINITY; L], [f32::NEG_INFINITY; L]);
+    let (mut filled, mut no_data) = (0u64, 0u64);
+    for j in h..h + n {
+        let row = j * t.size + h;
+        let (hs, ms) = (&t.height[row..row + n], &t.mask[row..row + n]);
+        let (mut f, mut z) = ([0u32; L], [0u32; L]);
+        let (hc, mc) = (hs.chunks_exact(L), ms.chunks_exact(L));
+        let (hr, mr) = (hc.remainder(), mc.remainder());
+        for (hv, mv) in hc.zip(mc) {
+            for q in 0..L {
+                let valid = mv[q] != mask::NO_DATA;
+                z[q] += u32::from(!valid);
+                f[q] += u32::from(mv[q] == mask::FILLED);
+                lo[q] = lo[q].min(if valid { hv[q] } else { f32::INFINITY });
+                hi[q] = hi[q].max(if valid { hv[q] } else { f32::NEG_INFINITY });
+            }
+        }
+        for (&v, &m) in hr.iter().zip(mr) {
+            if m == mask::NO_DATA {
+                z[0] += 1;
+            } else {
+                f[0] += u32::from(m == mask::FILLED);
+                lo[0] = lo[0].min(v);
+                hi[0] = hi[0].max(v);
+            }
+        }
+        filled += f.iter().map(|&c| u64::from(c)).sum::<u64>();
+        no_data += z.iter().map(|&c| u64::from(c)).sum::<u64>();
+    }
     let mut s = TileStats {
-        min: f32::INFINITY,
-        max: f32::NEG_INFINITY,
-        filled: 0,
-        no_data: 0,
+        min: lo.iter().fold(f32::INFINITY, |a, &b| a.min(b)),
+        max: hi.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b)),
+        filled,
+        no_data,
         kept,
     };
-    for j in h..h + n {
-        for i in h..h + n {
-            let k = j * t.size + i;
-            match t.mask[k] {
-                mask::NO_DATA => s.no_data += 1,
-                m => {
-                    s.filled += (m == mask::FILLED) as u64;
+    if s.min == 0.0 || s.max == 0.0 {
+        // Which zero (+0 or −0) a minimum keeps depends on the order the samples were met in:
+        // take them in raster order, as before, so that the manifest's bytes do not change.
+        (s.min, s.max) = (f32::INFINITY, f32::NEG_INFINITY);
+        for j in h..h + n {
+            for i in h..h + n {
+                let k = j * t.size + i;
+                if t.mask[k] != mask::NO_DATA {
                     s.min = s.min.min(t.height[k]);
                     s.max = s.max.max(t.height[k]);
                 }
@@ -888,7 +922,7 @@ fn render_taps(
 }
 
 /// Running mean of the samples that have data, and whether any of them was filled.
-#[derive(Default)]
+#[derive(Clone, Copy, Default)]
 struct BoxSum {
     sum: f64,
     n: u32,
@@ -929,8 +963,13 @@ impl TileBuilder {
             self.height.push(f32::NAN);
             self.mask.push(mask::NO_DATA);
         } else {
-            self.height
-                .push((acc.sum / acc.n as f64 + height_shift) as f32);
+            // One sample (the finest level, or point sampling): x / 1 is x, without a division.
+            let mean = if acc.n == 1 {
+                acc.sum
+            } else {
+                acc.sum / acc.n as f64
+            };
+            self.height.push((mean + height_shift) as f32);
             self.mask.push(if acc.filled {
                 mask::FILLED
             } else {
@@ -1261,6 +1300,94 @@ mod tests {
 
     fn bits(v: &[f32]) -> Vec<u32> {
         v.iter().map(|x| x.to_bits()).collect()
+    }
+
+    /// The eight-lane statistics are the raster-order loop's, bit for bit: on random tiles
+    /// with no-data and filled samples, odd sizes (a remainder after the lanes), and tiles
+    /// whose extremes are +0 and −0 met in either order.
+    #[test]
+    fn interior_stats_match_the_raster_order_loop() {
+        let reference = |layout: &Layout, t: &HeightTile| {
+            let (h, n) = (layout.halo as usize, layout.tile_size as usize);
+            let (mut lo, mut hi, mut filled, mut no_data) =
+                (f32::INFINITY, f32::NEG_INFINITY, 0u64, 0u64);
+            for j in h..h + n {
+                for i in h..h + n {
+                    let k = j * t.size + i;
+                    match t.mask[k] {
+                        mask::NO_DATA => no_data += 1,
+                        m => {
+                            filled += u64::from(m == mask::FILLED);
+                            lo = lo.min(t.height[k]);
+                            hi = hi.max(t.height[k]);
+                        }
+                    }
+                }
+            }
+            (no_data < (n * n) as u64).then_some((lo.to_bits(), hi.to_bits(), filled, no_data))
+        };
+        let mut rnd = crate::testutil::rng(41);
+        for tile_size in [1u32, 7, 8, 13, 64] {
+            let layout = Layout {
+                projection: Projection::Gnomonic,
+                tile_size,
+                halo: 2,
+                levels: 1,
+            };
+            let size = layout.stored_size();
+            for case in 0..7 {
+                let mut t = HeightTile {
+                    size,
+                    height: (0..size * size)
+                        .map(|_| (rnd() * 2000.0 - 1000.0) as f32)
+                        .collect(),
+                    mask: (0..size * size)
+                        .map(|_| match (rnd() * 10.0) as u8 {
+                            0 => mask::NO_DATA,
+                            1 => mask::FILLED,
+                            _ => mask::MEASURED,
+                        })
+                        .collect(),
+                };
+                match case {
+                    // Only zeros of both signs, in two orders.
+                    1 | 2 => {
+                        for (k, v) in t.height.iter_mut().enumerate() {
+                            *v = if (k % 3 == 0) == (case == 1) {
+                                -0.0
+                            } else {
+                                0.0
+                            };
+                        }
+                    }
+                    // Zero is the minimum (all other heights positive).
+                    3 => {
+                        for v in &mut t.height {
+                            *v = v.abs();
+                        }
+                        t.height[size * size / 2] = -0.0;
+                        t.height[size * size / 2 + 1] = 0.0;
+                    }
+                    // Nothing but no-data.
+                    4 => t.mask.fill(mask::NO_DATA),
+                    // The first interior sample has no data, the next is −0, every other +0:
+                    // the first zero met in raster order is not the first of lane 0.
+                    5 => {
+                        t.height.fill(0.0);
+                        t.mask.fill(mask::MEASURED);
+                        let first = 2 * size + 2;
+                        t.mask[first] = mask::NO_DATA;
+                        if tile_size > 1 {
+                            t.height[first + 1] = -0.0;
+                        }
+                    }
+                    _ => {}
+                }
+                let got = interior_stats(&layout, &t, false)
+                    .map(|s| (s.min.to_bits(), s.max.to_bits(), s.filled, s.no_data));
+                assert_eq!(got, reference(&layout, &t), "tile {tile_size}, case {case}");
+            }
+        }
     }
 
     fn group_tiles_match_per_tile_tiles(w: usize, tile_size: u32) {
