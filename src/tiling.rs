@@ -1085,6 +1085,7 @@ fn tile_from_samples(
     let halo = layout.halo as i64;
     let k = 1usize << (sample_level - id.level);
     let mut out = TileBuilder::new(size);
+    let mut acc = Vec::with_capacity(size);
     for j in 0..size as i64 {
         let (gx, gy) = layout.global_pixel(id, -halo, j - halo);
         let (sx, sy) = (
@@ -1102,14 +1103,20 @@ fn tile_from_samples(
                 )
             })
             .collect();
-        for i in 0..size {
-            let mut acc = BoxSum::default();
-            for (h, m) in &rows {
-                for a in i * k..(i + 1) * k {
-                    acc.add(h[a], m[a]);
+        // The row's sums side by side, one sample row at a time: each pixel adds its samples
+        // in the same order as alone (rows, then left to right), but the pixels' addition
+        // chains are independent and overlap.
+        acc.clear();
+        acc.resize(size, BoxSum::default());
+        for (h, m) in &rows {
+            for ((a, h), m) in acc.iter_mut().zip(h.chunks_exact(k)).zip(m.chunks_exact(k)) {
+                for (&h, &m) in h.iter().zip(m) {
+                    a.add(h, m);
                 }
             }
-            out.push(acc, height_shift);
+        }
+        for &a in &acc {
+            out.push(a, height_shift);
         }
     }
     out.finish()
