@@ -520,29 +520,26 @@ pub fn encode(
                         }
                         _ => 0,
                     };
+                    // None: store the block raw without deflating it.
                     let z = if noisy != 0 {
-                        mixed::zlib(predicted, &bps[level], w, h, noisy)
+                        Some(mixed::zlib(predicted, &bps[level], w, h, noisy))
                     } else if enc.level == ZipLevel::Layout {
                         let bps = &bps[level];
                         let dd = layout::distances(bps, w, h);
                         if bps.iter().all(|&b| b == 4) {
-                            // f32 blocks whose predicted bytes are noise to deflate are stored
-                            // as they are (OpenEXR reads a chunk of the raw size as raw).
-                            match layout::zlib_unless_weak(predicted, &dd) {
-                                Some(z) => z,
-                                None => packed.clone(),
-                            }
+                            // f32 blocks whose predicted bytes probe as noise to deflate.
+                            layout::zlib_unless_weak(predicted, &dd)
                         } else {
-                            layout::zlib(predicted, &dd)
+                            Some(layout::zlib(predicted, &dd))
                         }
                     } else {
-                        deflate(predicted, enc.level)
+                        Some(deflate(predicted, enc.level))
                     };
-                    // OpenEXR stores a block raw when deflate does not make it smaller.
-                    if z.len() < packed.len() {
-                        z
-                    } else {
-                        packed.clone()
+                    // OpenEXR stores a block raw when deflate does not make it smaller (a
+                    // reader tells by its length).
+                    match z {
+                        Some(z) if z.len() < packed.len() => z,
+                        _ => packed.clone(),
                     }
                 } else {
                     packed.clone()
