@@ -755,7 +755,7 @@ fn fast_stays_below_exact_at_a_real_data_edge() {
     assert!(edge_n > n / 4, "{edge_n} of {n} samples in edge tiles");
     assert!(above <= 1e-3, "fast above exact by {above}°");
     assert!(
-        rms <= 0.004 && low <= n / 100_000,
+        rms <= 0.002 && low <= n / 500_000,
         "RMS {rms}°, {low} of {n} > 0.25° below"
     );
 }

@@ -31,8 +31,9 @@ pub const FORMAT: &str = "penumbra-horizon-1";
 /// Revision of the algorithms' results (part of the run key: a rerun after a change that moves
 /// the values recomputes instead of keeping maps made the old way). 2: the fast method's exact
 /// near field reaches 24 px instead of 4, and far candidates at the raster's edge are clamped.
-/// 3: beyond `fine_margin_px` the fast method sees far rings of coarser levels.
-const ALGORITHM: &str = "3";
+/// 3: beyond `fine_margin_px` the fast method sees far rings of coarser levels. 4: its sweep
+/// serves opposite azimuths at once and leaves guesses that are searched exactly afterwards.
+const ALGORITHM: &str = "4";
 pub const AZIMUTH_CONVENTION: &str = "plane azimuth on the tile's cube face: counter-clockwise \
      from the face's +U axis towards +V, degrees; plane k = 360*k/A; compass azimuth differs per \
      pixel (docs/horizons.md)";

@@ -1,6 +1,8 @@
-//! The fast method's far field: the per-azimuth sweep of parallel great circles, each keeping
-//! the upper convex hull of its profile, and the finish that evaluates its winners on each
-//! observer's own ray (docs/horizons.md).
+//! The fast method's far field: sweeps of parallel great circles, each keeping the upper convex
+//! hull of its profile. Over a tile's own raster, [`sweep_pair`] serves two opposite azimuths
+//! at once and leaves [`Guesses`] that [`finish_pair`] searches exactly on each observer's own
+//! ray; over a far ring, [`sweep`] evaluates its winners on the ring observers' rays itself
+//! (docs/horizons.md).
 
 use super::far::FarPass;
 use super::geometry::{dot, normalize, snap, Azimuth, Context, PixelGeo, Ray, Rect, TAP_EPS};
@@ -12,76 +14,9 @@ use crate::cube::Vec3;
 /// elevation by far less (docs/horizons.md).
 pub(super) const SKIP: f64 = 0.03;
 
-/// Elevations (degrees) from the near field, the sweep's winners evaluated exactly on each
-/// observer's own ray, an exact search of that ray around the winner, the far rings' terrain
-/// beyond the raster (`far`, [`super::far`]; the fast method adds rings one at a time instead,
-/// see [`super::method::FarHorizons`], and its tests pass them here all at once) and
-/// (`with_slope0`) the zero-distance slope, which [`ground_slope`] adds later where rings
-/// come in between.
-#[allow(clippy::too_many_arguments)]
-pub(super) fn finish(
-    ctx: &Context,
-    rect: Rect,
-    az: &Azimuth,
-    near_px: f64,
-    geo: &[PixelGeo],
-    near: &[f64],
-    acc: &[f64],
-    acc_s: &[f64],
-    far: &[FarPass],
-    with_slope0: bool,
-    dst: &mut [f32],
-) {
-    let (cos, sin) = (az.cos, az.sin);
-    let mut slopes = vec![0.0f64; rect.w];
-    for j in 0..rect.h {
-        let row = &mut dst[j * rect.w..(j + 1) * rect.w];
-        for (i, slope) in slopes.iter_mut().enumerate() {
-            let (x, y) = (rect.x0 + i, rect.y0 + j);
-            let o = j * rect.w + i;
-            let h0 = ctx.at(x as i64, y as i64);
-            if h0.is_nan() {
-                *slope = f64::NAN;
-                continue;
-            }
-            let ray = Ray::from_parts(ctx, x, y, &geo[o], az);
-            let mut t = near[o];
-            let sw = acc_s[o];
-            if sw.is_finite() {
-                // Every value reported is the elevation of a real point of this ray, evaluated
-                // exactly (so fast ≤ reference). The lines pass up to ½ px beside the ray:
-                // around the sweep's winner the ray is searched exactly, which includes the
-                // winner itself, unless the near field is far ahead; then the winner alone.
-                if acc[o] >= t - SKIP {
-                    t = t.max(
-                        ray.max_over(ctx, (sw - WINDOW).max(near_px), sw + WINDOW, t)
-                            .0,
-                    );
-                } else {
-                    t = t.max(ray.slope_on_surface(ctx, sw));
-                }
-            }
-            if !far.is_empty() {
-                let ground = ray.ground_per_px();
-                for f in far {
-                    t = f.raise(i, j, h0 as f64, &geo[o], ground, t);
-                }
-            }
-            if with_slope0 {
-                let s0 = ctx.slope0_g(x, y, cos, sin, ray.ground_per_px());
-                if s0 > t {
-                    t = s0;
-                }
-            }
-            *slope = t;
-        }
-        degrees(&slopes, row);
-    }
-}
-
-/// `dst` (degrees, as [`finish`] without the zero-distance slope gives them, then raised by
+/// `dst` (degrees, as [`finish_pair`] without the zero-distance slope gives them, then raised by
 /// far rings) raised to the zero-distance slope where that is higher: the same bytes as
-/// [`finish`] with it, since the degrees of a maximum are the maximum of the degrees.
+/// [`finish_pair`] with it, since the degrees of a maximum are the maximum of the degrees.
 pub(super) fn ground_slope(
     ctx: &Context,
     rect: Rect,
@@ -514,7 +449,8 @@ impl Grid<'_> {
     }
 }
 
-/// The fast sweep for one plane azimuth: lines parallel to the look direction, one pixel apart
+/// The far rings' sweep for one plane azimuth ([`super::far`]; a tile's own raster has
+/// [`sweep_pair`]): lines parallel to the look direction, one pixel apart
 /// along the minor axis, swept from the far end of the raster towards the observers, each
 /// keeping the upper convex hull of its profile (samples where it crosses pixel columns and
 /// rows: exact bilinear values). An observer asks the two lines that bracket it at its own
@@ -800,6 +736,543 @@ pub(super) fn sweep(
     }
 }
 
+/// The sweep's guesses for one plane azimuth, per observer (row-major over the rect): the
+/// best slope one of its two bracketing lines estimates (the observer placed on that line at
+/// its own column and height) and where, in plane pixels along the ray, and the other line's.
+/// Estimates only guide [`finish_pair`]'s exact searches on the observer's own ray.
+pub(super) struct Guesses {
+    pub(super) best: Vec<f32>,
+    pub(super) best_s: Vec<f32>,
+    pub(super) alt: Vec<f32>,
+    pub(super) alt_s: Vec<f32>,
+    /// The distances of the hull vertices on either side of each line's winner (farther,
+    /// nearer): crests the line sees just below its winner.
+    pub(super) best_nb: Vec<[f32; 2]>,
+    pub(super) alt_nb: Vec<[f32; 2]>,
+}
+
+impl Guesses {
+    pub(super) fn new(n: usize) -> Guesses {
+        Guesses {
+            best: vec![f32::NEG_INFINITY; n],
+            best_s: vec![f32::NAN; n],
+            alt: vec![f32::NEG_INFINITY; n],
+            alt_s: vec![f32::NAN; n],
+            best_nb: vec![[f32::NAN; 2]; n],
+            alt_nb: vec![[f32::NAN; 2]; n],
+        }
+    }
+
+    fn reset(&mut self) {
+        self.best.fill(f32::NEG_INFINITY);
+        self.best_s.fill(f32::NAN);
+        self.alt.fill(f32::NEG_INFINITY);
+        self.alt_s.fill(f32::NAN);
+        self.best_nb.fill([f32::NAN; 2]);
+        self.alt_nb.fill([f32::NAN; 2]);
+    }
+
+    #[inline(always)]
+    fn offer(&mut self, idx: usize, slope: f32, s: f32, nb: [f32; 2]) {
+        if slope > self.best[idx] {
+            self.alt[idx] = self.best[idx];
+            self.alt_s[idx] = self.best_s[idx];
+            self.alt_nb[idx] = self.best_nb[idx];
+            self.best[idx] = slope;
+            self.best_s[idx] = s;
+            self.best_nb[idx] = nb;
+        } else if slope > self.alt[idx] {
+            self.alt[idx] = slope;
+            self.alt_s[idx] = s;
+            self.alt_nb[idx] = nb;
+        }
+    }
+}
+
+/// The sweep for plane azimuth `phi` and, where `back` is given, for `phi` + π at once: both
+/// look along the same lines (one pixel apart along the minor axis, samples where each crosses
+/// pixel columns and rows), so the samples and their places in each line's great-circle plane
+/// are computed once and the line's upper hull is built twice, once from each end. Every
+/// observer asks the two lines that bracket it at its own column for the hull vertex it sees
+/// highest (placed on the line, at its own height) and keeps both answers as [`Guesses`]; no
+/// evaluation on its own ray happens here. Lines span the whole raster whether `back` is
+/// given or not, so `ahead`'s guesses are the same bytes either way.
+pub(super) fn sweep_pair(
+    ctx: &Context,
+    rect: Rect,
+    phi: f64,
+    near_px: f64,
+    ahead: &mut Guesses,
+    mut back: Option<&mut Guesses>,
+    scratch: &mut Scratch,
+) {
+    ahead.reset();
+    if let Some(b) = back.as_deref_mut() {
+        b.reset();
+    }
+    let (dx, dy) = (phi.cos(), -phi.sin());
+    let xmajor = dx.abs() >= dy.abs();
+    let (dp, dq) = if xmajor { (dx, dy) } else { (dy, dx) };
+    let t = dq / dp;
+    let look: i64 = if dp > 0.0 { 1 } else { -1 };
+    let step = -look;
+    let g = if xmajor {
+        Grid {
+            h: &ctx.heights,
+            sp: 1,
+            sq: ctx.width,
+            np: ctx.width as i64,
+            nq: ctx.height as i64,
+        }
+    } else {
+        Grid {
+            h: &ctx.heights,
+            sp: ctx.width,
+            sq: 1,
+            np: ctx.height as i64,
+            nq: ctx.width as i64,
+        }
+    };
+    let (np, nq) = (g.np, g.nq);
+    let (rp0, rp1, rq0, rq1) = if xmajor {
+        (rect.x0, rect.x0 + rect.w, rect.y0, rect.y0 + rect.h)
+    } else {
+        (rect.y0, rect.y0 + rect.h, rect.x0, rect.x0 + rect.w)
+    };
+    let (rp0, rp1, rq0, rq1) = (rp0 as i64, rp1 as i64, rq0 as i64, rq1 as i64);
+    let (si, sj) = if xmajor { (1, rect.w) } else { (rect.w, 1) };
+    let m_at = |p: i64, q: i64| q as f64 - t * p as f64;
+    let ms = [
+        m_at(rp0, rq0),
+        m_at(rp0, rq1 - 1),
+        m_at(rp1 - 1, rq0),
+        m_at(rp1 - 1, rq1 - 1),
+    ];
+    let m_lo = ms.iter().cloned().fold(f64::INFINITY, f64::min).floor() as i64 - 1;
+    let m_hi = ms.iter().cloned().fold(f64::NEG_INFINITY, f64::max).ceil() as i64 + 1;
+    let (n, ua, va) = ctx.face.axes();
+    let plane = |p: f64, q: f64| -> Vec3 {
+        let (x, y) = if xmajor { (p, q) } else { (q, p) };
+        let (u, v) = ctx.uv(x, y);
+        [
+            n[0] + u * ua[0] + v * va[0],
+            n[1] + u * ua[1] + v * va[1],
+            n[2] + u * ua[2] + v * va[2],
+        ]
+    };
+    let radius = ctx.radius_m;
+    let inv_dp = 1.0 / dp.abs();
+    // Samples nearer than the near field along the ray, in major-axis pixels.
+    let lag = near_px * dp.abs();
+    for m in m_lo..=m_hi {
+        let mf = m as f64;
+        let (mut pa, mut pb) = (0, np - 1);
+        if t != 0.0 {
+            let (e0, e1) = ((-1.0 - mf) / t, (nq as f64 - mf) / t);
+            let (lo, hi) = (e0.min(e1), e0.max(e1));
+            pa = pa.max(lo.floor() as i64);
+            pb = pb.min(hi.ceil() as i64);
+        } else if mf < -1.0 || mf > nq as f64 {
+            continue;
+        }
+        if pa > pb {
+            continue;
+        }
+        let (start, stop) = if step < 0 { (pb, pa) } else { (pa, pb) };
+        let a_pt = plane(0.0, mf);
+        let b_pt = plane(1.0, mf + t);
+        let bv = [b_pt[0] - a_pt[0], b_pt[1] - a_pt[1], b_pt[2] - a_pt[2]];
+        let pm = 0.5 * (start + stop) as f64;
+        let e1 = normalize(plane(pm, mf + t * pm));
+        let sb = [
+            step as f64 * bv[0],
+            step as f64 * bv[1],
+            step as f64 * bv[2],
+        ];
+        let k = dot(sb, e1);
+        let e2 = normalize([sb[0] - k * e1[0], sb[1] - k * e1[1], sb[2] - k * e1[2]]);
+        let (a0, a1, b0, b1) = (dot(a_pt, e1), dot(bv, e1), dot(a_pt, e2), dot(bv, e2));
+        // 1. The line's samples in the look direction's sweep order (from `phi`'s far end),
+        // and where each observer column comes: its index, whether the column's own sample
+        // is there, and the column's unit direction in the line's plane.
+        let sc = &mut *scratch;
+        sc.p.clear();
+        sc.h.clear();
+        sc.cols.clear();
+        let mut prev_y = f64::NAN;
+        let mut p = start;
+        loop {
+            let y = mf + t * p as f64;
+            if !prev_y.is_nan() {
+                let (lo, hi) = if prev_y < y { (prev_y, y) } else { (y, prev_y) };
+                let kq = ceil(lo);
+                if kq > lo + 1e-6 && kq < hi - 1e-6 && kq >= 0.0 && kq <= (nq - 1) as f64 {
+                    let pc = (kq - mf) / t;
+                    sc.p.push(pc);
+                    sc.h.push(g.bilinear(pc, kq));
+                }
+            }
+            prev_y = y;
+            let inside = y >= 0.0 && y <= (nq - 1) as f64;
+            if p >= rp0 && p < rp1 {
+                let (a, b) = (a0 + p as f64 * a1, b0 + p as f64 * b1);
+                let inv = 1.0 / (a * a + b * b).sqrt();
+                sc.cols.push(Col {
+                    at: sc.p.len(),
+                    own: inside,
+                    p,
+                    y,
+                    ux: b * inv,
+                    uy: a * inv,
+                });
+            }
+            if inside {
+                sc.p.push(p as f64);
+                sc.h.push(g.bilinear(p as f64, y));
+            }
+            if p == stop {
+                break;
+            }
+            p += step;
+        }
+        if sc.cols.is_empty() {
+            continue;
+        }
+        // 2. Their positions in the line's plane (vectorised).
+        let len = sc.p.len();
+        sc.x.resize(len, 0.0);
+        sc.y.resize(len, 0.0);
+        for i in 0..len {
+            let pp = sc.p[i];
+            let (a, b) = (a0 + pp * a1, b0 + pp * b1);
+            let k = (radius + sc.h[i] as f64) / (a * a + b * b).sqrt();
+            sc.x[i] = b * k;
+            sc.y[i] = a * k;
+        }
+        // 3. The hull from `phi`'s far end, queries where the observer columns come: each
+        // column's observers see the samples more than `near_px` along their ray (the near
+        // field has the rest), so a sample joins the hull once the columns are that far past it.
+        let mut hull = std::mem::take(&mut sc.hull);
+        hull.clear();
+        let mut fingers = [usize::MAX; 2];
+        let mut next = 0;
+        for c in &sc.cols {
+            while next < c.at && (sc.p[next] - c.p as f64).abs() >= lag {
+                if !sc.h[next].is_nan() {
+                    hull_push(
+                        &mut hull,
+                        Pt {
+                            x: sc.x[next],
+                            y: sc.y[next],
+                            p: sc.p[next],
+                            inv: 0.0,
+                        },
+                    );
+                }
+                next += 1;
+            }
+            ask(
+                &g,
+                &hull,
+                c,
+                1.0,
+                observers_of(c, rq0, rq1, rp0, si, sj),
+                radius,
+                inv_dp,
+                &mut fingers,
+                ahead,
+            );
+        }
+        // 4. The same line from the other end for `phi` + π, mirrored (x → −x) so that the
+        // hull is built the same way.
+        if let Some(bk) = back.as_deref_mut() {
+            hull.clear();
+            let mut fingers = [usize::MAX; 2];
+            let mut next = len;
+            for c in sc.cols.iter().rev() {
+                let first = c.at + c.own as usize;
+                while next > first && (sc.p[next - 1] - c.p as f64).abs() >= lag {
+                    next -= 1;
+                    if !sc.h[next].is_nan() {
+                        hull_push(
+                            &mut hull,
+                            Pt {
+                                x: -sc.x[next],
+                                y: sc.y[next],
+                                p: sc.p[next],
+                                inv: 0.0,
+                            },
+                        );
+                    }
+                }
+                ask(
+                    &g,
+                    &hull,
+                    c,
+                    -1.0,
+                    observers_of(c, rq0, rq1, rp0, si, sj),
+                    radius,
+                    inv_dp,
+                    &mut fingers,
+                    bk,
+                );
+            }
+        }
+        sc.hull = hull;
+    }
+}
+
+/// An observer column of one line in [`sweep_pair`].
+#[derive(Clone, Copy)]
+struct Col {
+    /// Index of the first sample at or beyond the column in `phi`'s sweep order.
+    at: usize,
+    /// Whether the column's own sample (at `at`) is on the line.
+    own: bool,
+    p: i64,
+    /// The line's minor coordinate at the column.
+    y: f64,
+    /// The column's unit direction in the line's plane.
+    ux: f64,
+    uy: f64,
+}
+
+/// The (up to two) observers a line brackets at column `c`: (side, index in the rect, q).
+#[inline(always)]
+fn observers_of(
+    c: &Col,
+    rq0: i64,
+    rq1: i64,
+    rp0: i64,
+    si: usize,
+    sj: usize,
+) -> [Option<(usize, usize, i64)>; 2] {
+    let qa = ceil(c.y);
+    let f = qa - c.y;
+    let qa = qa as i64;
+    let mut out = [None, None];
+    for (k, (side, q0, w)) in [(0, qa, 1.0 - f), (1, qa - 1, f)].into_iter().enumerate() {
+        if w <= 0.0 || q0 < rq0 || q0 >= rq1 {
+            continue;
+        }
+        let idx = (c.p - rp0) as usize * si + (q0 - rq0) as usize * sj;
+        out[k] = Some((side, idx, q0));
+    }
+    out
+}
+
+/// Pop while the top is on the body's side of (or on) the segment from the one below it to
+/// `q`, then push `q` (as [`Line::push`]).
+#[inline(always)]
+fn hull_push(pts: &mut Vec<Pt>, q: Pt) {
+    while pts.len() >= 2 {
+        let n = pts.len();
+        if cross(pts[n - 2], pts[n - 1], q) >= 0.0 {
+            pts.pop();
+        } else {
+            break;
+        }
+    }
+    pts.push(q);
+}
+
+/// The observers of column `c` ask the hull (`mirror`: −1 for the reversed sweep) for the
+/// vertex they see highest, placed on the line at their own height; the answers go to `out`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn ask(
+    g: &Grid,
+    hull: &[Pt],
+    c: &Col,
+    mirror: f64,
+    obs: [Option<(usize, usize, i64)>; 2],
+    radius: f64,
+    inv_dp: f64,
+    fingers: &mut [usize; 2],
+    out: &mut Guesses,
+) {
+    if hull.is_empty() {
+        return;
+    }
+    for (side, idx, q0) in obs.into_iter().flatten() {
+        let h0 = g.at(c.p, q0);
+        if h0.is_nan() {
+            continue;
+        }
+        let r = radius + h0 as f64;
+        let o = Pt {
+            x: mirror * c.ux * r,
+            y: c.uy * r,
+            p: c.p as f64,
+            inv: 0.0,
+        };
+        let iv = query_hull(hull, o, &mut fingers[side]);
+        let v = hull[iv];
+        let dist = |v: Pt| ((v.p - c.p as f64).abs() * inv_dp) as f32;
+        let nb = [
+            if iv > 0 { dist(hull[iv - 1]) } else { f32::NAN },
+            if iv + 1 < hull.len() {
+                dist(hull[iv + 1])
+            } else {
+                f32::NAN
+            },
+        ];
+        out.offer(idx, slope(o, v) as f32, dist(v), nb);
+    }
+}
+
+/// [`Line::query`] over a bare hull.
+#[inline(always)]
+fn query_hull(h: &[Pt], o: Pt, finger: &mut usize) -> usize {
+    let better = |a: Pt, b: Pt| cross(o, a, b) > 0.0;
+    let mut i = (*finger).min(h.len() - 1);
+    if i + 1 < h.len() && better(h[i + 1], h[i]) {
+        while i + 1 < h.len() && better(h[i + 1], h[i]) {
+            i += 1;
+        }
+    } else {
+        while i > 0 && better(h[i - 1], h[i]) {
+            i -= 1;
+        }
+    }
+    *finger = i;
+    i
+}
+
+/// How far (slope) below the best line's guess the other line's may lie and still have the
+/// observer's own ray searched around it too (where the two lines disagree on where).
+const ALT_SKIP: f64 = 0.03;
+
+/// How far (plane pixels) the search around a guess over no data reaches back towards the
+/// observer: three cells, as far as a line beside the ray runs on past a data edge.
+const BACK_PX: f64 = 3.0;
+
+/// Guesses nearer than this (plane pixels along the ray) have their hull neighbours
+/// evaluated on the observer's own ray too: up to 2.5 × the default near field, where the
+/// lines' ≤ 1 px lateral offset from the ray can still rank a crest below its neighbour.
+const NEIGHBOURS_WITHIN: f64 = 64.0;
+
+/// Elevations (degrees) of one azimuth from the near field and the sweep's [`Guesses`]
+/// (docs/horizons.md): unless the near field is ahead of the best guess by more than
+/// [`SKIP`] (then the guess alone is evaluated), the observer's own ray is searched exactly
+/// within ±[`WINDOW`] of the best guess's distance, and of the other line's where that is
+/// within [`ALT_SKIP`] of it (one window over both where they overlap); for guesses within
+/// [`NEIGHBOURS_WITHIN`] the winners' hull neighbours are evaluated on the ray, and searched
+/// around where they beat what the observer has. A guess beyond where the ray leaves the
+/// raster is taken at that exit. Then the far rings' terrain beyond the raster (`far`, as
+/// the tests pass them all at once) and (`with_slope0`) the zero-distance slope. Every value
+/// reported is a point of the observer's own ray, evaluated exactly.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn finish_pair(
+    ctx: &Context,
+    rect: Rect,
+    az: &Azimuth,
+    near_px: f64,
+    geo: &[PixelGeo],
+    near: &[f64],
+    guess: &Guesses,
+    far: &[FarPass],
+    with_slope0: bool,
+    dst: &mut [f32],
+) {
+    let (cos, sin) = (az.cos, az.sin);
+    let (w1, h1) = ((ctx.width - 1) as f64, (ctx.height - 1) as f64);
+    // Distance (plane pixels) at which the ray from (x, y) leaves the raster, with the 1e-9 px
+    // the exact search snaps back onto an edge (a ray along the edge row, whose direction's
+    // other component is a rounding error, runs on along it).
+    let (cx, cy) = (cos, -sin);
+    let exit = |x: f64, y: f64| -> f64 {
+        let along = |z: f64, c: f64, hi: f64| {
+            if c > 0.0 {
+                (hi - z + 1e-9) / c
+            } else if c < 0.0 {
+                (-z - 1e-9) / c
+            } else {
+                f64::INFINITY
+            }
+        };
+        along(x, cx, w1).min(along(y, cy, h1))
+    };
+    let mut slopes = vec![0.0f64; rect.w];
+    for j in 0..rect.h {
+        let row = &mut dst[j * rect.w..(j + 1) * rect.w];
+        for (i, slope) in slopes.iter_mut().enumerate() {
+            let (x, y) = (rect.x0 + i, rect.y0 + j);
+            let o = j * rect.w + i;
+            let h0 = ctx.at(x as i64, y as i64);
+            if h0.is_nan() {
+                *slope = f64::NAN;
+                continue;
+            }
+            let ray = Ray::from_parts(ctx, x, y, &geo[o], az);
+            let mut t = near[o];
+            let sw = f64::from(guess.best_s[o]);
+            if sw.is_finite() {
+                let out = exit(x as f64, y as f64);
+                // The ray searched exactly over [lo − WINDOW, hi + WINDOW] beyond the near
+                // field, the interval's ends taken no farther than the ray's exit.
+                // A guess over no data or a cell with a no-data corner (the line runs on
+                // beside a data edge the ray has already crossed) widens the search back
+                // towards the observer by up to [`BACK_PX`], to the ray's last terrain before
+                // the edge, where a view falling away peaks.
+                let search = |lo: f64, hi: f64, t: f64| -> f64 {
+                    let (mut lo, hi) = (lo.min(out), hi.min(out));
+                    if !ctx.on_complete_cell(ray.x0 + lo * ray.cx, ray.y0 + lo * ray.cy) {
+                        lo -= BACK_PX;
+                    }
+                    ray.max_over(ctx, (lo - WINDOW).max(near_px), hi + WINDOW, t)
+                        .0
+                };
+                let best = f64::from(guess.best[o]);
+                if best >= t - SKIP {
+                    let (alt, sa) = (f64::from(guess.alt[o]), f64::from(guess.alt_s[o]));
+                    let with_alt = sa.is_finite() && alt >= best.max(t) - ALT_SKIP;
+                    if with_alt && (sa - sw).abs() <= 2.0 * WINDOW {
+                        t = search(sw.min(sa), sw.max(sa), t);
+                    } else {
+                        let before = t;
+                        t = search(sw, sw, t);
+                        // (Or wherever the best line's guess gave nothing on the ray: a line
+                        // beside it ran over other terrain, as at a data edge.)
+                        if sa.is_finite() && (with_alt || t == before) {
+                            t = search(sa, sa, t);
+                        }
+                    }
+                    if sw < NEIGHBOURS_WITHIN {
+                        for nb in guess.best_nb[o].into_iter().chain(guess.alt_nb[o]) {
+                            let nb = f64::from(nb);
+                            if nb > near_px {
+                                // (−∞ at a data edge: inside a partial cell or over no
+                                // data, where only the search finds the ray's crossings.)
+                                let v = ray.slope_on_surface(ctx, nb.min(out));
+                                if v > t || v == f64::NEG_INFINITY {
+                                    t = search(nb, nb, v.max(t));
+                                }
+                            }
+                        }
+                    }
+                } else {
+                    t = t.max(ray.slope_on_surface(ctx, sw.min(out)));
+                }
+            }
+            if !far.is_empty() {
+                let ground = ray.ground_per_px();
+                for f in far {
+                    t = f.raise(i, j, h0 as f64, &geo[o], ground, t);
+                }
+            }
+            if with_slope0 {
+                let s0 = ctx.slope0_g(x, y, cos, sin, ray.ground_per_px());
+                if s0 > t {
+                    t = s0;
+                }
+            }
+            *slope = t;
+        }
+        degrees(&slopes, row);
+    }
+}
+
 /// Per-line buffers of the sweep, reused from line to line.
 #[derive(Default)]
 pub(crate) struct Scratch {
@@ -810,6 +1283,7 @@ pub(crate) struct Scratch {
     y: Vec<f64>,
     inv: Vec<f64>,
     marks: Vec<(usize, i64, f64)>,
+    cols: Vec<Col>,
 }
 
 #[cfg(test)]
