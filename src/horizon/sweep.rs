@@ -1139,8 +1139,8 @@ fn query_hull(h: &[Pt], o: Pt, finger: &mut usize) -> usize {
     i
 }
 
-/// How far (slope) below the best line's guess the other line's may lie and still have the
-/// observer's own ray searched around it too (where the two lines disagree on where).
+/// How far (slope) below what the observer has the other line's guess may lie and still have
+/// the observer's own ray searched around it too (where the two lines disagree on where).
 const ALT_SKIP: f64 = 0.03;
 
 /// How far (plane pixels) the search around a guess over no data reaches back towards the
@@ -1156,7 +1156,8 @@ const NEIGHBOURS_WITHIN: f64 = 64.0;
 /// (docs/horizons.md): unless the near field is ahead of the best guess by more than
 /// [`SKIP`] (then the guess alone is evaluated), the observer's own ray is searched exactly
 /// within ±[`WINDOW`] of the best guess's distance, and of the other line's where that is
-/// within [`ALT_SKIP`] of it (one window over both where they overlap); for guesses within
+/// within [`ALT_SKIP`] of what the first search found or that found nothing (one window over
+/// both where they overlap); for guesses within
 /// [`NEIGHBOURS_WITHIN`] the winners' hull neighbours are evaluated on the ray, and searched
 /// around where they beat what the observer has. A guess beyond where the ray leaves the
 /// raster is taken at that exit. Then the far rings' terrain beyond the raster (`far`, as
@@ -1226,15 +1227,16 @@ pub(super) fn finish_pair(
                 let best = f64::from(guess.best[o]);
                 if best >= t - SKIP {
                     let (alt, sa) = (f64::from(guess.alt[o]), f64::from(guess.alt_s[o]));
-                    let with_alt = sa.is_finite() && alt >= best.max(t) - ALT_SKIP;
-                    if with_alt && (sa - sw).abs() <= 2.0 * WINDOW {
+                    if sa.is_finite() && alt >= t - ALT_SKIP && (sa - sw).abs() <= 2.0 * WINDOW {
                         t = search(sw.min(sa), sw.max(sa), t);
                     } else {
                         let before = t;
                         t = search(sw, sw, t);
-                        // (Or wherever the best line's guess gave nothing on the ray: a line
-                        // beside it ran over other terrain, as at a data edge.)
-                        if sa.is_finite() && (with_alt || t == before) {
+                        // The other line's guess where it could beat what that found (the
+                        // best line's estimate may be high: it passes beside the ray), or
+                        // wherever the best one gave nothing on the ray (a line beside it ran
+                        // over other terrain, as at a data edge).
+                        if sa.is_finite() && (alt >= t - ALT_SKIP || t == before) {
                             t = search(sa, sa, t);
                         }
                     }
