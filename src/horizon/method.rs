@@ -626,7 +626,7 @@ mod tests {
             }
             assert!(n > 100_000, "{n} samples");
             // How far below the reference the fast method stays: with the holes and the
-            // ragged edge 0.011–0.012° RMS and 0.04–0.05 % of samples more than 0.25° low since
+            // ragged edge 0.010–0.011° RMS and 0.03–0.04 % of samples more than 0.25° low since
             // its sweep serves opposite azimuths and its guesses are searched afterwards
             // (0.021–0.025° and 0.14–0.17 % before; 0.33–0.37° and 0.27–0.31 % before its sweep
             // candidates and taps followed the rules above, 0.033–0.037° before candidates over

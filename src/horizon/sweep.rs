@@ -1147,6 +1147,9 @@ const ALT_SKIP: f64 = 0.03;
 /// observer: three cells, as far as a line beside the ray runs on past a data edge.
 const BACK_PX: f64 = 3.0;
 
+/// The longest gap (plane pixels) between close guesses that one exact search spans.
+const BRIDGE_PX: f64 = 2.0;
+
 /// Guesses nearer than this (plane pixels along the ray) have their hull neighbours
 /// evaluated on the observer's own ray too: up to 2.5 × the default near field, where the
 /// lines' ≤ 1 px lateral offset from the ray can still rank a crest below its neighbour.
@@ -1227,7 +1230,45 @@ pub(super) fn finish_pair(
                 let best = f64::from(guess.best[o]);
                 if best >= t - SKIP {
                     let (alt, sa) = (f64::from(guess.alt[o]), f64::from(guess.alt_s[o]));
-                    if sa.is_finite() && alt >= t - ALT_SKIP && (sa - sw).abs() <= 2.0 * WINDOW {
+                    if sw < NEIGHBOURS_WITHIN {
+                        // Close guesses: both lines' winners and those of their hull
+                        // neighbours that the ray sees above what it has (or cannot evaluate:
+                        // a cell with a no-data corner), searched in spans that bridge gaps
+                        // of up to [`BRIDGE_PX`] (the crest often lies between them).
+                        let mut at = [f64::NAN; 6];
+                        let mut n = 0;
+                        let mut add = |s: f64| {
+                            at[n] = s;
+                            n += 1;
+                        };
+                        add(sw);
+                        if sa.is_finite() && alt >= t - ALT_SKIP {
+                            add(sa);
+                        }
+                        for nb in guess.best_nb[o].into_iter().chain(guess.alt_nb[o]) {
+                            let nb = f64::from(nb);
+                            if nb > near_px {
+                                let v = ray.slope_on_surface(ctx, nb.min(out));
+                                if v > t || v == f64::NEG_INFINITY {
+                                    add(nb);
+                                }
+                            }
+                        }
+                        let at = &mut at[..n];
+                        at.sort_unstable_by(f64::total_cmp);
+                        let mut lo = at[0];
+                        for k in 0..at.len() {
+                            if k + 1 == at.len() || at[k + 1] - at[k] > BRIDGE_PX {
+                                t = search(lo, at[k], t);
+                                if k + 1 < at.len() {
+                                    lo = at[k + 1];
+                                }
+                            }
+                        }
+                    } else if sa.is_finite()
+                        && alt >= t - ALT_SKIP
+                        && (sa - sw).abs() <= 2.0 * WINDOW
+                    {
                         t = search(sw.min(sa), sw.max(sa), t);
                     } else {
                         let before = t;
@@ -1238,19 +1279,6 @@ pub(super) fn finish_pair(
                         // over other terrain, as at a data edge).
                         if sa.is_finite() && (alt >= t - ALT_SKIP || t == before) {
                             t = search(sa, sa, t);
-                        }
-                    }
-                    if sw < NEIGHBOURS_WITHIN {
-                        for nb in guess.best_nb[o].into_iter().chain(guess.alt_nb[o]) {
-                            let nb = f64::from(nb);
-                            if nb > near_px {
-                                // (−∞ at a data edge: inside a partial cell or over no
-                                // data, where only the search finds the ray's crossings.)
-                                let v = ray.slope_on_surface(ctx, nb.min(out));
-                                if v > t || v == f64::NEG_INFINITY {
-                                    t = search(nb, nb, v.max(t));
-                                }
-                            }
                         }
                     }
                 } else {
