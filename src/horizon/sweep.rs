@@ -449,6 +449,185 @@ impl Grid<'_> {
     }
 }
 
+/// One plane azimuth's family of parallel lines q = m + t·p over a raster ((p, q) = (major,
+/// minor) axes), one pixel apart along the minor axis, integer m: what both sweeps share.
+struct Lines<'a> {
+    ctx: &'a Context,
+    g: Grid<'a>,
+    xmajor: bool,
+    /// The look direction's major component, and dq/dp.
+    dp: f64,
+    t: f64,
+    /// −1 or +1: the sweep's direction along p (against the look direction).
+    step: i64,
+    /// The observers' rect in (p, q), and an observer's index steps for +1 in p and in q.
+    rp0: i64,
+    rp1: i64,
+    rq0: i64,
+    rq1: i64,
+    si: usize,
+    sj: usize,
+    /// The lines that bracket an observer.
+    m_lo: i64,
+    m_hi: i64,
+}
+
+impl<'a> Lines<'a> {
+    fn new(ctx: &'a Context, rect: Rect, phi: f64) -> Lines<'a> {
+        let (dx, dy) = (phi.cos(), -phi.sin());
+        let xmajor = dx.abs() >= dy.abs();
+        let (dp, dq) = if xmajor { (dx, dy) } else { (dy, dx) };
+        let t = dq / dp;
+        let look: i64 = if dp > 0.0 { 1 } else { -1 };
+        let g = if xmajor {
+            Grid {
+                h: &ctx.heights,
+                sp: 1,
+                sq: ctx.width,
+                np: ctx.width as i64,
+                nq: ctx.height as i64,
+            }
+        } else {
+            Grid {
+                h: &ctx.heights,
+                sp: ctx.width,
+                sq: 1,
+                np: ctx.height as i64,
+                nq: ctx.width as i64,
+            }
+        };
+        let (rp0, rp1, rq0, rq1) = if xmajor {
+            (rect.x0, rect.x0 + rect.w, rect.y0, rect.y0 + rect.h)
+        } else {
+            (rect.y0, rect.y0 + rect.h, rect.x0, rect.x0 + rect.w)
+        };
+        let (rp0, rp1, rq0, rq1) = (rp0 as i64, rp1 as i64, rq0 as i64, rq1 as i64);
+        let (si, sj) = if xmajor { (1, rect.w) } else { (rect.w, 1) };
+        let m_at = |p: i64, q: i64| q as f64 - t * p as f64;
+        let ms = [
+            m_at(rp0, rq0),
+            m_at(rp0, rq1 - 1),
+            m_at(rp1 - 1, rq0),
+            m_at(rp1 - 1, rq1 - 1),
+        ];
+        let m_lo = ms.iter().cloned().fold(f64::INFINITY, f64::min).floor() as i64 - 1;
+        let m_hi = ms.iter().cloned().fold(f64::NEG_INFINITY, f64::max).ceil() as i64 + 1;
+        Lines {
+            ctx,
+            g,
+            xmajor,
+            dp,
+            t,
+            step: -look,
+            rp0,
+            rp1,
+            rq0,
+            rq1,
+            si,
+            sj,
+            m_lo,
+            m_hi,
+        }
+    }
+
+    /// The face-plane point (not normalised) of raster position (p, q).
+    fn plane(&self, p: f64, q: f64) -> Vec3 {
+        let (n, ua, va) = self.ctx.face.axes();
+        let (x, y) = if self.xmajor { (p, q) } else { (q, p) };
+        let (u, v) = self.ctx.uv(x, y);
+        [
+            n[0] + u * ua[0] + v * va[0],
+            n[1] + u * ua[1] + v * va[1],
+            n[2] + u * ua[2] + v * va[2],
+        ]
+    }
+
+    /// Where line `mf` runs within a pixel of the raster inside [lo, hi] along p, as (start,
+    /// stop) in sweep order; None where nowhere.
+    fn span(&self, mf: f64, lo: i64, hi: i64) -> Option<(i64, i64)> {
+        let (t, nq) = (self.t, self.g.nq);
+        let (mut pa, mut pb) = (lo, hi);
+        if t != 0.0 {
+            let (e0, e1) = ((-1.0 - mf) / t, (nq as f64 - mf) / t);
+            let (lo, hi) = (e0.min(e1), e0.max(e1));
+            pa = pa.max(lo.floor() as i64);
+            pb = pb.min(hi.ceil() as i64);
+        } else if mf < -1.0 || mf > nq as f64 {
+            return None;
+        }
+        if pa > pb {
+            return None;
+        }
+        Some(if self.step < 0 { (pb, pa) } else { (pa, pb) })
+    }
+
+    /// Line `mf`'s frame between `start` and `stop`: A + p·B spans a plane through the body
+    /// centre; e1 = up at the middle of the swept range, e2 = the sweep direction. Returns
+    /// (A·e1, B·e1, A·e2, B·e2).
+    fn frame(&self, mf: f64, start: i64, stop: i64) -> (f64, f64, f64, f64) {
+        let (t, step) = (self.t, self.step);
+        let a_pt = self.plane(0.0, mf);
+        let b_pt = self.plane(1.0, mf + t);
+        let bv = [b_pt[0] - a_pt[0], b_pt[1] - a_pt[1], b_pt[2] - a_pt[2]];
+        let pm = 0.5 * (start + stop) as f64;
+        let e1 = normalize(self.plane(pm, mf + t * pm));
+        let sb = [
+            step as f64 * bv[0],
+            step as f64 * bv[1],
+            step as f64 * bv[2],
+        ];
+        let k = dot(sb, e1);
+        let e2 = normalize([sb[0] - k * e1[0], sb[1] - k * e1[1], sb[2] - k * e1[2]]);
+        (dot(a_pt, e1), dot(bv, e1), dot(a_pt, e2), dot(bv, e2))
+    }
+
+    /// Line `mf`'s samples from `start` to `stop` in sweep order, where it crosses pixel
+    /// columns and rows (exact bilinear values), appended to `ps` (line parameter) and `hs`;
+    /// `at_col(index, p, y, inside)` at each observer column p (y: the line's minor
+    /// coordinate there), before its own sample, which is there where `inside`.
+    fn samples(
+        &self,
+        mf: f64,
+        start: i64,
+        stop: i64,
+        ps: &mut Vec<f64>,
+        hs: &mut Vec<f32>,
+        mut at_col: impl FnMut(usize, i64, f64, bool),
+    ) {
+        let (g, t, nq) = (&self.g, self.t, self.g.nq);
+        let mut prev_y = f64::NAN;
+        let mut p = start;
+        loop {
+            let y = mf + t * p as f64;
+            // The row crossing between the previous column and this one lies ahead of this
+            // column's observers (one at most as |t| ≤ 1; none within 1e-6 px of a column,
+            // where it would duplicate the column's sample).
+            if !prev_y.is_nan() {
+                let (lo, hi) = if prev_y < y { (prev_y, y) } else { (y, prev_y) };
+                let kq = ceil(lo);
+                if kq > lo + 1e-6 && kq < hi - 1e-6 && kq >= 0.0 && kq <= (nq - 1) as f64 {
+                    let pc = (kq - mf) / t;
+                    ps.push(pc);
+                    hs.push(g.bilinear(pc, kq));
+                }
+            }
+            prev_y = y;
+            let inside = y >= 0.0 && y <= (nq - 1) as f64;
+            if p >= self.rp0 && p < self.rp1 {
+                at_col(ps.len(), p, y, inside);
+            }
+            if inside {
+                ps.push(p as f64);
+                hs.push(g.bilinear(p as f64, y));
+            }
+            if p == stop {
+                break;
+            }
+            p += self.step;
+        }
+    }
+}
+
 /// The far rings' sweep for one plane azimuth ([`super::far`]; a tile's own raster has
 /// [`sweep_pair`]): lines parallel to the look direction, one pixel apart
 /// along the minor axis, swept from the far end of the raster towards the observers, each
@@ -471,138 +650,42 @@ pub(super) fn sweep(
     scratch: &mut Scratch,
     observers: Option<&[f32]>,
 ) {
-    let (dx, dy) = (phi.cos(), -phi.sin());
-    let xmajor = dx.abs() >= dy.abs();
-    let (dp, dq) = if xmajor { (dx, dy) } else { (dy, dx) };
-    let t = dq / dp;
-    let look: i64 = if dp > 0.0 { 1 } else { -1 };
-    let step = -look;
-    let g = if xmajor {
-        Grid {
-            h: &ctx.heights,
-            sp: 1,
-            sq: ctx.width,
-            np: ctx.width as i64,
-            nq: ctx.height as i64,
-        }
-    } else {
-        Grid {
-            h: &ctx.heights,
-            sp: ctx.width,
-            sq: 1,
-            np: ctx.height as i64,
-            nq: ctx.width as i64,
-        }
-    };
-    let (np, nq) = (g.np, g.nq);
-    let (rp0, rp1, rq0, rq1) = if xmajor {
-        (rect.x0, rect.x0 + rect.w, rect.y0, rect.y0 + rect.h)
-    } else {
-        (rect.y0, rect.y0 + rect.h, rect.x0, rect.x0 + rect.w)
-    };
-    let (rp0, rp1, rq0, rq1) = (rp0 as i64, rp1 as i64, rq0 as i64, rq1 as i64);
-    // (i, j) offsets of an observer in `acc`: index = i·si + j·sj with (p, q) relative.
-    let (si, sj) = if xmajor { (1, rect.w) } else { (rect.w, 1) };
+    let lines = Lines::new(ctx, rect, phi);
+    let (g, dp, t, step) = (&lines.g, lines.dp, lines.t, lines.step);
+    let (nq, rq0, rq1, rp0, rp1) = (g.nq, lines.rq0, lines.rq1, lines.rp0, lines.rp1);
+    let (si, sj) = (lines.si, lines.sj);
     // Sweep from the raster's far end (in the look direction) to the observers' last column.
-    let (p_first, p_last) = if look > 0 {
-        (np - 1, rp0)
+    let (p_first, p_last) = if step < 0 {
+        (g.np - 1, rp0)
     } else {
         (0, rp1 - 1)
     };
-    // Lines q_m(p) = m + t·p that bracket an observer.
-    let m_at = |p: i64, q: i64| q as f64 - t * p as f64;
-    let ms = [
-        m_at(rp0, rq0),
-        m_at(rp0, rq1 - 1),
-        m_at(rp1 - 1, rq0),
-        m_at(rp1 - 1, rq1 - 1),
-    ];
-    let m_lo = ms.iter().cloned().fold(f64::INFINITY, f64::min).floor() as i64 - 1;
-    let m_hi = ms.iter().cloned().fold(f64::NEG_INFINITY, f64::max).ceil() as i64 + 1;
-    let (n, ua, va) = ctx.face.axes();
-    let plane = |p: f64, q: f64| -> Vec3 {
-        let (x, y) = if xmajor { (p, q) } else { (q, p) };
-        let (u, v) = ctx.uv(x, y);
-        [
-            n[0] + u * ua[0] + v * va[0],
-            n[1] + u * ua[1] + v * va[1],
-            n[2] + u * ua[2] + v * va[2],
-        ]
-    };
     let radius = ctx.radius_m;
-    for m in m_lo..=m_hi {
+    for m in lines.m_lo..=lines.m_hi {
         let mf = m as f64;
         // The part of the sweep where the line is within a pixel of the raster.
-        let (mut pa, mut pb) = (p_first.min(p_last), p_first.max(p_last));
-        if t != 0.0 {
-            let (e0, e1) = ((-1.0 - mf) / t, (nq as f64 - mf) / t);
-            let (lo, hi) = (e0.min(e1), e0.max(e1));
-            pa = pa.max(lo.floor() as i64);
-            pb = pb.min(hi.ceil() as i64);
-        } else if mf < -1.0 || mf > nq as f64 {
+        let Some((start, stop)) = lines.span(mf, p_first.min(p_last), p_first.max(p_last)) else {
             continue;
-        }
-        if pa > pb {
-            continue;
-        }
-        let (start, stop) = if step < 0 { (pb, pa) } else { (pa, pb) };
-        // Line frame: A + p·B spans a plane through the body centre; e1 = up at the middle of
-        // the swept range, e2 = the sweep direction.
-        let a_pt = plane(0.0, mf);
-        let b_pt = plane(1.0, mf + t);
-        let bv = [b_pt[0] - a_pt[0], b_pt[1] - a_pt[1], b_pt[2] - a_pt[2]];
-        let pm = 0.5 * (start + stop) as f64;
-        let e1 = normalize(plane(pm, mf + t * pm));
-        let sb = [
-            step as f64 * bv[0],
-            step as f64 * bv[1],
-            step as f64 * bv[2],
-        ];
-        let k = dot(sb, e1);
-        let e2 = normalize([sb[0] - k * e1[0], sb[1] - k * e1[1], sb[2] - k * e1[2]]);
+        };
+        let (a0, a1, b0, b1) = lines.frame(mf, start, stop);
         let mut hull = std::mem::take(&mut scratch.hull);
         hull.clear();
         let mut line = Line {
             pts: &mut hull,
-            a0: dot(a_pt, e1),
-            a1: dot(bv, e1),
-            b0: dot(a_pt, e2),
-            b1: dot(bv, e2),
+            a0,
+            a1,
+            b0,
+            b1,
         };
         // 1. The line's samples in sweep order, and where each observer column comes.
         let sc = &mut *scratch;
         sc.p.clear();
         sc.h.clear();
         sc.marks.clear();
-        let mut prev_y = f64::NAN;
-        let mut p = start;
-        loop {
-            let y = mf + t * p as f64;
-            // The row crossing between the previous column and this one lies ahead of this
-            // column's observers (one at most as |t| ≤ 1; none within 1e-6 px of a column,
-            // where it would duplicate the column's sample).
-            if !prev_y.is_nan() {
-                let (lo, hi) = if prev_y < y { (prev_y, y) } else { (y, prev_y) };
-                let kq = ceil(lo);
-                if kq > lo + 1e-6 && kq < hi - 1e-6 && kq >= 0.0 && kq <= (nq - 1) as f64 {
-                    let pc = (kq - mf) / t;
-                    sc.p.push(pc);
-                    sc.h.push(g.bilinear(pc, kq));
-                }
-            }
-            prev_y = y;
-            if p >= rp0 && p < rp1 {
-                sc.marks.push((sc.p.len(), p, y));
-            }
-            if y >= 0.0 && y <= (nq - 1) as f64 {
-                sc.p.push(p as f64);
-                sc.h.push(g.bilinear(p as f64, y));
-            }
-            if p == stop {
-                break;
-            }
-            p += step;
-        }
+        let marks = &mut sc.marks;
+        lines.samples(mf, start, stop, &mut sc.p, &mut sc.h, |i, p, y, _| {
+            marks.push((i, p, y))
+        });
         // 2. Their positions in the line's plane (independent: vectorised, no latency chain).
         let len = sc.p.len();
         sc.x.resize(len, 0.0);
@@ -810,88 +893,19 @@ pub(super) fn sweep_pair(
     if let Some(b) = back.as_deref_mut() {
         b.reset();
     }
-    let (dx, dy) = (phi.cos(), -phi.sin());
-    let xmajor = dx.abs() >= dy.abs();
-    let (dp, dq) = if xmajor { (dx, dy) } else { (dy, dx) };
-    let t = dq / dp;
-    let look: i64 = if dp > 0.0 { 1 } else { -1 };
-    let step = -look;
-    let g = if xmajor {
-        Grid {
-            h: &ctx.heights,
-            sp: 1,
-            sq: ctx.width,
-            np: ctx.width as i64,
-            nq: ctx.height as i64,
-        }
-    } else {
-        Grid {
-            h: &ctx.heights,
-            sp: ctx.width,
-            sq: 1,
-            np: ctx.height as i64,
-            nq: ctx.width as i64,
-        }
-    };
-    let (np, nq) = (g.np, g.nq);
-    let (rp0, rp1, rq0, rq1) = if xmajor {
-        (rect.x0, rect.x0 + rect.w, rect.y0, rect.y0 + rect.h)
-    } else {
-        (rect.y0, rect.y0 + rect.h, rect.x0, rect.x0 + rect.w)
-    };
-    let (rp0, rp1, rq0, rq1) = (rp0 as i64, rp1 as i64, rq0 as i64, rq1 as i64);
-    let (si, sj) = if xmajor { (1, rect.w) } else { (rect.w, 1) };
-    let m_at = |p: i64, q: i64| q as f64 - t * p as f64;
-    let ms = [
-        m_at(rp0, rq0),
-        m_at(rp0, rq1 - 1),
-        m_at(rp1 - 1, rq0),
-        m_at(rp1 - 1, rq1 - 1),
-    ];
-    let m_lo = ms.iter().cloned().fold(f64::INFINITY, f64::min).floor() as i64 - 1;
-    let m_hi = ms.iter().cloned().fold(f64::NEG_INFINITY, f64::max).ceil() as i64 + 1;
-    let (n, ua, va) = ctx.face.axes();
-    let plane = |p: f64, q: f64| -> Vec3 {
-        let (x, y) = if xmajor { (p, q) } else { (q, p) };
-        let (u, v) = ctx.uv(x, y);
-        [
-            n[0] + u * ua[0] + v * va[0],
-            n[1] + u * ua[1] + v * va[1],
-            n[2] + u * ua[2] + v * va[2],
-        ]
-    };
+    let lines = Lines::new(ctx, rect, phi);
+    let (g, dp) = (&lines.g, lines.dp);
+    let (rp0, rq0, rq1, si, sj) = (lines.rp0, lines.rq0, lines.rq1, lines.si, lines.sj);
     let radius = ctx.radius_m;
     let inv_dp = 1.0 / dp.abs();
     // Samples nearer than the near field along the ray, in major-axis pixels.
     let lag = near_px * dp.abs();
-    for m in m_lo..=m_hi {
+    for m in lines.m_lo..=lines.m_hi {
         let mf = m as f64;
-        let (mut pa, mut pb) = (0, np - 1);
-        if t != 0.0 {
-            let (e0, e1) = ((-1.0 - mf) / t, (nq as f64 - mf) / t);
-            let (lo, hi) = (e0.min(e1), e0.max(e1));
-            pa = pa.max(lo.floor() as i64);
-            pb = pb.min(hi.ceil() as i64);
-        } else if mf < -1.0 || mf > nq as f64 {
+        let Some((start, stop)) = lines.span(mf, 0, g.np - 1) else {
             continue;
-        }
-        if pa > pb {
-            continue;
-        }
-        let (start, stop) = if step < 0 { (pb, pa) } else { (pa, pb) };
-        let a_pt = plane(0.0, mf);
-        let b_pt = plane(1.0, mf + t);
-        let bv = [b_pt[0] - a_pt[0], b_pt[1] - a_pt[1], b_pt[2] - a_pt[2]];
-        let pm = 0.5 * (start + stop) as f64;
-        let e1 = normalize(plane(pm, mf + t * pm));
-        let sb = [
-            step as f64 * bv[0],
-            step as f64 * bv[1],
-            step as f64 * bv[2],
-        ];
-        let k = dot(sb, e1);
-        let e2 = normalize([sb[0] - k * e1[0], sb[1] - k * e1[1], sb[2] - k * e1[2]]);
-        let (a0, a1, b0, b1) = (dot(a_pt, e1), dot(bv, e1), dot(a_pt, e2), dot(bv, e2));
+        };
+        let (a0, a1, b0, b1) = lines.frame(mf, start, stop);
         // 1. The line's samples in the look direction's sweep order (from `phi`'s far end),
         // and where each observer column comes: its index, whether the column's own sample
         // is there, and the column's unit direction in the line's plane.
@@ -899,42 +913,19 @@ pub(super) fn sweep_pair(
         sc.p.clear();
         sc.h.clear();
         sc.cols.clear();
-        let mut prev_y = f64::NAN;
-        let mut p = start;
-        loop {
-            let y = mf + t * p as f64;
-            if !prev_y.is_nan() {
-                let (lo, hi) = if prev_y < y { (prev_y, y) } else { (y, prev_y) };
-                let kq = ceil(lo);
-                if kq > lo + 1e-6 && kq < hi - 1e-6 && kq >= 0.0 && kq <= (nq - 1) as f64 {
-                    let pc = (kq - mf) / t;
-                    sc.p.push(pc);
-                    sc.h.push(g.bilinear(pc, kq));
-                }
-            }
-            prev_y = y;
-            let inside = y >= 0.0 && y <= (nq - 1) as f64;
-            if p >= rp0 && p < rp1 {
-                let (a, b) = (a0 + p as f64 * a1, b0 + p as f64 * b1);
-                let inv = 1.0 / (a * a + b * b).sqrt();
-                sc.cols.push(Col {
-                    at: sc.p.len(),
-                    own: inside,
-                    p,
-                    y,
-                    ux: b * inv,
-                    uy: a * inv,
-                });
-            }
-            if inside {
-                sc.p.push(p as f64);
-                sc.h.push(g.bilinear(p as f64, y));
-            }
-            if p == stop {
-                break;
-            }
-            p += step;
-        }
+        let cols = &mut sc.cols;
+        lines.samples(mf, start, stop, &mut sc.p, &mut sc.h, |at, p, y, own| {
+            let (a, b) = (a0 + p as f64 * a1, b0 + p as f64 * b1);
+            let inv = 1.0 / (a * a + b * b).sqrt();
+            cols.push(Col {
+                at,
+                own,
+                p,
+                y,
+                ux: b * inv,
+                uy: a * inv,
+            });
+        });
         if sc.cols.is_empty() {
             continue;
         }
