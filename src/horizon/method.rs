@@ -146,17 +146,21 @@ fn fast(
     }
     let nodata = near::NoData::new(ctx);
     // Azimuths k and k + a/2 look along the same lines: swept together where a is even.
-    let one = |b: &mut FastBuffers, k: usize, guess: &sweep::Guesses, dst: &mut [f32]| {
+    let one = |ns: &mut near::NearScratch,
+               near: &mut [f64],
+               k: usize,
+               guess: &sweep::Guesses,
+               dst: &mut [f32]| {
         let az = Azimuth::new(ctx, plane_azimuth(k, a));
         let walk = near::NearWalk::new(&az, near_px);
-        near::near_field(ctx, rect, &az, &walk, geo, &nodata, &mut b.ns, &mut b.near);
+        near::near_field(ctx, rect, &az, &walk, geo, &nodata, ns, near);
         sweep::finish_pair(
             ctx,
             rect,
             &az,
             near_px,
             geo,
-            &b.near,
+            near,
             guess,
             &[],
             with_slope0,
@@ -171,40 +175,33 @@ fn fast(
             .for_each_init(
                 || FastBuffers::new(plane),
                 |b, (k, (d0, d1))| {
-                    let (mut g0, mut g1) = (
-                        std::mem::replace(&mut b.ahead, sweep::Guesses::new(0)),
-                        std::mem::replace(&mut b.back, sweep::Guesses::new(0)),
-                    );
-                    sweep::sweep_pair(
-                        ctx,
-                        rect,
-                        plane_azimuth(k, a),
-                        near_px,
-                        &mut g0,
-                        Some(&mut g1),
-                        &mut b.sweep,
-                    );
-                    one(b, k, &g0, d0);
-                    one(b, k + a / 2, &g1, d1);
-                    (b.ahead, b.back) = (g0, g1);
+                    let FastBuffers {
+                        near,
+                        ahead,
+                        back,
+                        sweep: lines,
+                        ns,
+                    } = b;
+                    let phi = plane_azimuth(k, a);
+                    sweep::sweep_pair(ctx, rect, phi, near_px, ahead, Some(back), lines);
+                    one(ns, near, k, ahead, d0);
+                    one(ns, near, k + a / 2, back, d1);
                 },
             );
     } else {
         out.par_chunks_mut(plane).enumerate().for_each_init(
             || FastBuffers::new(plane),
             |b, (k, dst)| {
-                let mut g0 = std::mem::replace(&mut b.ahead, sweep::Guesses::new(0));
-                sweep::sweep_pair(
-                    ctx,
-                    rect,
-                    plane_azimuth(k, a),
-                    near_px,
-                    &mut g0,
-                    None,
-                    &mut b.sweep,
-                );
-                one(b, k, &g0, dst);
-                b.ahead = g0;
+                let FastBuffers {
+                    near,
+                    ahead,
+                    sweep: lines,
+                    ns,
+                    ..
+                } = b;
+                let phi = plane_azimuth(k, a);
+                sweep::sweep_pair(ctx, rect, phi, near_px, ahead, None, lines);
+                one(ns, near, k, ahead, dst);
             },
         );
     }

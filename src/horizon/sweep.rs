@@ -290,42 +290,17 @@ impl Line<'_> {
 
     #[inline]
     fn push(&mut self, q: Pt) {
-        // Pop while the top is on the body's side of (or on) the segment from the one below it
-        // to the new point: the chain keeps turning clockwise.
-        while self.pts.len() >= 2 {
-            let n = self.pts.len();
-            if cross(self.pts[n - 2], self.pts[n - 1], q) >= 0.0 {
-                self.pts.pop();
-            } else {
-                break;
-            }
-        }
-        self.pts.push(q);
+        hull_push(self.pts, q);
     }
 
     /// The profile point seen highest from observer `o`, or None when the profile is empty.
     /// `finger` is where the last search on this line ended.
     #[inline]
     fn query(&self, o: Pt, finger: &mut usize) -> Option<usize> {
-        let h = &self.pts[..];
-        if h.is_empty() {
+        if self.pts.is_empty() {
             return None;
         }
-        // `better(a, b)`: a is seen higher than b from o.
-        let better = |a: Pt, b: Pt| cross(o, a, b) > 0.0;
-        // Seen from o the elevation along the hull is unimodal: climb from the finger.
-        let mut i = (*finger).min(h.len() - 1);
-        if i + 1 < h.len() && better(h[i + 1], h[i]) {
-            while i + 1 < h.len() && better(h[i + 1], h[i]) {
-                i += 1;
-            }
-        } else {
-            while i > 0 && better(h[i - 1], h[i]) {
-                i -= 1;
-            }
-        }
-        *finger = i;
-        Some(i)
+        Some(query_hull(self.pts, o, finger))
     }
 }
 
@@ -1053,7 +1028,7 @@ fn observers_of(
 }
 
 /// Pop while the top is on the body's side of (or on) the segment from the one below it to
-/// `q`, then push `q` (as [`Line::push`]).
+/// `q` (the chain keeps turning clockwise), then push `q`.
 #[inline(always)]
 fn hull_push(pts: &mut Vec<Pt>, q: Pt) {
     while pts.len() >= 2 {
@@ -1112,7 +1087,9 @@ fn ask(
     }
 }
 
-/// [`Line::query`] over a bare hull.
+/// The index of the hull vertex seen highest from observer `o` (`h` not empty), climbing from
+/// `finger`, where the last search on this hull ended: seen from o the elevation along the
+/// hull is unimodal.
 #[inline(always)]
 fn query_hull(h: &[Pt], o: Pt, finger: &mut usize) -> usize {
     let better = |a: Pt, b: Pt| cross(o, a, b) > 0.0;
