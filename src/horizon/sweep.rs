@@ -938,7 +938,7 @@ pub(super) fn sweep_pair(
                 next += 1;
             }
             ask(
-                &g,
+                g,
                 &hull,
                 c,
                 1.0,
@@ -972,7 +972,7 @@ pub(super) fn sweep_pair(
                     }
                 }
                 ask(
-                    &g,
+                    g,
                     &hull,
                     c,
                     -1.0,
