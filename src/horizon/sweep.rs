@@ -505,6 +505,26 @@ impl<'a> Lines<'a> {
         }
     }
 
+    /// The observers (index in the rect, minor coordinate) that a line, passing observer
+    /// column `p` at minor coordinate `y`, brackets there: the one at or above it (side 0)
+    /// and the one below (side 1), where inside the rect; a line through an observer
+    /// brackets it on side 0 only.
+    #[inline(always)]
+    fn observers(&self, p: i64, y: f64) -> [Option<(usize, i64)>; 2] {
+        let qa = ceil(y);
+        let f = qa - y;
+        let qa = qa as i64;
+        let mut out = [None, None];
+        for (side, (q0, w)) in [(qa, 1.0 - f), (qa - 1, f)].into_iter().enumerate() {
+            if w <= 0.0 || q0 < self.rq0 || q0 >= self.rq1 {
+                continue;
+            }
+            let idx = (p - self.rp0) as usize * self.si + (q0 - self.rq0) as usize * self.sj;
+            out[side] = Some((idx, q0));
+        }
+        out
+    }
+
     /// The face-plane point (not normalised) of raster position (p, q).
     fn plane(&self, p: f64, q: f64) -> Vec3 {
         let (n, ua, va) = self.ctx.face.axes();
@@ -627,8 +647,7 @@ pub(super) fn sweep(
 ) {
     let lines = Lines::new(ctx, rect, phi);
     let (g, dp, t, step) = (&lines.g, lines.dp, lines.t, lines.step);
-    let (nq, rq0, rq1, rp0, rp1) = (g.nq, lines.rq0, lines.rq1, lines.rp0, lines.rp1);
-    let (si, sj) = (lines.si, lines.sj);
+    let (nq, rp0, rp1) = (g.nq, lines.rp0, lines.rp1);
     // Sweep from the raster's far end (in the look direction) to the observers' last column.
     let (p_first, p_last) = if step < 0 {
         (g.np - 1, rp0)
@@ -683,14 +702,10 @@ pub(super) fn sweep(
             while mi < sc.marks.len() && sc.marks[mi].0 == i {
                 let (_, p, y) = sc.marks[mi];
                 mi += 1;
-                let qa = ceil(y);
-                let f = qa - y;
-                let qa = qa as i64;
-                for (side, q0, w) in [(0, qa, 1.0 - f), (1, qa - 1, f)] {
-                    if w <= 0.0 || q0 < rq0 || q0 >= rq1 {
+                for (side, found) in lines.observers(p, y).into_iter().enumerate() {
+                    let Some((idx, q0)) = found else {
                         continue;
-                    }
-                    let idx = (p - rp0) as usize * si + (q0 - rq0) as usize * sj;
+                    };
                     let h0 = match observers {
                         Some(h) => h[idx],
                         None => g.at(p, q0),
@@ -870,7 +885,6 @@ pub(super) fn sweep_pair(
     }
     let lines = Lines::new(ctx, rect, phi);
     let (g, dp) = (&lines.g, lines.dp);
-    let (rp0, rq0, rq1, si, sj) = (lines.rp0, lines.rq0, lines.rq1, lines.si, lines.sj);
     let radius = ctx.radius_m;
     let inv_dp = 1.0 / dp.abs();
     // Samples nearer than the near field along the ray, in major-axis pixels.
@@ -937,17 +951,7 @@ pub(super) fn sweep_pair(
                 }
                 next += 1;
             }
-            ask(
-                g,
-                &hull,
-                c,
-                1.0,
-                observers_of(c, rq0, rq1, rp0, si, sj),
-                radius,
-                inv_dp,
-                &mut fingers,
-                ahead,
-            );
+            ask(&lines, &hull, c, 1.0, inv_dp, &mut fingers, ahead);
         }
         // 4. The same line from the other end for `phi` + π, mirrored (x → −x) so that the
         // hull is built the same way.
@@ -971,17 +975,7 @@ pub(super) fn sweep_pair(
                         );
                     }
                 }
-                ask(
-                    g,
-                    &hull,
-                    c,
-                    -1.0,
-                    observers_of(c, rq0, rq1, rp0, si, sj),
-                    radius,
-                    inv_dp,
-                    &mut fingers,
-                    bk,
-                );
+                ask(&lines, &hull, c, -1.0, inv_dp, &mut fingers, bk);
             }
         }
         sc.hull = hull;
@@ -1003,30 +997,6 @@ struct Col {
     uy: f64,
 }
 
-/// The (up to two) observers a line brackets at column `c`: (side, index in the rect, q).
-#[inline(always)]
-fn observers_of(
-    c: &Col,
-    rq0: i64,
-    rq1: i64,
-    rp0: i64,
-    si: usize,
-    sj: usize,
-) -> [Option<(usize, usize, i64)>; 2] {
-    let qa = ceil(c.y);
-    let f = qa - c.y;
-    let qa = qa as i64;
-    let mut out = [None, None];
-    for (k, (side, q0, w)) in [(0, qa, 1.0 - f), (1, qa - 1, f)].into_iter().enumerate() {
-        if w <= 0.0 || q0 < rq0 || q0 >= rq1 {
-            continue;
-        }
-        let idx = (c.p - rp0) as usize * si + (q0 - rq0) as usize * sj;
-        out[k] = Some((side, idx, q0));
-    }
-    out
-}
-
 /// Pop while the top is on the body's side of (or on) the segment from the one below it to
 /// `q` (the chain keeps turning clockwise), then push `q`.
 #[inline(always)]
@@ -1044,15 +1014,12 @@ fn hull_push(pts: &mut Vec<Pt>, q: Pt) {
 
 /// The observers of column `c` ask the hull (`mirror`: −1 for the reversed sweep) for the
 /// vertex they see highest, placed on the line at their own height; the answers go to `out`.
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn ask(
-    g: &Grid,
+    lines: &Lines,
     hull: &[Pt],
     c: &Col,
     mirror: f64,
-    obs: [Option<(usize, usize, i64)>; 2],
-    radius: f64,
     inv_dp: f64,
     fingers: &mut [usize; 2],
     out: &mut Guesses,
@@ -1060,12 +1027,15 @@ fn ask(
     if hull.is_empty() {
         return;
     }
-    for (side, idx, q0) in obs.into_iter().flatten() {
-        let h0 = g.at(c.p, q0);
+    for (side, found) in lines.observers(c.p, c.y).into_iter().enumerate() {
+        let Some((idx, q0)) = found else {
+            continue;
+        };
+        let h0 = lines.g.at(c.p, q0);
         if h0.is_nan() {
             continue;
         }
-        let r = radius + h0 as f64;
+        let r = lines.ctx.radius_m + h0 as f64;
         let o = Pt {
             x: mirror * c.ux * r,
             y: c.uy * r,
