@@ -813,51 +813,56 @@ pub(super) fn sweep(
 /// best slope one of its two bracketing lines estimates (the observer placed on that line at
 /// its own column and height) and where, in plane pixels along the ray, and the other line's.
 /// Estimates only guide [`finish_pair`]'s exact searches on the observer's own ray.
-pub(super) struct Guesses {
-    pub(super) best: Vec<f32>,
-    pub(super) best_s: Vec<f32>,
-    pub(super) alt: Vec<f32>,
-    pub(super) alt_s: Vec<f32>,
+pub(super) struct Guesses(Vec<Guess>);
+
+/// One observer's [`Guesses`], kept together: the sweep offers them in the lines' order, which
+/// crosses the rows, so one record is one cache line touched where six arrays were six.
+#[derive(Clone, Copy)]
+pub(super) struct Guess {
+    pub(super) best: f32,
+    pub(super) best_s: f32,
+    pub(super) alt: f32,
+    pub(super) alt_s: f32,
     /// The distances of the hull vertices on either side of each line's winner (farther,
     /// nearer): crests the line sees just below its winner.
-    pub(super) best_nb: Vec<[f32; 2]>,
-    pub(super) alt_nb: Vec<[f32; 2]>,
+    pub(super) best_nb: [f32; 2],
+    pub(super) alt_nb: [f32; 2],
+}
+
+impl Guess {
+    const NONE: Guess = Guess {
+        best: f32::NEG_INFINITY,
+        best_s: f32::NAN,
+        alt: f32::NEG_INFINITY,
+        alt_s: f32::NAN,
+        best_nb: [f32::NAN; 2],
+        alt_nb: [f32::NAN; 2],
+    };
 }
 
 impl Guesses {
     pub(super) fn new(n: usize) -> Guesses {
-        Guesses {
-            best: vec![f32::NEG_INFINITY; n],
-            best_s: vec![f32::NAN; n],
-            alt: vec![f32::NEG_INFINITY; n],
-            alt_s: vec![f32::NAN; n],
-            best_nb: vec![[f32::NAN; 2]; n],
-            alt_nb: vec![[f32::NAN; 2]; n],
-        }
+        Guesses(vec![Guess::NONE; n])
     }
 
     fn reset(&mut self) {
-        self.best.fill(f32::NEG_INFINITY);
-        self.best_s.fill(f32::NAN);
-        self.alt.fill(f32::NEG_INFINITY);
-        self.alt_s.fill(f32::NAN);
-        self.best_nb.fill([f32::NAN; 2]);
-        self.alt_nb.fill([f32::NAN; 2]);
+        self.0.fill(Guess::NONE);
     }
 
     #[inline(always)]
     fn offer(&mut self, idx: usize, slope: f32, s: f32, nb: [f32; 2]) {
-        if slope > self.best[idx] {
-            self.alt[idx] = self.best[idx];
-            self.alt_s[idx] = self.best_s[idx];
-            self.alt_nb[idx] = self.best_nb[idx];
-            self.best[idx] = slope;
-            self.best_s[idx] = s;
-            self.best_nb[idx] = nb;
-        } else if slope > self.alt[idx] {
-            self.alt[idx] = slope;
-            self.alt_s[idx] = s;
-            self.alt_nb[idx] = nb;
+        let g = &mut self.0[idx];
+        if slope > g.best {
+            g.alt = g.best;
+            g.alt_s = g.best_s;
+            g.alt_nb = g.best_nb;
+            g.best = slope;
+            g.best_s = s;
+            g.best_nb = nb;
+        } else if slope > g.alt {
+            g.alt = slope;
+            g.alt_s = s;
+            g.alt_nb = nb;
         }
     }
 }
@@ -1148,7 +1153,8 @@ pub(super) fn finish_pair(
             }
             let ray = Ray::from_parts(ctx, x, y, &geo[o], az);
             let mut t = near[o];
-            let sw = f64::from(guess.best_s[o]);
+            let gs = guess.0[o];
+            let sw = f64::from(gs.best_s);
             if sw.is_finite() {
                 let out = exit(x as f64, y as f64);
                 // The ray searched exactly over [lo − WINDOW, hi + WINDOW] beyond the near
@@ -1165,9 +1171,9 @@ pub(super) fn finish_pair(
                     ray.max_over(ctx, (lo - WINDOW).max(near_px), hi + WINDOW, t)
                         .0
                 };
-                let best = f64::from(guess.best[o]);
+                let best = f64::from(gs.best);
                 if best >= t - SKIP {
-                    let (alt, sa) = (f64::from(guess.alt[o]), f64::from(guess.alt_s[o]));
+                    let (alt, sa) = (f64::from(gs.alt), f64::from(gs.alt_s));
                     if sw < NEIGHBOURS_WITHIN {
                         // Close guesses: both lines' winners and those of their hull
                         // neighbours that the ray sees above what it has (or cannot evaluate:
@@ -1183,7 +1189,7 @@ pub(super) fn finish_pair(
                         if sa.is_finite() && alt >= t - ALT_SKIP {
                             add(sa);
                         }
-                        for nb in guess.best_nb[o].into_iter().chain(guess.alt_nb[o]) {
+                        for nb in gs.best_nb.into_iter().chain(gs.alt_nb) {
                             let nb = f64::from(nb);
                             if nb > near_px {
                                 let v = ray.slope_on_surface(ctx, nb.min(out));
