@@ -711,6 +711,8 @@ fn fast_stays_below_exact_at_a_real_data_edge() {
         "64",
     ]);
     let horizon = |method: &str| -> Vec<(f32, bool)> {
+        // A 256-px fine margin (the default is 1024) so that the fast method's far rings meet
+        // the data edge too.
         run(&[
             "horizon",
             o,
@@ -722,6 +724,8 @@ fn fast_stays_below_exact_at_a_real_data_edge() {
             "f32",
             "--method",
             method,
+            "--fine-margin-px",
+            "256",
         ]);
         let ts = penumbra::manifest::Tileset::load(&out).unwrap();
         let mut v = Vec::new();

@@ -45,9 +45,13 @@ type PxBox = (i64, i64, i64, i64);
 pub(crate) type Covers = HashMap<(u8, Face), Option<PxBox>>;
 
 /// The fast method's full-resolution margin (`--fine-margin-px`) when none is given: two tile
-/// widths, at least 256 px (1024 px around the default 512-px tiles).
+/// widths, at least 1024 px (1024 px around the default 512-px tiles). The far rings' error
+/// grows as the margin shrinks, with the terrain's relief: at 256 px around 128-px tiles it
+/// was 0.002° RMS on Gale but 0.033° RMS (3.1° worst) on Hawaiʻi's volcanoes, at 1024 px
+/// 0.0007° and 0.0017° (docs/benchmarks.md, far rings re-run 2026-12-04), so small tiles get
+/// the default tiles' margin rather than one that scales down with them.
 pub fn default_fine_margin_px(tile_size: u32) -> u64 {
-    (2 * u64::from(tile_size)).max(256)
+    (2 * u64::from(tile_size)).max(1024)
 }
 /// Bounds of `--fine-margin-px`.
 pub const FINE_MARGIN_PX: std::ops::RangeInclusive<u64> = 16..=65536;
@@ -746,6 +750,9 @@ pub fn build_horizons(
     let n = lay.tile_size as usize;
     let height_path = &ts.products.height.as_ref().expect("checked").path;
     let spec = opts.stage();
+    let fine_margin = opts
+        .fine_margin_px
+        .unwrap_or_else(|| default_fine_margin_px(lay.tile_size));
     let run_key = runner::run_key(
         &spec,
         &[&ts.run_key],
@@ -753,6 +760,8 @@ pub fn build_horizons(
             height_path.as_bytes(),
             serde_json::to_string(opts).unwrap_or_default().as_bytes(),
             format!("{tmin} {tmax}").as_bytes(),
+            // The margin in effect, so that a changed default recomputes.
+            format!("fine margin {fine_margin}").as_bytes(),
         ],
     );
     let streamed =
@@ -798,9 +807,6 @@ pub fn build_horizons(
     };
 
     let mut covers = HashMap::new();
-    let fine_margin = opts
-        .fine_margin_px
-        .unwrap_or_else(|| default_fine_margin_px(lay.tile_size));
     let mut dist: Vec<HorizonLevelDistance> = levels
         .iter()
         .map(|&level| HorizonLevelDistance {

@@ -407,7 +407,7 @@ struct HorizonFlags {
     /// How far (pixels) around a tile the fast method reads its level's terrain; beyond that,
     /// out to the whole reach, it sees far rings of coarser levels, each ring pixel no wider
     /// seen from the tile than a pixel at this distance (16..=65536; larger is slower, closer
-    /// to the exact method and needs more memory; default two tile widths, at least 256).
+    /// to the exact method and needs more memory; default two tile widths, at least 1024).
     #[arg(long)]
     fine_margin_px: Option<u64>,
 }
