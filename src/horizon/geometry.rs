@@ -369,10 +369,7 @@ impl Ray {
         if v.is_nan() {
             return f64::NEG_INFINITY;
         }
-        let (a, b) = (self.a0 + s * self.a1, s * self.b1);
-        let n = (a * a + b * b).sqrt();
-        let r = ctx.radius_m + v;
-        (r * a - self.r0 * n) / (r * b)
+        self.slope_of(ctx, s, v)
     }
 
     /// As [`Ray::slope_at`], but −∞ inside a cell with a no-data corner, where
@@ -395,20 +392,25 @@ impl Ray {
         (r * a - self.r0 * n) / (r * b)
     }
 
-    /// Whether terrain of height `h` at distance `s` certainly has a slope no higher than
-    /// `best`, decided without [`Ray::slope_of`]'s square root and division: with
+    /// [`Ray::slope_of`] of terrain of height `h` at distance `s` where it is above `best`,
+    /// else `None`, mostly decided without its square root and division: with
     /// ‖(a,b)‖ ≥ a the slope is at most (h − h0)·a/(r·b), which lies above it by
-    /// r0·(‖(a,b)‖ − a)/(r·b) ≈ ψ/2 (ψ: the angle at the body's centre). Taken only where
-    /// ψ > 1e-7 (beyond 0.03 px on a 5 m/px Moon): there that gap is ≥ 25× what rounding
-    /// can add to `slope_of`'s value (≈ 2e-16/ψ, from its r·a − r0·‖(a,b)‖), and the test
-    /// leaves 1e-12 relative margin for its own rounding, so a point it drops is one
-    /// `slope_of` would not have raised `best` with: same bytes, fewer roots and divisions.
+    /// r0·(‖(a,b)‖ − a)/(r·b) ≈ ψ/2 (ψ: the angle at the body's centre). That bound is trusted
+    /// only where ψ > 1e-7 (beyond 0.03 px on a 5 m/px Moon): there the gap is ≥ 25× what
+    /// rounding can add to the exact formula's value (≈ 2e-16/ψ, from its r·a − r0·‖(a,b)‖),
+    /// and the test leaves 1e-12 relative margin for its own rounding, so a point it drops is
+    /// one whose exact slope would not have been above `best`.
     #[inline(always)]
-    fn cannot_beat(&self, ctx: &Context, s: f64, h: f64, best: f64) -> bool {
+    fn slope_if_above(&self, ctx: &Context, s: f64, h: f64, best: f64) -> Option<f64> {
         let (a, b) = (self.a0 + s * self.a1, s * self.b1);
         let rb = (ctx.radius_m + h) * b;
         let (num, lim) = ((h - self.h0) * a, best * rb);
-        b > 1e-7 * a && a > 0.0 && rb > 0.0 && num < lim - 1e-12 * (num.abs() + lim.abs())
+        if b > 1e-7 * a && a > 0.0 && rb > 0.0 && num < lim - 1e-12 * (num.abs() + lim.abs()) {
+            return None;
+        }
+        // Inlined, the compiler shares a, b and r with the screen above.
+        let sl = self.slope_of(ctx, s, h);
+        (sl > best).then_some(sl)
     }
 
     /// The largest slope over the continuous bilinear surface along the ray for s in
@@ -471,12 +473,7 @@ impl Ray {
                 let c1 = a * self.cx + b * self.cy + c * (ex * self.cy + ey * self.cx);
                 let c2 = c * self.cx * self.cy;
                 let mut try_at = |st: f64| {
-                    let h = c0 + st * (c1 + st * c2);
-                    if self.cannot_beat(ctx, st, h, best) {
-                        return;
-                    }
-                    let sl = self.slope_of(ctx, st, h);
-                    if sl > best {
+                    if let Some(sl) = self.slope_if_above(ctx, st, c0 + st * (c1 + st * c2), best) {
                         best = sl;
                         at = st;
                     }
@@ -606,6 +603,59 @@ pub fn compass_azimuth_deg(face: Face, u: f64, v: f64, phi: f64) -> f64 {
 #[cfg(test)]
 mod poly_check {
     use super::*;
+
+    /// The screen in [`Ray::slope_if_above`] never drops a point whose exact slope is above
+    /// `best`, and keeps the exact slope's bytes: random bodies (a 5 m/px Moon to 10 km/px
+    /// Mars pixels), observers across the face, distances from 1e-3 px to 5000 px, heights
+    /// over ±10 km, and `best` just below, at and just above the exact slope, and far off.
+    #[test]
+    fn slope_screen_drops_only_points_below_best() {
+        let mut rnd = crate::testutil::rng(0x51_09E5);
+        let mut screened = 0usize;
+        for trial in 0..400 {
+            let (radius, pixel) = [
+                (1_737_400.0, 5.0),
+                (1_737_400.0, 7_600.0),
+                (3_396_190.0, 463.0),
+                (3_396_190.0, 10_000.0),
+                (6_371_008.8, 30.0),
+            ][trial % 5];
+            let fp = (2.0f64 * radius / pixel).round();
+            let ctx = Context {
+                face: Face::Px,
+                face_pixels: fp,
+                origin: ((fp * rnd() * 0.9) as i64, (fp * rnd() * 0.9) as i64),
+                width: 4,
+                height: 4,
+                heights: (0..16).map(|_| (rnd() * 4000.0 - 2000.0) as f32).collect(),
+                radius_m: radius,
+            };
+            let ray = Ray::toward(&ctx, 1, 2, rnd() * std::f64::consts::TAU);
+            for _ in 0..200 {
+                let st = 10f64.powf(rnd() * 6.7 - 3.0);
+                let h = rnd() * 20_000.0 - 10_000.0;
+                let exact = ray.slope_of(&ctx, st, h);
+                let off = exact.abs().max(1e-3) * 10f64.powf(rnd() * 4.0 - 6.0);
+                for best in [
+                    f64::NEG_INFINITY,
+                    exact - off,
+                    exact.next_down(),
+                    exact,
+                    exact + off,
+                ] {
+                    let got = ray.slope_if_above(&ctx, st, h, best);
+                    let want = (exact > best).then_some(exact);
+                    assert_eq!(
+                        got.map(f64::to_bits),
+                        want.map(f64::to_bits),
+                        "R {radius}, {pixel} m/px, s {st}, h {h}, best {best}: exact {exact}"
+                    );
+                    screened += (got.is_none() && best < exact + off) as usize;
+                }
+            }
+        }
+        assert!(screened > 1000, "the screen took only {screened} points");
+    }
 
     #[test]
     fn cell_polynomial_equals_bilinear() {
