@@ -353,6 +353,12 @@ impl Ray {
         Ray::from_parts(ctx, x, y, &g, &Azimuth::new(ctx, phi))
     }
 
+    /// The observer's height above the reference sphere (m).
+    #[inline]
+    pub(crate) fn height(&self) -> f64 {
+        self.h0
+    }
+
     /// Ground metres per plane pixel along the ray at the observer: r0·dψ/ds = r0·b1/a0.
     #[inline]
     pub(crate) fn ground_per_px(&self) -> f64 {

@@ -401,8 +401,22 @@ mod tests {
             let az = Azimuth::new(ctx, phi);
             let walk = near::NearWalk::new(&az, near_px);
             near::near_field(ctx, rect, &az, &walk, &geo, &nodata, &mut b.ns, &mut b.near);
-            let mut guess = sweep::Guesses::new(plane);
-            sweep::sweep_pair(ctx, rect, phi, near_px, &mut guess, None, &mut b.sweep);
+            // The guesses as the fast method makes them, azimuths k and k + a/2 swept
+            // together (a is even here): windows around other guesses may meet other cells
+            // and, by f32 or f64 evaluation, give a crest's slope to other bits.
+            assert!(a % 2 == 0);
+            let (mut ahead, mut back) = (sweep::Guesses::new(plane), sweep::Guesses::new(plane));
+            let pair_phi = plane_azimuth(k % (a / 2), a);
+            sweep::sweep_pair(
+                ctx,
+                rect,
+                pair_phi,
+                near_px,
+                &mut ahead,
+                Some(&mut back),
+                &mut b.sweep,
+            );
+            let guess = if k < a / 2 { ahead } else { back };
             let swept: Vec<RingBuffers> = rings
                 .iter()
                 .map(|ring| {

@@ -44,6 +44,9 @@ pub(super) struct NearWalk {
     segs: Vec<Seg>,
     /// The pixels the walk's cells touch, as offsets from the observer: [x0, x1) × [y0, y1).
     bbox: [i64; 4],
+    /// Per whole plane pixel d of distance, the first cell that reaches beyond d (s_hi > d):
+    /// where [`window`] starts looking for an interval's cells.
+    first: Vec<u32>,
 }
 
 impl NearWalk {
@@ -93,7 +96,20 @@ impl NearWalk {
                 b[3].max(sg.dy + 2),
             ]
         });
-        NearWalk { near, segs, bbox }
+        let mut first = Vec::with_capacity(near.ceil() as usize + 1);
+        let mut k = 0;
+        for d in 0..=near.ceil() as usize {
+            while k < segs.len() && f64::from(segs[k].s_hi) <= d as f64 {
+                k += 1;
+            }
+            first.push(k as u32);
+        }
+        NearWalk {
+            near,
+            segs,
+            bbox,
+            first,
+        }
     }
 }
 
@@ -308,6 +324,248 @@ fn row_generic(heights: &[f32], width: usize, base: usize, walk: &NearWalk, sc: 
     }
 }
 
+/// One observer's inputs to [`slope`] (as [`NearScratch::load`] computes them for a row).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Observer {
+    h0: f32,
+    r0: f32,
+    alpha: f32,
+    beta: f32,
+    kappa: f32,
+}
+
+impl Observer {
+    /// The inputs for the observer of `ray`.
+    #[inline]
+    pub(super) fn of(ray: &Ray) -> Observer {
+        let (h0, r0, n0) = (ray.height(), ray.r0, ray.a0);
+        let (alpha, beta) = (ray.a1 / n0, ray.b1 / n0);
+        let gm = r0 * beta;
+        Observer {
+            h0: h0 as f32,
+            r0: r0 as f32,
+            alpha: alpha as f32,
+            beta: beta as f32,
+            kappa: (gm * gm / (2.0 * r0)) as f32,
+        }
+    }
+}
+
+/// Lanes of [`window`]'s kernel: the cells of an interval are taken eight at a time.
+const LANES: usize = 8;
+
+/// A walk from a grid point out to the far side of a raster (as [`NearWalk`]), its cells laid
+/// out lane by lane for [`window`]: per cell the offset of its first corner from the observer
+/// in the raster (dy·width + dx), where the ray enters and leaves it, and its twelve weights.
+/// [`LANES`] copies of the last cell pad the end, so that a chunk of lanes never reads past it.
+pub(super) struct WindowWalk {
+    walk: NearWalk,
+    off: Vec<i64>,
+    s_lo: Vec<f32>,
+    s_hi: Vec<f32>,
+    w: [Vec<f32>; 12],
+}
+
+impl WindowWalk {
+    /// The walk along `az` across `ctx` (out to its width + height, beyond which no ray in it
+    /// reaches).
+    pub(super) fn new(ctx: &Context, az: &Azimuth) -> WindowWalk {
+        let walk = NearWalk::new(az, (ctx.width + ctx.height) as f64);
+        let n = walk.segs.len() + LANES;
+        let pad = |k: usize| &walk.segs[k.min(walk.segs.len() - 1)];
+        let width = ctx.width as i64;
+        let off = (0..n).map(|k| pad(k).dy * width + pad(k).dx).collect();
+        let s_lo = (0..n).map(|k| pad(k).s_lo).collect();
+        let s_hi = (0..n).map(|k| pad(k).s_hi).collect();
+        let w = std::array::from_fn(|c| (0..n).map(|k| pad(k).w[c / 4][c % 4]).collect());
+        WindowWalk {
+            walk,
+            off,
+            s_lo,
+            s_hi,
+            w,
+        }
+    }
+
+    /// The cells k0..k1 that the interval [`from`, `to`] meets, with the cell before (whose
+    /// end is where the first of them meets the ray: each point is then evaluated as the end
+    /// of its own cell, or its peak, whatever interval holds it, so overlapping windows give
+    /// its slope to the same bits); `None` for an empty interval.
+    fn cells(&self, from: f64, to: f64) -> Option<(usize, usize)> {
+        let walk = &self.walk;
+        let segs = &walk.segs;
+        // The first cell with s_hi > from, and the first after it with s_lo ≥ to: from the
+        // lookup by whole pixels, a pixel holds at most three cells.
+        let at = |s: f64| walk.first[(s.max(0.0) as usize).min(walk.first.len() - 1)] as usize;
+        let mut k0 = at(from);
+        while k0 < segs.len() && f64::from(segs[k0].s_hi) <= from {
+            k0 += 1;
+        }
+        let mut k1 = at(to).max(k0);
+        while k1 < segs.len() && f64::from(segs[k1].s_lo) < to {
+            k1 += 1;
+        }
+        (k0 < k1).then_some((k0.saturating_sub(1), k1))
+    }
+}
+
+/// The largest slope along the ray of observer (x, y) (raster pixel, inputs `ob`) over every
+/// cell of `ww` that the interval [`from`, `to`] of plane pixels meets, by the row kernel's
+/// f32 evaluation of each whole cell (where the ray leaves it and the slope's peak inside it):
+/// the points [`Ray::max_over`] evaluates over those cells, which are those it evaluates over
+/// the interval but its start (mid-cell; that start matters only where the parabolic curvature
+/// model misplaces a cell's peak, as on 14-km pixels of the Moon, where the whole-ray
+/// reference misses it too). −∞ for an empty interval; `None` where those cells leave the
+/// raster or touch no data, or the interval starts in the observer's own cell: the f64 search
+/// handles those.
+#[inline]
+pub(super) fn window(
+    ctx: &Context,
+    ww: &WindowWalk,
+    x: usize,
+    y: usize,
+    ob: &Observer,
+    from: f64,
+    to: f64,
+) -> Option<f32> {
+    let segs = &ww.walk.segs;
+    if from < f64::from(segs[0].s_hi) && from < to {
+        // The observer's own cell, where the slope may peak at the interval's start (towards
+        // the zero-distance limit) with no cell before whose end would hold it.
+        return None;
+    }
+    let Some((k0, k1)) = ww.cells(from, to) else {
+        return Some(f32::NEG_INFINITY);
+    };
+    // Along a walk each of dx, dy moves one way only: the first and last cells bound them.
+    let (first, last) = (&segs[k0], &segs[k1 - 1]);
+    let (x, y) = (x as i64, y as i64);
+    let (xa, xb) = (x + first.dx.min(last.dx), x + first.dx.max(last.dx) + 1);
+    let (ya, yb) = (y + first.dy.min(last.dy), y + first.dy.max(last.dy) + 1);
+    let (w, h) = (ctx.width as i64, ctx.height as i64);
+    if xa < 0 || ya < 0 || xb >= w || yb >= h {
+        return None;
+    }
+    let base = (y * w + x) as usize;
+    let (v, any) = window_cells(&ctx.heights, ctx.width, base, ww, ob, k0, k1);
+    if any.is_nan() {
+        return None;
+    }
+    Some(v)
+}
+
+/// [`window_cells_generic`], compiled for AVX-512 and AVX2 too and chosen at run time (the
+/// same IEEE operations in the same order in every build, as the row kernel's).
+#[inline]
+fn window_cells(
+    hs: &[f32],
+    width: usize,
+    base: usize,
+    ww: &WindowWalk,
+    ob: &Observer,
+    k0: usize,
+    k1: usize,
+) -> (f32, f32) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the CPU has AVX-512F, checked just above.
+            return unsafe { window_cells_avx512(hs, width, base, ww, ob, k0, k1) };
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2, checked just above.
+            return unsafe { window_cells_avx2(hs, width, base, ww, ob, k0, k1) };
+        }
+    }
+    window_cells_generic(hs, width, base, ww, ob, k0, k1)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn window_cells_avx512(
+    hs: &[f32],
+    width: usize,
+    base: usize,
+    ww: &WindowWalk,
+    ob: &Observer,
+    k0: usize,
+    k1: usize,
+) -> (f32, f32) {
+    window_cells_generic(hs, width, base, ww, ob, k0, k1)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn window_cells_avx2(
+    hs: &[f32],
+    width: usize,
+    base: usize,
+    ww: &WindowWalk,
+    ob: &Observer,
+    k0: usize,
+    k1: usize,
+) -> (f32, f32) {
+    window_cells_generic(hs, width, base, ww, ob, k0, k1)
+}
+
+/// The largest slope over cells k0..k1 of `ww` (where each leaves the ray, and its peak
+/// inside), [`LANES`] cells at a time, and the sum of their corners (NaN where one has no
+/// data). Lanes past k1 evaluate cell k1 − 1's corners again and are left out. (Indexed by
+/// lane across several arrays, as the vectoriser wants it.)
+#[inline(always)]
+#[allow(clippy::needless_range_loop)]
+fn window_cells_generic(
+    hs: &[f32],
+    width: usize,
+    base: usize,
+    ww: &WindowWalk,
+    ob: &Observer,
+    k0: usize,
+    k1: usize,
+) -> (f32, f32) {
+    let (hz, al, be, rr, kap) = (ob.h0, ob.alpha, ob.beta, ob.r0, ob.kappa);
+    let mut best = [f32::NEG_INFINITY; LANES];
+    let mut any = [0.0f32; LANES];
+    let mut c = k0;
+    while c < k1 {
+        let mut t = [[0.0f32; LANES]; 4];
+        for l in 0..LANES {
+            let b = (base as i64 + ww.off[(c + l).min(k1 - 1)]) as usize;
+            t[0][l] = hs[b];
+            t[1][l] = hs[b + 1];
+            t[2][l] = hs[b + width];
+            t[3][l] = hs[b + width + 1];
+        }
+        let w = |i: usize| -> &[f32; LANES] { ww.w[i][c..c + LANES].try_into().unwrap() };
+        let lo: &[f32; LANES] = ww.s_lo[c..c + LANES].try_into().unwrap();
+        let hi: &[f32; LANES] = ww.s_hi[c..c + LANES].try_into().unwrap();
+        for l in 0..LANES {
+            let e = [t[0][l] - hz, t[1][l] - hz, t[2][l] - hz, t[3][l] - hz];
+            any[l] += t[0][l] + t[1][l] + t[2][l] + t[3][l];
+            let d0 = w(0)[l] * e[0] + w(1)[l] * e[1] + w(2)[l] * e[2] + w(3)[l] * e[3];
+            let d1 = w(4)[l] * e[0] + w(5)[l] * e[1] + w(6)[l] * e[2] + w(7)[l] * e[3];
+            let d2 = w(8)[l] * e[0] + w(9)[l] * e[1] + w(10)[l] * e[2] + w(11)[l] * e[3];
+            let (s_lo, s_hi) = (lo[l], hi[l]);
+            let len = s_hi - s_lo;
+            // As the row kernel: where the cell leaves the ray, and the peak inside it.
+            let end = slope(s_hi, d0 + len * (d1 + len * d2), al, be, rr);
+            let ca = d0 - s_lo * (d1 - s_lo * d2);
+            let cc = d2 - kap;
+            let q = ca / cc;
+            let st = q.max(0.0).sqrt();
+            let inside = q > 0.0 && st > s_lo && st < s_hi;
+            let sg = if inside { st } else { s_hi };
+            let sig = sg - s_lo;
+            let mid = slope(sg, d0 + sig * (d1 + sig * d2), al, be, rr);
+            let v = end.max(mid);
+            best[l] = if c + l < k1 { best[l].max(v) } else { best[l] };
+        }
+        c += LANES;
+    }
+    let v = best.iter().fold(f32::NEG_INFINITY, |m, &b| m.max(b));
+    (v, any.iter().sum())
+}
+
 /// Slope (tan of elevation above the observer's horizontal) of terrain Δh above the observer's
 /// height at distance `s`, with tan ψ = num/den = s·β/(1 + s·α): (Δh − D)/(r·tan ψ) with the
 /// curvature drop D = r0·tan²ψ/(1 + √(1 + tan²ψ)), over one denominator.
@@ -415,6 +673,127 @@ mod tests {
             assert!(kernel > rect.w * rect.h * a / 8, "{kernel}");
         }
         eprintln!("near kernel vs f64 walk: worst {worst:.1e}°");
+    }
+
+    /// The window kernel against the f64 search: never below what the f64 search finds over
+    /// the same cells, never above the whole ray's maximum (the reference), both within f32's
+    /// resolution; `None` only where the cells leave the raster, touch no data or start at
+    /// the observer (or the ray runs along grid lines or through grid corners, where the walk
+    /// touches the cells beside them); the same bits from every build this machine runs.
+    #[test]
+    fn window_kernel_brackets_the_f64_search() {
+        let cases = [
+            (424_734.0, (212_000, 212_000), 6_371_008.8),
+            (256.0, (180, 190), 1_737_400.0),
+            (600.0, (250, 240), 10_000.0),
+        ];
+        let mut rnd = crate::testutil::rng(0x57_1D0E);
+        let (mut kernel, mut fallback, mut worst) = (0usize, 0usize, 0.0f64);
+        let deg = |v: f64| v.atan().to_degrees();
+        for (face_pixels, origin, radius) in cases {
+            let ctx = rough(64, 56, face_pixels, origin, radius);
+            let rect = Rect {
+                x0: 0,
+                y0: 0,
+                w: 64,
+                h: 56,
+            };
+            let geo = pixel_geometry(&ctx, rect);
+            for k in 0..48 {
+                let az = Azimuth::new(&ctx, plane_azimuth(k, 48));
+                let ww = WindowWalk::new(&ctx, &az);
+                for _ in 0..200 {
+                    let x = (rnd() * 64.0) as usize;
+                    let y = (rnd() * 56.0) as usize;
+                    if ctx.at(x as i64, y as i64).is_nan() {
+                        continue;
+                    }
+                    let from = 0.5 + rnd() * 24.0;
+                    let to = from + rnd() * 4.0;
+                    let o = y * rect.w + x;
+                    let ray = Ray::from_parts(&ctx, x, y, &geo[o], &az);
+                    let ob = Observer::of(&ray);
+                    let got = window(&ctx, &ww, x, y, &ob, from, to);
+                    // The f64 search over the same cells (from the end of the first, the cell
+                    // before the interval's, whose start is the end of one not taken).
+                    let want = match ww.cells(from, to) {
+                        Some((k0, k1)) => {
+                            let (a, b) = (f64::from(ww.s_hi[k0]), f64::from(ww.s_hi[k1 - 1]));
+                            ray.max_over(&ctx, a.max(1e-9), b, f64::NEG_INFINITY).0
+                        }
+                        None => f64::NEG_INFINITY,
+                    };
+                    let Some(v) = got else {
+                        // Only where a cell the interval meets is incomplete or outside.
+                        let complete =
+                            |s: f64| ctx.on_complete_cell(ray.x0 + s * ray.cx, ray.y0 + s * ray.cy);
+                        // (A ray along a grid line walks the cells on one side of it, one
+                        // through grid corners cells beside them for a rounding error.)
+                        let (a, b, n) = (from - 1.5, to, 256);
+                        let along = ray.cx.abs() < 1e-12
+                            || ray.cy.abs() < 1e-12
+                            || (ray.cx.abs() - ray.cy.abs()).abs() < 1e-9;
+                        let own = from < 1.5;
+                        assert!(
+                            along
+                                || own
+                                || (0..=n).any(|q| !complete(a + (b - a) * q as f64 / n as f64)),
+                            "({x}, {y}) az {k}: fell back over complete cells [{from}, {to}]"
+                        );
+                        fallback += 1;
+                        continue;
+                    };
+                    kernel += 1;
+                    let whole = ray.max_over(&ctx, 0.0, 1e9, f64::NEG_INFINITY).0;
+                    let v = f64::from(v);
+                    if want > f64::NEG_INFINITY {
+                        let below = deg(want) - deg(v);
+                        assert!(
+                            below < 2e-4,
+                            "({x}, {y}) az {k} [{from}, {to}]: {v} below f64 {want}"
+                        );
+                        worst = worst.max(below);
+                    }
+                    if v > f64::NEG_INFINITY {
+                        let above = deg(v) - deg(whole);
+                        assert!(
+                            above < 2e-4,
+                            "({x}, {y}) az {k}: {v} above the whole ray's {whole}"
+                        );
+                        worst = worst.max(above);
+                    }
+                    // Every build gives the same bits.
+                    #[cfg(target_arch = "x86_64")]
+                    {
+                        let (k0, k1) = ww.cells(from, to).expect("a kernel answer has cells");
+                        let base = y * ctx.width + x;
+                        let g =
+                            window_cells_generic(&ctx.heights, ctx.width, base, &ww, &ob, k0, k1);
+                        if std::arch::is_x86_feature_detected!("avx2") {
+                            // SAFETY: AVX2 is present, checked just above.
+                            let a = unsafe {
+                                window_cells_avx2(&ctx.heights, ctx.width, base, &ww, &ob, k0, k1)
+                            };
+                            assert_eq!(a.0.to_bits(), g.0.to_bits());
+                        }
+                        if std::arch::is_x86_feature_detected!("avx512f") {
+                            // SAFETY: AVX-512F is present, checked just above.
+                            let a = unsafe {
+                                window_cells_avx512(&ctx.heights, ctx.width, base, &ww, &ob, k0, k1)
+                            };
+                            assert_eq!(a.0.to_bits(), g.0.to_bits());
+                        }
+                    }
+                }
+            }
+        }
+        // Random observers in a 64 × 56 raster: a third of the windows reach its edge or a
+        // hole and fall back.
+        assert!(
+            kernel > fallback && fallback > 0,
+            "kernel {kernel}, fallback {fallback}"
+        );
+        eprintln!("window kernel vs f64 search: worst {worst:.1e}° ({kernel} windows, {fallback} fell back)");
     }
 
     #[test]

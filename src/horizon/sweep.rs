@@ -6,6 +6,7 @@
 
 use super::far::FarPass;
 use super::geometry::{dot, normalize, snap, Azimuth, Context, PixelGeo, Ray, Rect, TAP_EPS};
+use super::near;
 use crate::cube::Vec3;
 
 /// How far (in slope, tan of elevation) below an observer's best so far a line's estimate of a
@@ -1140,6 +1141,8 @@ pub(super) fn finish_pair(
         };
         along(x, cx, w1).min(along(y, cy, h1))
     };
+    // The cell walk from a grid point out to the raster's far side, for the windows.
+    let walk = near::WindowWalk::new(ctx, az);
     let mut slopes = vec![0.0f64; rect.w];
     for j in 0..rect.h {
         let row = &mut dst[j * rect.w..(j + 1) * rect.w];
@@ -1163,13 +1166,19 @@ pub(super) fn finish_pair(
                 // beside a data edge the ray has already crossed) widens the search back
                 // towards the observer by up to [`BACK_PX`], to the ray's last terrain before
                 // the edge, where a view falling away peaks.
+                // Over complete cells inside the raster by the near field's f32 kernel over
+                // the whole cells the interval meets (near::window), elsewhere in f64.
+                let ob = near::Observer::of(&ray);
                 let search = |lo: f64, hi: f64, t: f64| -> f64 {
                     let (mut lo, hi) = (lo.min(out), hi.min(out));
                     if !ctx.on_complete_cell(ray.x0 + lo * ray.cx, ray.y0 + lo * ray.cy) {
                         lo -= BACK_PX;
                     }
-                    ray.max_over(ctx, (lo - WINDOW).max(near_px), hi + WINDOW, t)
-                        .0
+                    let (from, to) = ((lo - WINDOW).max(near_px), hi + WINDOW);
+                    match near::window(ctx, &walk, x, y, &ob, from, to) {
+                        Some(v) => t.max(f64::from(v)),
+                        None => ray.max_over(ctx, from, to, t).0,
+                    }
                 };
                 let best = f64::from(gs.best);
                 if best >= t - SKIP {
