@@ -447,65 +447,62 @@ pub(super) fn window(
         return None;
     }
     let base = (y * w + x) as usize;
-    let (v, any) = window_cells(&ctx.heights, ctx.width, base, ww, ob, k0, k1);
+    let (v, any) = window_cells(&Cells {
+        hs: &ctx.heights,
+        width: ctx.width,
+        base,
+        ww,
+        ob,
+        k0,
+        k1,
+    });
     if any.is_nan() {
         return None;
     }
     Some(v)
 }
 
+/// One window for [`window_cells`]: cells k0..k1 of `ww` seen from observer `ob` at index
+/// `base` of the raster `hs` (row length `width`).
+#[derive(Clone, Copy)]
+struct Cells<'a> {
+    hs: &'a [f32],
+    width: usize,
+    base: usize,
+    ww: &'a WindowWalk,
+    ob: &'a Observer,
+    k0: usize,
+    k1: usize,
+}
+
 /// [`window_cells_generic`], compiled for AVX-512 and AVX2 too and chosen at run time (the
 /// same IEEE operations in the same order in every build, as the row kernel's).
 #[inline]
-fn window_cells(
-    hs: &[f32],
-    width: usize,
-    base: usize,
-    ww: &WindowWalk,
-    ob: &Observer,
-    k0: usize,
-    k1: usize,
-) -> (f32, f32) {
+fn window_cells(c: &Cells) -> (f32, f32) {
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx512f") {
             // SAFETY: the CPU has AVX-512F, checked just above.
-            return unsafe { window_cells_avx512(hs, width, base, ww, ob, k0, k1) };
+            return unsafe { window_cells_avx512(c) };
         }
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has AVX2, checked just above.
-            return unsafe { window_cells_avx2(hs, width, base, ww, ob, k0, k1) };
+            return unsafe { window_cells_avx2(c) };
         }
     }
-    window_cells_generic(hs, width, base, ww, ob, k0, k1)
+    window_cells_generic(c)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
-unsafe fn window_cells_avx512(
-    hs: &[f32],
-    width: usize,
-    base: usize,
-    ww: &WindowWalk,
-    ob: &Observer,
-    k0: usize,
-    k1: usize,
-) -> (f32, f32) {
-    window_cells_generic(hs, width, base, ww, ob, k0, k1)
+unsafe fn window_cells_avx512(c: &Cells) -> (f32, f32) {
+    window_cells_generic(c)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn window_cells_avx2(
-    hs: &[f32],
-    width: usize,
-    base: usize,
-    ww: &WindowWalk,
-    ob: &Observer,
-    k0: usize,
-    k1: usize,
-) -> (f32, f32) {
-    window_cells_generic(hs, width, base, ww, ob, k0, k1)
+unsafe fn window_cells_avx2(c: &Cells) -> (f32, f32) {
+    window_cells_generic(c)
 }
 
 /// The largest slope over cells k0..k1 of `ww` (where each leaves the ray, and its peak
@@ -514,15 +511,16 @@ unsafe fn window_cells_avx2(
 /// lane across several arrays, as the vectoriser wants it.)
 #[inline(always)]
 #[allow(clippy::needless_range_loop)]
-fn window_cells_generic(
-    hs: &[f32],
-    width: usize,
-    base: usize,
-    ww: &WindowWalk,
-    ob: &Observer,
-    k0: usize,
-    k1: usize,
-) -> (f32, f32) {
+fn window_cells_generic(cells: &Cells) -> (f32, f32) {
+    let Cells {
+        hs,
+        width,
+        base,
+        ww,
+        ob,
+        k0,
+        k1,
+    } = *cells;
     let (hz, al, be, rr, kap) = (ob.h0, ob.alpha, ob.beta, ob.r0, ob.kappa);
     let mut best = [f32::NEG_INFINITY; LANES];
     let mut any = [0.0f32; LANES];
@@ -613,25 +611,36 @@ mod tests {
         }
     }
 
-    #[test]
-    fn row_kernel_equals_the_f64_cell_walk() {
-        // Earth-like at 30 m near the face centre; the Moon at 7.6 km pixels near a face
-        // corner (strong gnomonic distortion, ψ up to 0.1 rad within the near field); a 10 km body.
+    /// Rough 64 × 56 rasters, the whole of each as observers, with their pixel geometry:
+    /// Earth-like at 30 m near the face centre; the Moon at 7.6 km pixels near a face corner
+    /// (strong gnomonic distortion, ψ up to 0.1 rad within the near field); a 10 km body.
+    fn bodies() -> Vec<(Context, Rect, Vec<PixelGeo>)> {
         let cases = [
             (424_734.0, (212_000, 212_000), 6_371_008.8),
             (256.0, (180, 190), 1_737_400.0),
             (600.0, (250, 240), 10_000.0),
         ];
+        let rect = Rect {
+            x0: 0,
+            y0: 0,
+            w: 64,
+            h: 56,
+        };
+        cases
+            .into_iter()
+            .map(|(face_pixels, origin, radius)| {
+                let ctx = rough(64, 56, face_pixels, origin, radius);
+                let geo = pixel_geometry(&ctx, rect);
+                (ctx, rect, geo)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn row_kernel_equals_the_f64_cell_walk() {
         let mut worst = 0.0f64;
-        for (face_pixels, origin, radius) in cases {
-            let ctx = rough(64, 56, face_pixels, origin, radius);
-            let rect = Rect {
-                x0: 0,
-                y0: 0,
-                w: 64,
-                h: 56,
-            };
-            let geo = pixel_geometry(&ctx, rect);
+        for (ctx, rect, geo) in bodies() {
+            let radius = ctx.radius_m;
             let nodata = NoData::new(&ctx);
             let mut sc = NearScratch::default();
             let mut got = vec![0.0; rect.w * rect.h];
@@ -682,23 +691,10 @@ mod tests {
     /// touches the cells beside them); the same bits from every build this machine runs.
     #[test]
     fn window_kernel_brackets_the_f64_search() {
-        let cases = [
-            (424_734.0, (212_000, 212_000), 6_371_008.8),
-            (256.0, (180, 190), 1_737_400.0),
-            (600.0, (250, 240), 10_000.0),
-        ];
         let mut rnd = crate::testutil::rng(0x57_1D0E);
         let (mut kernel, mut fallback, mut worst) = (0usize, 0usize, 0.0f64);
         let deg = |v: f64| v.atan().to_degrees();
-        for (face_pixels, origin, radius) in cases {
-            let ctx = rough(64, 56, face_pixels, origin, radius);
-            let rect = Rect {
-                x0: 0,
-                y0: 0,
-                w: 64,
-                h: 56,
-            };
-            let geo = pixel_geometry(&ctx, rect);
+        for (ctx, rect, geo) in bodies() {
             for k in 0..48 {
                 let az = Azimuth::new(&ctx, plane_azimuth(k, 48));
                 let ww = WindowWalk::new(&ctx, &az);
@@ -746,41 +742,44 @@ mod tests {
                     kernel += 1;
                     let whole = ray.max_over(&ctx, 0.0, 1e9, f64::NEG_INFINITY).0;
                     let v = f64::from(v);
+                    let mut within = |gap: f64, what: &str| {
+                        assert!(gap < 2e-4, "({x}, {y}) az {k} [{from}, {to}]: {v} {what}");
+                        worst = worst.max(gap);
+                    };
                     if want > f64::NEG_INFINITY {
-                        let below = deg(want) - deg(v);
-                        assert!(
-                            below < 2e-4,
-                            "({x}, {y}) az {k} [{from}, {to}]: {v} below f64 {want}"
+                        within(
+                            deg(want) - deg(v),
+                            &format!("below the f64 search's {want}"),
                         );
-                        worst = worst.max(below);
                     }
                     if v > f64::NEG_INFINITY {
-                        let above = deg(v) - deg(whole);
-                        assert!(
-                            above < 2e-4,
-                            "({x}, {y}) az {k}: {v} above the whole ray's {whole}"
+                        within(
+                            deg(v) - deg(whole),
+                            &format!("above the whole ray's {whole}"),
                         );
-                        worst = worst.max(above);
                     }
                     // Every build gives the same bits.
                     #[cfg(target_arch = "x86_64")]
                     {
                         let (k0, k1) = ww.cells(from, to).expect("a kernel answer has cells");
-                        let base = y * ctx.width + x;
-                        let g =
-                            window_cells_generic(&ctx.heights, ctx.width, base, &ww, &ob, k0, k1);
+                        let c = Cells {
+                            hs: &ctx.heights,
+                            width: ctx.width,
+                            base: y * ctx.width + x,
+                            ww: &ww,
+                            ob: &ob,
+                            k0,
+                            k1,
+                        };
+                        let g = window_cells_generic(&c);
                         if std::arch::is_x86_feature_detected!("avx2") {
                             // SAFETY: AVX2 is present, checked just above.
-                            let a = unsafe {
-                                window_cells_avx2(&ctx.heights, ctx.width, base, &ww, &ob, k0, k1)
-                            };
+                            let a = unsafe { window_cells_avx2(&c) };
                             assert_eq!(a.0.to_bits(), g.0.to_bits());
                         }
                         if std::arch::is_x86_feature_detected!("avx512f") {
                             // SAFETY: AVX-512F is present, checked just above.
-                            let a = unsafe {
-                                window_cells_avx512(&ctx.heights, ctx.width, base, &ww, &ob, k0, k1)
-                            };
+                            let a = unsafe { window_cells_avx512(&c) };
                             assert_eq!(a.0.to_bits(), g.0.to_bits());
                         }
                     }
