@@ -44,9 +44,6 @@ pub(super) struct NearWalk {
     segs: Vec<Seg>,
     /// The pixels the walk's cells touch, as offsets from the observer: [x0, x1) × [y0, y1).
     bbox: [i64; 4],
-    /// Per whole plane pixel d of distance, the first cell that reaches beyond d (s_hi > d):
-    /// where [`window`] starts looking for an interval's cells.
-    first: Vec<u32>,
 }
 
 impl NearWalk {
@@ -96,20 +93,7 @@ impl NearWalk {
                 b[3].max(sg.dy + 2),
             ]
         });
-        let mut first = Vec::with_capacity(near.ceil() as usize + 1);
-        let mut k = 0;
-        for d in 0..=near.ceil() as usize {
-            while k < segs.len() && f64::from(segs[k].s_hi) <= d as f64 {
-                k += 1;
-            }
-            first.push(k as u32);
-        }
-        NearWalk {
-            near,
-            segs,
-            bbox,
-            first,
-        }
+        NearWalk { near, segs, bbox }
     }
 }
 
@@ -355,11 +339,16 @@ impl Observer {
 const LANES: usize = 8;
 
 /// A walk from a grid point out to the far side of a raster (as [`NearWalk`]), its cells laid
-/// out lane by lane for [`window`]: per cell the offset of its first corner from the observer
-/// in the raster (dy·width + dx), where the ray enters and leaves it, and its twelve weights.
-/// [`LANES`] copies of the last cell pad the end, so that a chunk of lanes never reads past it.
+/// out lane by lane for [`window`]: per cell its offset (dx, dy) from the observer and that
+/// offset in the raster (dy·width + dx), where the ray enters and leaves it, and its twelve
+/// weights. [`LANES`] copies of the last of its `len` cells pad the end, so that a chunk of
+/// lanes never reads past it.
 pub(super) struct WindowWalk {
-    walk: NearWalk,
+    len: usize,
+    /// Per whole plane pixel d of distance, the first cell that reaches beyond d (s_hi > d):
+    /// where [`WindowWalk::cells`] starts looking for an interval's cells.
+    first: Vec<u32>,
+    dxy: Vec<(i64, i64)>,
     off: Vec<i64>,
     s_lo: Vec<f32>,
     s_hi: Vec<f32>,
@@ -370,16 +359,29 @@ impl WindowWalk {
     /// The walk along `az` across `ctx` (out to its width + height, beyond which no ray in it
     /// reaches).
     pub(super) fn new(ctx: &Context, az: &Azimuth) -> WindowWalk {
-        let walk = NearWalk::new(az, (ctx.width + ctx.height) as f64);
-        let n = walk.segs.len() + LANES;
-        let pad = |k: usize| &walk.segs[k.min(walk.segs.len() - 1)];
+        let reach = (ctx.width + ctx.height) as f64;
+        let segs = NearWalk::new(az, reach).segs;
+        let len = segs.len();
+        let mut first = Vec::with_capacity(reach as usize + 1);
+        let mut k = 0;
+        for d in 0..=reach as usize {
+            while k < len && f64::from(segs[k].s_hi) <= d as f64 {
+                k += 1;
+            }
+            first.push(k as u32);
+        }
+        let n = len + LANES;
+        let pad = |k: usize| &segs[k.min(len - 1)];
         let width = ctx.width as i64;
+        let dxy = segs.iter().map(|sg| (sg.dx, sg.dy)).collect();
         let off = (0..n).map(|k| pad(k).dy * width + pad(k).dx).collect();
         let s_lo = (0..n).map(|k| pad(k).s_lo).collect();
         let s_hi = (0..n).map(|k| pad(k).s_hi).collect();
         let w = std::array::from_fn(|c| (0..n).map(|k| pad(k).w[c / 4][c % 4]).collect());
         WindowWalk {
-            walk,
+            len,
+            first,
+            dxy,
             off,
             s_lo,
             s_hi,
@@ -392,17 +394,15 @@ impl WindowWalk {
     /// of its own cell, or its peak, whatever interval holds it, so overlapping windows give
     /// its slope to the same bits); `None` for an empty interval.
     fn cells(&self, from: f64, to: f64) -> Option<(usize, usize)> {
-        let walk = &self.walk;
-        let segs = &walk.segs;
         // The first cell with s_hi > from, and the first after it with s_lo ≥ to: from the
         // lookup by whole pixels, a pixel holds at most three cells.
-        let at = |s: f64| walk.first[(s.max(0.0) as usize).min(walk.first.len() - 1)] as usize;
+        let at = |s: f64| self.first[(s.max(0.0) as usize).min(self.first.len() - 1)] as usize;
         let mut k0 = at(from);
-        while k0 < segs.len() && f64::from(segs[k0].s_hi) <= from {
+        while k0 < self.len && f64::from(self.s_hi[k0]) <= from {
             k0 += 1;
         }
         let mut k1 = at(to).max(k0);
-        while k1 < segs.len() && f64::from(segs[k1].s_lo) < to {
+        while k1 < self.len && f64::from(self.s_lo[k1]) < to {
             k1 += 1;
         }
         (k0 < k1).then_some((k0.saturating_sub(1), k1))
@@ -428,8 +428,7 @@ pub(super) fn window(
     from: f64,
     to: f64,
 ) -> Option<f32> {
-    let segs = &ww.walk.segs;
-    if from < f64::from(segs[0].s_hi) && from < to {
+    if from < f64::from(ww.s_hi[0]) && from < to {
         // The observer's own cell, where the slope may peak at the interval's start (towards
         // the zero-distance limit) with no cell before whose end would hold it.
         return None;
@@ -438,10 +437,10 @@ pub(super) fn window(
         return Some(f32::NEG_INFINITY);
     };
     // Along a walk each of dx, dy moves one way only: the first and last cells bound them.
-    let (first, last) = (&segs[k0], &segs[k1 - 1]);
+    let ((dx0, dy0), (dx1, dy1)) = (ww.dxy[k0], ww.dxy[k1 - 1]);
     let (x, y) = (x as i64, y as i64);
-    let (xa, xb) = (x + first.dx.min(last.dx), x + first.dx.max(last.dx) + 1);
-    let (ya, yb) = (y + first.dy.min(last.dy), y + first.dy.max(last.dy) + 1);
+    let (xa, xb) = (x + dx0.min(dx1), x + dx0.max(dx1) + 1);
+    let (ya, yb) = (y + dy0.min(dy1), y + dy0.max(dy1) + 1);
     let (w, h) = (ctx.width as i64, ctx.height as i64);
     if xa < 0 || ya < 0 || xb >= w || yb >= h {
         return None;
@@ -792,7 +791,10 @@ mod tests {
             kernel > fallback && fallback > 0,
             "kernel {kernel}, fallback {fallback}"
         );
-        eprintln!("window kernel vs f64 search: worst {worst:.1e}° ({kernel} windows, {fallback} fell back)");
+        eprintln!(
+            "window kernel vs f64 search: worst {worst:.1e}° \
+             ({kernel} windows, {fallback} fell back)"
+        );
     }
 
     #[test]

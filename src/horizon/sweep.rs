@@ -1160,28 +1160,28 @@ pub(super) fn finish_pair(
             let sw = f64::from(gs.best_s);
             if sw.is_finite() {
                 let out = exit(x as f64, y as f64);
-                // The ray searched exactly over [lo − WINDOW, hi + WINDOW] beyond the near
-                // field, the interval's ends taken no farther than the ray's exit.
-                // A guess over no data or a cell with a no-data corner (the line runs on
-                // beside a data edge the ray has already crossed) widens the search back
-                // towards the observer by up to [`BACK_PX`], to the ray's last terrain before
-                // the edge, where a view falling away peaks.
-                // Over complete cells inside the raster by the near field's f32 kernel over
-                // the whole cells the interval meets (near::window), elsewhere in f64.
-                let ob = near::Observer::of(&ray);
-                let search = |lo: f64, hi: f64, t: f64| -> f64 {
-                    let (mut lo, hi) = (lo.min(out), hi.min(out));
-                    if !ctx.on_complete_cell(ray.x0 + lo * ray.cx, ray.y0 + lo * ray.cy) {
-                        lo -= BACK_PX;
-                    }
-                    let (from, to) = ((lo - WINDOW).max(near_px), hi + WINDOW);
-                    match near::window(ctx, &walk, x, y, &ob, from, to) {
-                        Some(v) => t.max(f64::from(v)),
-                        None => ray.max_over(ctx, from, to, t).0,
-                    }
-                };
                 let best = f64::from(gs.best);
                 if best >= t - SKIP {
+                    // The ray searched exactly over [lo − WINDOW, hi + WINDOW] beyond the near
+                    // field, the interval's ends taken no farther than the ray's exit.
+                    // A guess over no data or a cell with a no-data corner (the line runs on
+                    // beside a data edge the ray has already crossed) widens the search back
+                    // towards the observer by up to [`BACK_PX`], to the ray's last terrain before
+                    // the edge, where a view falling away peaks.
+                    // Over complete cells inside the raster by the near field's f32 kernel over
+                    // the whole cells the interval meets (near::window), elsewhere in f64.
+                    let ob = near::Observer::of(&ray);
+                    let search = |lo: f64, hi: f64, t: f64| -> f64 {
+                        let (mut lo, hi) = (lo.min(out), hi.min(out));
+                        if !ctx.on_complete_cell(ray.x0 + lo * ray.cx, ray.y0 + lo * ray.cy) {
+                            lo -= BACK_PX;
+                        }
+                        let (from, to) = ((lo - WINDOW).max(near_px), hi + WINDOW);
+                        match near::window(ctx, &walk, x, y, &ob, from, to) {
+                            Some(v) => t.max(f64::from(v)),
+                            None => ray.max_over(ctx, from, to, t).0,
+                        }
+                    };
                     let (alt, sa) = (f64::from(gs.alt), f64::from(gs.alt_s));
                     if sw < NEIGHBOURS_WITHIN {
                         // Close guesses: both lines' winners and those of their hull
