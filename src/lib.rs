@@ -12,6 +12,7 @@ pub mod cube;
 pub mod dem;
 pub mod error;
 pub mod exrcodec;
+pub mod format;
 pub mod fourier;
 pub mod fsio;
 pub mod horizon;
@@ -23,7 +24,6 @@ pub mod query;
 pub mod runner;
 pub mod scene;
 pub mod shadow;
-pub mod tileio;
 pub mod tileset;
 pub mod tiling;
 

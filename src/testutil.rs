@@ -11,27 +11,6 @@ pub(crate) fn rng(seed: u64) -> impl FnMut() -> f64 {
     }
 }
 
-/// A horizon context of `w × h` heights (row-major, metres) with pixels of `pixel_m` on a Moon-sized
-/// sphere, centred on face +X.
-pub(crate) fn lunar_context(
-    w: usize,
-    h: usize,
-    heights: Vec<f32>,
-    pixel_m: f64,
-) -> crate::horizon::Context {
-    let r = 1_737_400.0;
-    let s = (2.0 * r / pixel_m).round();
-    crate::horizon::Context {
-        face: crate::cube::Face::Px,
-        face_pixels: s,
-        origin: ((s as i64 - w as i64) / 2, (s as i64 - h as i64) / 2),
-        width: w,
-        height: h,
-        heights,
-        radius_m: r,
-    }
-}
-
 /// A DEM held in memory: `w × h` samples `f(column, row)` on `georef`.
 pub(crate) fn synthetic_dem(
     w: usize,

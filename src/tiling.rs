@@ -22,11 +22,12 @@ use crate::body::Body;
 use crate::cube::{self, Projection};
 use crate::dem::{floor_fast, mask, Dem, Resampling};
 use crate::error::{Error, Result};
+use crate::format::albedo::{write_albedo_tile, AlbedoTile};
+use crate::format::height::{self, HeightTile};
 use crate::layout::{Layout, TileId, MAX_LEVELS};
 use crate::manifest::{self, Tileset};
 use crate::progress::Progress;
 use crate::runner::{self, StageSpec, Start};
-use crate::tileio::{self, AlbedoTile, HeightTile};
 use crate::tileset::writer::Writer;
 use crate::tileset::{Product, STATE_DIR};
 
@@ -81,7 +82,7 @@ pub struct TileOptions {
     pub resampling: Resampling,
     /// How levels coarser than the finest are filtered.
     pub prefilter: Prefilter,
-    pub compression: tileio::TileCompression,
+    pub compression: crate::format::TileCompression,
     pub max_fill_px: u32,
     /// Equirectangular albedo image and the longitude of its left edge.
     pub albedo: Option<(PathBuf, f64)>,
@@ -100,7 +101,7 @@ impl Default for TileOptions {
             levels: None,
             resampling: Resampling::Bilinear,
             prefilter: Prefilter::Box,
-            compression: tileio::TileCompression::Zip,
+            compression: crate::format::TileCompression::Zip,
             max_fill_px: crate::dem::DEFAULT_MAX_FILL_PX,
             albedo: None,
             max_output_gib: runner::DEFAULT_MAX_OUTPUT_GIB,
@@ -1162,7 +1163,7 @@ impl TileSink<'_> {
         let hpath = crate::tileset::tile_path(self.out, manifest::HEIGHT_PATTERN, id);
         let apath = crate::tileset::tile_path(self.out, manifest::ALBEDO_PATTERN, id);
         if hpath.exists() && (self.albedo.is_none() || apath.exists()) {
-            if let Ok(t) = tileio::read_height_tile(&hpath) {
+            if let Ok(t) = height::read_height_tile(&hpath) {
                 if t.size == self.layout.stored_size() {
                     return interior_stats(self.layout, &t, true);
                 }
@@ -1177,10 +1178,10 @@ impl TileSink<'_> {
             return Ok(None);
         };
         let hpath = crate::tileset::tile_path(self.out, manifest::HEIGHT_PATTERN, id);
-        tileio::write_height_tile(&hpath, &tile, self.opts.compression)?;
+        height::write_height_tile(&hpath, &tile, self.opts.compression)?;
         if let Some(a) = self.albedo {
             let apath = crate::tileset::tile_path(self.out, manifest::ALBEDO_PATTERN, id);
-            tileio::write_albedo_tile(&apath, &render_albedo_tile(a, self.layout, id))?;
+            write_albedo_tile(&apath, &render_albedo_tile(a, self.layout, id))?;
         }
         Ok(Some(stats))
     }

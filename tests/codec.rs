@@ -11,9 +11,9 @@ use std::process::Command;
 
 use exr::prelude::f16;
 use penumbra::exrcodec;
+use penumbra::format::{height as tileio, TileCompression};
 use penumbra::mip::{self, MipOptions, Precision};
 use penumbra::progress::NoProgress;
-use penumbra::tileio::{self, TileCompression};
 use penumbra::tiling::{tile_dem, TileOptions};
 
 use crate::util::global_dem;

@@ -6,11 +6,11 @@ use std::process::Output;
 
 use penumbra::body::Body;
 use penumbra::dem;
+use penumbra::format::height::{self as tileio, HeightTile};
 use penumbra::layout::TileId;
 use penumbra::manifest::Tileset;
 use penumbra::mip::{self, MipOptions, Precision};
 use penumbra::progress::NoProgress;
-use penumbra::tileio::{self, HeightTile};
 use penumbra::tiling::{tile_dem, TileOptions};
 
 use crate::util::{analytic, geographic_dem, global_dem, penumbra_bin, shared_data, snapshot, Rng};

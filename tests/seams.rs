@@ -2,10 +2,10 @@ use std::collections::HashMap;
 
 use penumbra::body::Body;
 use penumbra::cube::{self, Face, Projection};
+use penumbra::format::height::{self as tileio, HeightTile};
 use penumbra::layout::{Layout, TileId};
 use penumbra::manifest::Tileset;
 use penumbra::progress::NoProgress;
-use penumbra::tileio::{self, HeightTile};
 use penumbra::tiling::{tile_dem, TileOptions};
 
 use crate::util::{analytic, global_dem};

@@ -38,3 +38,7 @@ mod fourier;
 mod shadows;
 // The shadow ray-marching methods in stiff cases with known answers (the library's API).
 mod shadow_methods;
+
+// The layering of docs/architecture.md on the source: no import circle between files, product
+// files read and written only by the formats layer and the store.
+mod architecture;

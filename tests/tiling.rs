@@ -3,10 +3,10 @@ use std::collections::BTreeSet;
 use penumbra::body::Body;
 use penumbra::cube::{self, Face};
 use penumbra::dem::{Dem, Resampling};
+use penumbra::format::height as tileio;
 use penumbra::layout::TileId;
 use penumbra::manifest::{self, Tileset};
 use penumbra::progress::NoProgress;
-use penumbra::tileio;
 use penumbra::tiling::{tile_dem, TileOptions};
 
 use crate::util::{analytic, copy_tree, geographic_dem, global_dem, snapshot};

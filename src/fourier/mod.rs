@@ -12,8 +12,8 @@ pub mod pyramid;
 pub mod series;
 pub mod sun;
 
-pub use self::pyramid::{Encoding, Layout, Pyramid, Reduce};
 pub use self::series::{evaluate, max_coefficients, Sigma, Transform};
+pub use crate::format::fourier::{Encoding, Layout, Pyramid, Reduce};
 pub mod stage;
 
 pub use self::stage::{build_fourier, Encoder, FourierOptions, FourierReport, STAGE};

@@ -14,32 +14,10 @@ use std::sync::Arc;
 
 use rustfft::num_complex::Complex;
 use rustfft::{Fft, FftPlanner};
-use serde::{Deserialize, Serialize};
 
-/// The most coefficients `a` real samples have: ⌊A/2⌋ + 1.
-pub fn max_coefficients(a: usize) -> usize {
-    a / 2 + 1
-}
-
-/// Taper of the kept coefficients.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Sigma {
-    /// The plain truncated series.
-    #[default]
-    None,
-    /// Lanczos σ-factors sinc(k/K): trade sharpness for less Gibbs ringing at cliffs.
-    Lanczos,
-}
+pub use crate::format::fourier::{max_coefficients, Sigma};
 
 impl Sigma {
-    pub fn name(self) -> &'static str {
-        match self {
-            Sigma::None => "none",
-            Sigma::Lanczos => "lanczos",
-        }
-    }
-
     /// Factor of coefficient `k` of `kk` kept.
     pub fn factor(self, k: usize, kk: usize) -> f64 {
         match self {
@@ -52,17 +30,6 @@ impl Sigma {
                     x.sin() / x
                 }
             }
-        }
-    }
-}
-
-impl std::str::FromStr for Sigma {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        match s {
-            "none" => Ok(Sigma::None),
-            "lanczos" => Ok(Sigma::Lanczos),
-            _ => Err(format!("unknown sigma '{s}' (none, lanczos)")),
         }
     }
 }

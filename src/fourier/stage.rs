@@ -9,24 +9,20 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::pyramid::{self, Encoding, Layout, Pyramid, Reduce, GROUP};
 use super::series::{max_coefficients, Scratch, Sigma, Transform};
-use std::io::Write as _;
+use crate::format::fourier::{
+    self as pyramid, group_list, tile_path, Encoding, Layout, Pyramid, Reduce, FLOOR, FORMAT,
+    PATTERN,
+};
 
-use crate::error::{Error, IoContext, Result};
+use crate::error::{Error, Result};
+use crate::format::height::HeightTile;
 use crate::layout::TileId;
-use crate::manifest::{self, FourierGroup, FourierProduct, HorizonLevelDistance, Tileset};
+use crate::manifest::{self, FourierProduct, HorizonLevelDistance, Tileset};
 use crate::progress::Progress;
 use crate::runner::{self, StageSpec, Start};
-use crate::tileio::HeightTile;
 use crate::tileset::writer::Writer;
-use crate::tileset::{self, Product, Store};
-
-pub const PATTERN: &str = "fourier/{level}/{face}/{y}/{x}.fhm";
-/// Name and version of the pyramid files (part of the run key).
-pub const FORMAT: &str = "penumbra-fourier-1";
-pub const FLOOR: &str = "horizons below the tangent to the sphere of the lowest terrain \
-     (radius + terrain_min_m) are raised to it, −90° (no terrain) included";
+use crate::tileset::{Product, Store};
 
 /// What the user chose.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -375,17 +371,6 @@ fn choose_k(
     k_max
 }
 
-/// The groups of a pyramid holding `k` coefficients, for the manifest.
-pub fn group_list(n: usize, k: usize, layout: Layout) -> Vec<FourierGroup> {
-    (0..pyramid::groups(k))
-        .map(|g| FourierGroup {
-            first: g * GROUP,
-            count: (k - g * GROUP).min(GROUP),
-            resolution: layout.resolution(n, g),
-        })
-        .collect()
-}
-
 /// Key of a tile in `tile_coefficients`.
 pub fn tile_key(id: TileId) -> String {
     format!("{}/{}/{}/{}", id.level, id.face.name(), id.x, id.y)
@@ -493,17 +478,12 @@ pub fn check_output_size(opts: &FourierOptions, tiles: usize, n: usize) -> Resul
 /// A file an interrupted run left that decodes with this run's settings, with what the manifest
 /// needs from its header; None: rewrite it.
 pub fn kept(path: &Path, n: usize, a: usize) -> Option<TileStats> {
-    let b = std::fs::read(path).ok()?;
-    let p = Pyramid::decode(&b, path, n, a).ok()?;
+    let (p, bytes) = crate::format::fourier::read(path, n, a).ok()?;
     Some(TileStats {
         k: p.k,
         fully_lit: p.fully_lit,
-        bytes: b.len() as u64,
+        bytes,
     })
-}
-
-pub fn tile_path(dir: &Path, id: TileId) -> PathBuf {
-    tileset::tile_path(dir, PATTERN, id)
 }
 
 /// The stage from stored raw maps.
@@ -633,8 +613,7 @@ pub fn build_fourier(
         let tile = store.height(id)?.expect("listed tiles exist");
         let elev = store.horizon(id)?;
         let (p, stats) = enc.encode(&elev, &tile);
-        let bytes = p.encode();
-        crate::fsio::write_staged(&out, |f| f.write_all(&bytes).at(&out))?;
+        pyramid::write(&out, &p)?;
         tally.add(id, stats);
         report.tiles_written += 1;
         report.bytes_written += stats.bytes;

@@ -11,46 +11,7 @@ use super::pyramid;
 use super::reference::reference;
 use super::sweep::{self, ground_slope, sweep, tangents, Scratch};
 
-/// Which algorithm computes the horizons.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Method {
-    /// Each pixel's own ray searched exactly out to a near field (`near_px`, default 24 px),
-    /// beyond that a per-azimuth sweep of parallel great circles with an upper convex hull
-    /// per line.
-    #[default]
-    Fast,
-    /// Exact, as `Reference`, but each ray walked over a maximum pyramid of the context that
-    /// skips whatever provably cannot rise above the best slope found so far, seeded with the
-    /// neighbours' horizons ([`super::pyramid`]): the reference's answer at a fraction of its
-    /// time.
-    Exact,
-    /// Brute force: each pixel's own ray walked cell by cell to the end of the context, the
-    /// maximum over the continuous bilinear surface.
-    Reference,
-}
-
-impl std::str::FromStr for Method {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        match s {
-            "fast" => Ok(Method::Fast),
-            "exact" => Ok(Method::Exact),
-            "reference" => Ok(Method::Reference),
-            _ => Err(format!("unknown method '{s}' (fast, exact, reference)")),
-        }
-    }
-}
-
-impl Method {
-    pub fn name(self) -> &'static str {
-        match self {
-            Method::Fast => "fast",
-            Method::Exact => "exact",
-            Method::Reference => "reference",
-        }
-    }
-}
+pub use crate::format::horizon::Method;
 
 /// Horizons of every pixel of `rect` in `a` plane azimuths: `a` planes of `rect.w × rect.h`
 /// elevation angles in degrees (row-major), plane k at plane azimuth 2πk/a. NaN where the
@@ -601,7 +562,7 @@ mod tests {
                 heights[y * w + x] = f32::NAN;
             }
         }
-        crate::testutil::lunar_context(w, h, heights, 100.0)
+        crate::horizon::geometry::lunar_context(w, h, heights, 100.0)
     }
 
     /// At data edges and holes the exact method gives the reference's answer (up to the f32

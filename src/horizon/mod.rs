@@ -10,7 +10,6 @@
 
 mod far;
 mod geometry;
-pub mod io;
 mod method;
 mod near;
 mod pyramid;
@@ -26,8 +25,9 @@ pub use self::method::{
 };
 pub use self::near::{DEFAULT_NEAR_PX, MAX_NEAR_PX};
 pub use self::stage::{
-    build_horizons, context_for, default_fine_margin_px, reach_rad, read_horizon_exr,
-    terrain_range, tile_path, write_horizon_exr, HorizonOptions, HorizonPrecision, HorizonReport,
-    Reach, StreamedFourier, AZIMUTH_CONVENTION, FINE_MARGIN_PX, PATTERN, STAGE, STAGE_BOTH,
-    STAGE_FOURIER,
+    build_horizons, context_for, default_fine_margin_px, reach_rad, terrain_range, HorizonOptions,
+    HorizonReport, Reach, StreamedFourier, FINE_MARGIN_PX, STAGE, STAGE_BOTH, STAGE_FOURIER,
+};
+pub use crate::format::horizon::{
+    read_horizon_exr, tile_path, write_horizon_exr, HorizonPrecision, AZIMUTH_CONVENTION, PATTERN,
 };

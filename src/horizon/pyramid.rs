@@ -284,7 +284,7 @@ mod tests {
                 heights[y * w + x] = f32::NAN;
             }
         }
-        crate::testutil::lunar_context(w, h, heights, pixel_m)
+        crate::horizon::geometry::lunar_context(w, h, heights, pixel_m)
     }
 
     /// The walk gives the exact search's answer over the same stretch of ray, from floors

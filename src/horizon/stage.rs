@@ -3,7 +3,6 @@
 //! its pixels, and the raw maps on disk; plus the on-demand query of one point.
 
 use std::collections::HashMap;
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -12,33 +11,29 @@ use serde::Serialize;
 
 use super::far::FarRing;
 use super::geometry::{Context, Rect};
-pub use super::io::{read_horizon_exr, write_horizon_exr, HorizonPrecision};
 use super::method::{horizons_with, FarHorizons, Method};
 use super::near::{DEFAULT_NEAR_PX, MAX_NEAR_PX};
 use crate::cube::{Face, Projection};
-use crate::error::{Error, IoContext, Result};
+use crate::error::{Error, Result};
+use crate::format::height::HeightTile;
+use crate::format::horizon::{
+    read_horizon_exr, tile_path, write_horizon_exr, HorizonPrecision, AZIMUTH_CONVENTION, FORMAT,
+    LAYOUT, PATTERN,
+};
+use crate::format::TileCompression;
 use crate::layout::TileId;
 use crate::manifest::{self, HorizonLevelDistance, HorizonProduct, Tileset};
 use crate::progress::Progress;
 use crate::runner::{self, StageSpec, Start};
-use crate::tileio::{HeightTile, TileCompression};
 use crate::tileset::writer::Writer;
-use crate::tileset::{self, Product, Store};
+use crate::tileset::{Product, Store};
 
-pub const PATTERN: &str = "horizon/{level}/{face}/{y}/{x}.exr";
-/// Version of the horizon products' layout and convention (part of the run key).
-pub const FORMAT: &str = "penumbra-horizon-1";
 /// Revision of the algorithms' results (part of the run key: a rerun after a change that moves
 /// the values recomputes instead of keeping maps made the old way). 2: the fast method's exact
 /// near field reaches 24 px instead of 4, and far candidates at the raster's edge are clamped.
 /// 3: beyond `fine_margin_px` the fast method sees far rings of coarser levels. 4: its sweep
 /// serves opposite azimuths at once and leaves guesses that are searched exactly afterwards.
 const ALGORITHM: &str = "4";
-pub const AZIMUTH_CONVENTION: &str = "plane azimuth on the tile's cube face: counter-clockwise \
-     from the face's +U axis towards +V, degrees; plane k = 360*k/A; compass azimuth differs per \
-     pixel (docs/horizons.md)";
-pub const LAYOUT: &str = "image tile_size wide and A*tile_size high: rows k*n..(k+1)*n hold \
-     plane k, row-major like the height tile's interior (no halo)";
 /// A global pixel window or box (x0, y0, x1, y1), half-open.
 type PxBox = (i64, i64, i64, i64);
 /// Each (level, face)'s coverage box, computed once per run.
@@ -585,10 +580,6 @@ fn context_window(
     Ok(ctx)
 }
 
-pub fn tile_path(dir: &Path, id: TileId) -> PathBuf {
-    tileset::tile_path(dir, PATTERN, id)
-}
-
 // ---------------------------------------------------------------------------------------------
 // Stage
 
@@ -652,14 +643,14 @@ pub const STAGE: StageSpec = StageSpec {
 pub const STAGE_FOURIER: StageSpec = StageSpec {
     name: "horizon",
     writes: &[Product::Fourier],
-    format: &[FORMAT, ALGORITHM, crate::fourier::stage::FORMAT],
+    format: &[FORMAT, ALGORITHM, crate::format::fourier::FORMAT],
 };
 
 /// Both: pyramids and the raw maps (`--keep-raw`).
 pub const STAGE_BOTH: StageSpec = StageSpec {
     name: "horizon",
     writes: &[Product::Fourier, Product::Horizon],
-    format: &[FORMAT, ALGORITHM, crate::fourier::stage::FORMAT],
+    format: &[FORMAT, ALGORITHM, crate::format::fourier::FORMAT],
 };
 
 /// The levels a run computes, checked against the tileset.
@@ -772,7 +763,7 @@ pub fn build_horizons(
             sigma: f.sigma,
             tiles_fully_lit: fully_lit,
             bytes_written: bytes,
-            bytes_per_tile: crate::fourier::pyramid::file_bytes(n, f.coefficients, f.layout) as u64,
+            bytes_per_tile: crate::format::fourier::file_bytes(n, f.coefficients, f.layout) as u64,
         };
     let run = match runner::start(writer, spec, &run_key, Some(ts))? {
         Start::UpToDate => {
@@ -832,7 +823,7 @@ pub fn build_horizons(
         store.cache().keep_since(mark);
         mark = store.cache().now();
         let out = tile_path(run.out(), id);
-        let fout = crate::fourier::stage::tile_path(run.out(), id);
+        let fout = crate::format::fourier::tile_path(run.out(), id);
         let tile = store.height(id)?.expect("listed tiles exist");
         let top = interior_max(&tile, lay.halo as usize, n);
         // The distances are recorded for every tile, kept ones too, so that a resumed run's
@@ -903,8 +894,7 @@ pub fn build_horizons(
         if let Some(enc) = &encoder {
             let t1 = std::time::Instant::now();
             let (p, stats) = enc.encode(&elev, &tile);
-            let bytes = p.encode();
-            crate::fsio::write_staged(&fout, |f| f.write_all(&bytes).at(&fout))?;
+            crate::format::fourier::write(&fout, &p)?;
             compress_s += t1.elapsed().as_secs_f64();
             tally.add(id, stats);
         }

@@ -1,4 +1,4 @@
-//! Limits of `tileset.json`: every number in range and every path relative and inside the
+//! Reading `tileset.json` ([`Tileset::load`]) and its limits: every number in range and every path relative and inside the
 //! tileset, checked when a tileset is opened so that no reader trusts a damaged manifest.
 //! Each error names the manifest and the field.
 
@@ -6,7 +6,44 @@ use std::path::Path;
 
 use crate::error::{Error, Result};
 use crate::layout::MAX_LEVELS;
-use crate::manifest::Tileset;
+use crate::manifest::{Tileset, FORMAT, FORMAT_VERSION, MANIFEST};
+
+impl Tileset {
+    /// Read and validate the manifest of the tileset in `dir` (checked here).
+    pub fn load(dir: &Path) -> Result<Tileset> {
+        let path = dir.join(MANIFEST);
+        if !path.exists() {
+            return Err(Error::invalid(
+                &path,
+                "no tileset manifest here: point at a folder made by `penumbra tile` or `penumbra bake`",
+            ));
+        }
+        let bytes = crate::fsio::read_capped(&path, MAX_MANIFEST_BYTES, "a tileset manifest")?;
+        let de = &mut serde_json::Deserializer::from_slice(&bytes);
+        let t: Tileset = serde_path_to_error::deserialize(de).map_err(|e| {
+            let field = e.path().to_string();
+            Error::invalid(
+                &path,
+                format!(
+                    "manifest is not valid at field `{field}`: {}; restore it, or rerun \
+                     `penumbra tile`/`bake` into a fresh folder",
+                    e.inner()
+                ),
+            )
+        })?;
+        if t.format != FORMAT || t.format_version > FORMAT_VERSION {
+            return Err(Error::unsupported(
+                &path,
+                format!(
+                    "format {} v{} (this penumbra reads {FORMAT} up to v{FORMAT_VERSION})",
+                    t.format, t.format_version
+                ),
+            ));
+        }
+        check(&t, &path)?;
+        Ok(t)
+    }
+}
 
 /// Largest manifest read (a 24-level global tileset's coverage is a few MiB).
 pub const MAX_MANIFEST_BYTES: u64 = 64 << 20;
@@ -310,7 +347,7 @@ pub fn check(ts: &Tileset, path: &Path) -> Result<()> {
                 format!("'{}' is not f16 or f32", h.precision),
             ));
         }
-        if h.method.parse::<crate::horizon::Method>().is_err() {
+        if h.method.parse::<crate::format::horizon::Method>().is_err() {
             return Err(bad(
                 path,
                 "products.horizon.method",
@@ -349,7 +386,7 @@ pub fn check(ts: &Tileset, path: &Path) -> Result<()> {
 }
 
 fn fourier(path: &Path, ts: &Tileset, f: &crate::manifest::FourierProduct) -> Result<()> {
-    use crate::fourier::{pyramid, stage, Layout};
+    use crate::format::fourier::{self as pyramid, group_list, Encoding, Layout, Reduce, Sigma};
     let (lay, b) = (&ts.layout, &ts.body);
     pattern(
         path,
@@ -366,7 +403,7 @@ fn fourier(path: &Path, ts: &Tileset, f: &crate::manifest::FourierProduct) -> Re
             format!("{} is outside 4..=4096", f.azimuths),
         ));
     }
-    let most = crate::fourier::max_coefficients(f.azimuths);
+    let most = pyramid::max_coefficients(f.azimuths);
     if !(1..=most).contains(&f.coefficients) {
         return Err(bad(
             path,
@@ -379,13 +416,13 @@ fn fourier(path: &Path, ts: &Tileset, f: &crate::manifest::FourierProduct) -> Re
         .parse()
         .map_err(|e: String| bad(path, "products.fourier.layout", e))?;
     f.encoding
-        .parse::<crate::fourier::Encoding>()
+        .parse::<Encoding>()
         .map_err(|e| bad(path, "products.fourier.encoding", e))?;
     f.sigma
-        .parse::<crate::fourier::Sigma>()
+        .parse::<Sigma>()
         .map_err(|e| bad(path, "products.fourier.sigma", e))?;
     f.reduce
-        .parse::<crate::fourier::pyramid::Reduce>()
+        .parse::<Reduce>()
         .map_err(|e| bad(path, "products.fourier.reduce", e))?;
     if let Some(&l) = f.levels.iter().find(|&&l| l >= lay.levels) {
         return Err(bad(
@@ -395,7 +432,7 @@ fn fourier(path: &Path, ts: &Tileset, f: &crate::manifest::FourierProduct) -> Re
         ));
     }
     let n = lay.tile_size as usize;
-    if f.groups != stage::group_list(n, f.coefficients, layout) {
+    if f.groups != group_list(n, f.coefficients, layout) {
         return Err(bad(
             path,
             "products.fourier.groups",
@@ -441,7 +478,10 @@ fn fourier(path: &Path, ts: &Tileset, f: &crate::manifest::FourierProduct) -> Re
             format!("'{}' is not raw or streamed", f.source),
         ));
     }
-    if f.horizon_method.parse::<crate::horizon::Method>().is_err() {
+    if f.horizon_method
+        .parse::<crate::format::horizon::Method>()
+        .is_err()
+    {
         return Err(bad(
             path,
             "products.fourier.horizon_method",

@@ -4,39 +4,7 @@
 
 use crate::error::{Error, Result};
 
-/// Smallest f16 ≥ `x` (NaN stays NaN; above 65504 gives +∞).
-pub fn f16_up(x: f32) -> half::f16 {
-    if x.is_nan() {
-        return half::f16::NAN;
-    }
-    let h = half::f16::from_f32(x);
-    if h.to_f32() >= x {
-        return h;
-    }
-    let b = h.to_bits();
-    half::f16::from_bits(match b {
-        0x8000 => 0x0001,
-        b if b & 0x8000 == 0 => b + 1,
-        b => b - 1,
-    })
-}
-
-/// Largest f16 ≤ `x` (NaN stays NaN; below −65504 gives −∞).
-pub fn f16_down(x: f32) -> half::f16 {
-    if x.is_nan() {
-        return half::f16::NAN;
-    }
-    let h = half::f16::from_f32(x);
-    if h.to_f32() <= x {
-        return h;
-    }
-    let b = h.to_bits();
-    half::f16::from_bits(match b {
-        0x0000 => 0x8001,
-        b if b & 0x8000 == 0 => b - 1,
-        b => b + 1,
-    })
-}
+pub use crate::format::mip::{f16_down, f16_up, level_sizes};
 
 pub(super) const NEG_INF: f32 = f32::NEG_INFINITY;
 pub(super) const POS_INF: f32 = f32::INFINITY;
@@ -68,16 +36,6 @@ pub(super) fn nan_if(v: f32, empty: f32) -> f32 {
     } else {
         v
     }
-}
-
-/// Texels per side at each level for a `n`-texel level 0: n, ⌈n/2⌉, …, 1.
-pub fn level_sizes(n: usize) -> Vec<usize> {
-    let mut v = vec![n.max(1)];
-    while *v.last().unwrap() > 1 {
-        let s = *v.last().unwrap();
-        v.push(s.div_ceil(2));
-    }
-    v
 }
 
 /// A maximum pyramid: `max[k]` is level k, `sizes[k]²` texels, row-major.

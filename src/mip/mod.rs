@@ -20,21 +20,16 @@
 //! `io`: the mip-mapped EXR files; `schema`: the storage [`Precision`] (a leaf, also used by
 //! the manifest); `stage`: the stage over a tileset and the point query.
 
-mod io;
 mod kernels;
-pub mod schema;
 mod stage;
 
-pub use self::io::{
-    decode_mip_exr, encode_mip_exr, encode_mip_exr_exr_crate, read_mip_exr, write_mip_exr, MipFile,
-};
 pub use self::kernels::{
     f16_down, f16_up, face_pyramid, level_sizes, max_pyramid, max_pyramid_into, minmax_pyramid,
     minmax_pyramid_into, MaxPyramid, MinMaxPyramid,
 };
-pub use self::schema::Precision;
-pub use self::stage::{
-    build_mips, face_chunk_path, face_path, tile_paths, MipOptions, MipReport, FACE_CHUNK_PATTERN,
-    FACE_CHUNK_TILES, FACE_PATTERN, MAX_PATTERN, MINMAX_PATTERN, MIP_FORMAT, STAGE,
-    TEXEL_CONVENTION,
+pub use self::stage::{build_mips, MipOptions, MipReport, STAGE};
+pub use crate::format::mip::{
+    decode_mip_exr, encode_mip_exr, encode_mip_exr_exr_crate, face_chunk_path, face_path,
+    read_mip_exr, tile_paths, write_mip_exr, MipFile, Precision, FACE_CHUNK_PATTERN,
+    FACE_CHUNK_TILES, FACE_PATTERN, MAX_PATTERN, MINMAX_PATTERN, MIP_FORMAT, TEXEL_CONVENTION,
 };

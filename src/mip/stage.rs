@@ -7,38 +7,24 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::io::{read_mip_exr, write_mip_exr};
 use super::kernels::{
     f16_down, f16_up, face_pyramid, fmax, fmin, minmax_pyramid_into, nan_if, MinMaxPyramid,
     NEG_INF, POS_INF,
 };
-use super::schema::Precision;
 use crate::cube::Face;
 use crate::error::{Error, Result};
+use crate::format::mip::{
+    face_chunk_path, face_path, read_mip_exr, tile_paths, write_mip_exr, Precision,
+    FACE_CHUNK_PATTERN, FACE_CHUNK_TILES, FACE_PATTERN, MAX_PATTERN, MINMAX_PATTERN, MIP_FORMAT,
+    TEXEL_CONVENTION,
+};
+use crate::format::TileCompression;
 use crate::layout::TileId;
 use crate::manifest::{self, MipLevelRange, MipProduct, Tileset};
 use crate::progress::Progress;
 use crate::runner::{self, StageSpec, Start};
-use crate::tileio::TileCompression;
 use crate::tileset::writer::Writer;
-use crate::tileset::{self, Product, Store};
-
-pub const MAX_PATTERN: &str = "maxmip/{level}/{face}/{y}/{x}.exr";
-pub const MINMAX_PATTERN: &str = "minmax/{level}/{face}/{y}/{x}.exr";
-pub const FACE_PATTERN: &str = "minmax/{level}/{face}/face.exr";
-/// Chunks of the face pyramids of faces with more than [`FACE_CHUNK_TILES`] tiles per side.
-pub const FACE_CHUNK_PATTERN: &str = "minmax/{level}/{face}/face/{cy}/{cx}.exr";
-/// Tiles per side of a face-pyramid chunk: a face with more tiles per side than this keeps
-/// the fine levels of its pyramid in chunks of this many tiles squared, so that building one
-/// never holds more than a chunk (docs/mipmaps.md).
-pub const FACE_CHUNK_TILES: u32 = 1024;
-/// Version of the mip products' layout and convention (part of the run key).
-pub const MIP_FORMAT: &str = "penumbra-mip-1";
-/// One-line statement of the texel convention, recorded in the manifest.
-pub const TEXEL_CONVENTION: &str =
-    "level-0 texel (i,j) = interior pixel (i,j), bounds the bilinear \
-     surface over [i-1/2,i+1/2]x[j-1/2,j+1/2] = extreme of stored samples i-1..i+1, j-1..j+1; \
-     level k texel = extreme of its 2x2 children (sizes halve rounding up); NaN = no data";
+use crate::tileset::{Product, Store};
 
 // ---------------------------------------------------------------------------------------------
 // Stage
@@ -114,24 +100,6 @@ pub struct MipReport {
 
 fn nan_to_none(v: f32) -> Option<f64> {
     (!v.is_nan()).then_some(v as f64)
-}
-
-/// Paths of a tile's two products.
-pub fn tile_paths(dir: &Path, id: TileId) -> (PathBuf, PathBuf) {
-    (
-        tileset::tile_path(dir, MAX_PATTERN, id),
-        tileset::tile_path(dir, MINMAX_PATTERN, id),
-    )
-}
-
-/// Path of a face pyramid.
-pub fn face_path(dir: &Path, level: u8, face: Face) -> PathBuf {
-    tileset::face_file_path(dir, FACE_PATTERN, level, face)
-}
-
-/// Path of chunk (cx, cy) of a face pyramid.
-pub fn face_chunk_path(dir: &Path, level: u8, face: Face, cx: u32, cy: u32) -> PathBuf {
-    tileset::face_chunk_file_path(dir, FACE_CHUNK_PATTERN, level, face, cx, cy)
 }
 
 /// The mip stage writes the max and (min, max) pyramids of the height tiles.

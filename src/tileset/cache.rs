@@ -7,8 +7,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 use crate::error::Result;
+use crate::format::height::HeightTile;
 use crate::layout::TileId;
-use crate::tileio::HeightTile;
 
 type Entry = (Option<Arc<HeightTile>>, u64);
 

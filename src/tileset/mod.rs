@@ -20,11 +20,10 @@ pub mod writer;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use crate::cube::Face;
 use crate::error::{Error, Result};
+use crate::format::{self, height::HeightTile};
 use crate::layout::TileId;
 use crate::manifest::{Tileset, MANIFEST};
-use crate::tileio::{self, HeightTile};
 
 pub use cache::TileCache;
 pub use lock::STATE_DIR;
@@ -134,45 +133,7 @@ impl Product {
     }
 }
 
-/// Path of a tile's file below `root` from a product's path pattern (`{level}`, `{face}`,
-/// `{x}`, `{y}`), e.g. `height/{level}/{face}/{y}/{x}.exr`.
-pub fn tile_path(root: &Path, pattern: &str, id: TileId) -> PathBuf {
-    root.join(
-        pattern
-            .replace("{level}", &id.level.to_string())
-            .replace("{face}", id.face.name())
-            .replace("{x}", &id.x.to_string())
-            .replace("{y}", &id.y.to_string()),
-    )
-}
-
-/// Path of a per-(level, face) file below `root` from a pattern with `{level}` and `{face}`.
-pub fn face_file_path(root: &Path, pattern: &str, level: u8, face: Face) -> PathBuf {
-    root.join(
-        pattern
-            .replace("{level}", &level.to_string())
-            .replace("{face}", face.name()),
-    )
-}
-
-/// Path of chunk (cx, cy) of a per-(level, face) file below `root` from a pattern with
-/// `{level}`, `{face}`, `{cx}` and `{cy}`.
-pub fn face_chunk_file_path(
-    root: &Path,
-    pattern: &str,
-    level: u8,
-    face: Face,
-    cx: u32,
-    cy: u32,
-) -> PathBuf {
-    root.join(
-        pattern
-            .replace("{level}", &level.to_string())
-            .replace("{face}", face.name())
-            .replace("{cx}", &cx.to_string())
-            .replace("{cy}", &cy.to_string()),
-    )
-}
+pub use crate::format::{face_chunk_file_path, face_file_path, tile_path};
 
 /// Default byte budget of a store's height-tile cache.
 pub const DEFAULT_CACHE_BYTES: u64 = 1 << 30;
@@ -239,7 +200,7 @@ impl Store {
     /// Read a height tile (uncached), checking its size against the manifest.
     pub fn read_height(&self, id: TileId) -> Result<HeightTile> {
         let p = self.height_path(id)?;
-        let t = tileio::read_height_tile(&p)?;
+        let t = format::height::read_height_tile(&p)?;
         let s = self.ts.layout.stored_size();
         if t.size != s {
             return Err(Error::invalid(
@@ -263,7 +224,7 @@ impl Store {
 
     /// A tile's (min, max) mipmap, checked against the tile size (`max`: the one-channel
     /// maximum pyramid instead).
-    pub fn mip(&self, id: TileId, max: bool) -> Result<crate::mip::MipFile> {
+    pub fn mip(&self, id: TileId, max: bool) -> Result<format::mip::MipFile> {
         let m =
             self.ts.products.mip.as_ref().ok_or_else(|| {
                 self.missing("tileset has no mipmaps: build them with the mip stage")
@@ -273,7 +234,7 @@ impl Store {
             if max { &m.max_path } else { &m.minmax_path },
             id,
         );
-        let f = crate::mip::read_mip_exr(&p)?;
+        let f = format::mip::read_mip_exr(&p)?;
         let n = self.ts.layout.tile_size as usize;
         if f.sizes.first() != Some(&n) {
             return Err(Error::invalid(
@@ -286,7 +247,7 @@ impl Store {
 
     /// A tile's Fourier pyramid, checked against the manifest (tile size, azimuths) and its
     /// checksum.
-    pub fn fourier(&self, id: TileId) -> Result<crate::fourier::Pyramid> {
+    pub fn fourier(&self, id: TileId) -> Result<format::fourier::Pyramid> {
         let f = self.ts.products.fourier.as_ref().ok_or_else(|| {
             self.missing(
                 "tileset has no Fourier pyramids: make them with `penumbra fourier` or \
@@ -294,13 +255,7 @@ impl Store {
             )
         })?;
         let p = tile_path(&self.dir, &f.path, id);
-        let cap = crate::fourier::pyramid::file_bytes(
-            self.ts.layout.tile_size as usize,
-            crate::fourier::max_coefficients(f.azimuths),
-            crate::fourier::Layout::Full,
-        ) as u64;
-        let bytes = crate::fsio::read_capped(&p, cap, "a Fourier pyramid")?;
-        crate::fourier::Pyramid::decode(&bytes, &p, self.ts.layout.tile_size as usize, f.azimuths)
+        Ok(format::fourier::read(&p, self.ts.layout.tile_size as usize, f.azimuths)?.0)
     }
 
     /// A tile's raw horizon maps (`A` planes of n² elevations, degrees), checked against the
@@ -310,8 +265,7 @@ impl Store {
             self.missing("tileset has no horizon maps: compute them with the horizon stage")
         })?;
         let p = tile_path(&self.dir, &h.path, id);
-        let (a, planes) =
-            crate::horizon::io::read_horizon_exr(&p, self.ts.layout.tile_size as usize)?;
+        let (a, planes) = format::horizon::read_horizon_exr(&p, self.ts.layout.tile_size as usize)?;
         if a != h.azimuths {
             return Err(Error::invalid(
                 &p,

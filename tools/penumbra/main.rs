@@ -12,13 +12,13 @@ use penumbra::body::Body;
 use penumbra::cube::Projection;
 use penumbra::dem::Resampling;
 use penumbra::error::Error;
+use penumbra::format::TileCompression;
 use penumbra::fourier::sun::Model;
 use penumbra::fourier::{Encoding, FourierOptions, Layout, Reduce, Sigma};
 use penumbra::horizon::{HorizonOptions, HorizonPrecision, Method};
 use penumbra::mip::{MipOptions, Precision};
 use penumbra::query::HorizonFrom;
 use penumbra::scene::SceneSpec;
-use penumbra::tileio::TileCompression;
 use penumbra::tiling::{Prefilter, TileOptions};
 use penumbra_cli::output;
 

@@ -13,8 +13,8 @@ interior texel, the texel whose shadow it shows.
 
 use bytemuck::{Pod, Zeroable};
 use penumbra::cube::{dot, Vec3};
+use penumbra::format::height::HeightTile;
 use penumbra::layout::{Layout, TileId};
-use penumbra::tileio::HeightTile;
 
 use crate::camera::{add, cross, norm, scale, sub};
 

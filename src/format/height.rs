@@ -1,5 +1,5 @@
-//! Reading and writing tiles: EXR height tiles (f32 `height` + f16 `mask`), PNG albedo tiles,
-//! written into a run's staging folder through [`crate::fsio::write_staged`] (temp file,
+//! The height tiles: EXR files of f32 `height` + f16 `mask` (docs/tileset.md), their manifest
+//! entry and path pattern, written into a run's staging folder through [`crate::fsio::write_staged`] (temp file,
 //! rename; made durable by the run's commit), so a reader or a killed run never sees half a
 //! file.
 
@@ -9,10 +9,12 @@ use std::path::Path;
 
 use exr::prelude::f16;
 
+use serde::{Deserialize, Serialize};
+
 use crate::error::{Error, IoContext, Result};
 use crate::exrcodec::{self, Channel, Samples};
 
-pub use crate::fsio::{write_atomic, write_atomic_bytes, write_staged};
+use crate::fsio::write_staged;
 
 /// A square height tile including its halo.
 #[derive(Clone, Debug, PartialEq)]
@@ -57,30 +59,7 @@ impl HeightTile {
     }
 }
 
-/// Lossless compression of EXR tiles.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum TileCompression {
-    /// ZIP over 16 scanlines (OpenEXR's predictor + deflate; 64² tiles for mip files): 1.5–3.5×
-    /// smaller than raw on real DEMs. [`crate::exrcodec`] deflates at a low level with all
-    /// blocks of a file in parallel, so it costs a few percent of a stage (PIZ was slower and
-    /// no smaller).
-    #[default]
-    Zip,
-    /// Uncompressed: fastest to write and to read.
-    None,
-}
-
-impl std::str::FromStr for TileCompression {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        match s {
-            "zip" => Ok(TileCompression::Zip),
-            "none" => Ok(TileCompression::None),
-            _ => Err(format!("unknown compression '{s}': use zip or none")),
-        }
-    }
-}
+pub use crate::exrcodec::TileCompression;
 
 /// Write a height tile as a single-part scanline EXR, channels `height` (f32) and `mask`
 /// (f16 holding 0, 1 or 2), ZIP blocks of 16 lines (see [`crate::exrcodec`]).
@@ -185,44 +164,20 @@ pub fn decode_height_tile(bytes: &[u8]) -> std::result::Result<HeightTile, Strin
     })
 }
 
-/// An albedo/colour tile: 8- or 16-bit samples, 1–4 channels, halo included.
-#[derive(Clone, Debug, PartialEq)]
-pub struct AlbedoTile {
-    pub size: usize,
-    pub channels: usize,
-    pub sixteen_bit: bool,
-    /// Row-major interleaved samples scaled to the bit depth's full range.
-    pub data: Vec<u16>,
-}
+/// Path pattern of the height tiles below a tileset.
+pub const HEIGHT_PATTERN: &str = "height/{level}/{face}/{y}/{x}.exr";
 
-/// Write an albedo tile as PNG.
-pub fn write_albedo_tile(path: &Path, tile: &AlbedoTile) -> Result<()> {
-    use image::{DynamicImage, ImageBuffer};
-    let (w, h) = (tile.size as u32, tile.size as u32);
-    let bad = || Error::invalid(path, "albedo tile buffer has the wrong length");
-    let img: DynamicImage = if tile.sixteen_bit {
-        let d = tile.data.clone();
-        match tile.channels {
-            1 => DynamicImage::ImageLuma16(ImageBuffer::from_raw(w, h, d).ok_or_else(bad)?),
-            2 => DynamicImage::ImageLumaA16(ImageBuffer::from_raw(w, h, d).ok_or_else(bad)?),
-            3 => DynamicImage::ImageRgb16(ImageBuffer::from_raw(w, h, d).ok_or_else(bad)?),
-            _ => DynamicImage::ImageRgba16(ImageBuffer::from_raw(w, h, d).ok_or_else(bad)?),
-        }
-    } else {
-        let d: Vec<u8> = tile.data.iter().map(|&v| v as u8).collect();
-        match tile.channels {
-            1 => DynamicImage::ImageLuma8(ImageBuffer::from_raw(w, h, d).ok_or_else(bad)?),
-            2 => DynamicImage::ImageLumaA8(ImageBuffer::from_raw(w, h, d).ok_or_else(bad)?),
-            3 => DynamicImage::ImageRgb8(ImageBuffer::from_raw(w, h, d).ok_or_else(bad)?),
-            _ => DynamicImage::ImageRgba8(ImageBuffer::from_raw(w, h, d).ok_or_else(bad)?),
-        }
-    };
-    write_staged(path, |f| {
-        let mut buf = std::io::Cursor::new(Vec::new());
-        img.write_to(&mut buf, image::ImageFormat::Png)
-            .map_err(|e| Error::invalid(path, format!("PNG encoding failed: {e}")))?;
-        f.write_all(buf.get_ref()).at(path)
-    })
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct HeightProduct {
+    pub path: String,
+    /// EXR channels: `height` f32 metres above `body.radius_m`, `mask` f16 (0 measured,
+    /// 1 void filled from neighbours, 2 no data: height NaN).
+    pub channels: Vec<String>,
+    pub min_m: f64,
+    pub max_m: f64,
+    /// Interior pixels over all written tiles whose mask is 1 / 2.
+    pub filled_pixels: u64,
+    pub no_data_pixels: u64,
 }
 
 #[cfg(test)]

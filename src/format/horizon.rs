@@ -1,0 +1,261 @@
+//! The raw horizon maps on disk (docs/horizons.md): one EXR per height tile, `A` planes of `n²`
+//! elevations (degrees) stacked vertically, one channel `elevation` in f16 or f32; their path
+//! pattern, conventions, the method names the manifest records, and the manifest entry.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use std::borrow::Cow;
+
+use exr::prelude::f16;
+
+use crate::error::{Error, IoContext, Result};
+use crate::exrcodec::TileCompression;
+use crate::exrcodec::{self, Channel, Samples, ZipLevel};
+use crate::fsio::write_staged;
+use crate::layout::TileId;
+use serde::{Deserialize, Serialize};
+
+/// Storage precision of the raw maps.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum HorizonPrecision {
+    /// Half floats: 0.0078° steps below 16°, 0.031° below 64°, 0.0625° up to 90°.
+    #[default]
+    F16,
+    F32,
+}
+
+impl std::str::FromStr for HorizonPrecision {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "f16" => Ok(HorizonPrecision::F16),
+            "f32" => Ok(HorizonPrecision::F32),
+            _ => Err(format!("unknown precision '{s}' (f16, f32)")),
+        }
+    }
+}
+
+impl HorizonPrecision {
+    pub fn name(self) -> &'static str {
+        match self {
+            HorizonPrecision::F16 => "f16",
+            HorizonPrecision::F32 => "f32",
+        }
+    }
+}
+
+/// Write one tile's raw maps: `a` planes of `n²` elevations (degrees) stacked vertically.
+pub fn write_horizon_exr(
+    path: &Path,
+    n: usize,
+    a: usize,
+    elev: &[f32],
+    precision: HorizonPrecision,
+    compression: TileCompression,
+) -> Result<()> {
+    let bytes = encode_horizon_exr(n, a, elev, precision, compression, ZipLevel::DEFAULT)
+        .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
+    write_staged(path, |f| f.write_all(&bytes).at(path))
+}
+
+/// The bytes of a horizon file (what [`write_horizon_exr`] stores) at a given deflate level.
+pub fn encode_horizon_exr(
+    n: usize,
+    a: usize,
+    elev: &[f32],
+    precision: HorizonPrecision,
+    compression: TileCompression,
+    level: ZipLevel,
+) -> std::result::Result<Vec<u8>, String> {
+    assert_eq!(elev.len(), n * n * a);
+    let samples = match precision {
+        HorizonPrecision::F32 => Samples::F32(Cow::Borrowed(elev)),
+        HorizonPrecision::F16 => {
+            Samples::F16(Cow::Owned(elev.iter().map(|&v| f16::from_f32(v)).collect()))
+        }
+    };
+    exrcodec::encode(
+        "penumbra-horizon",
+        (n, n * a),
+        &[Channel {
+            name: "elevation",
+            levels: vec![samples],
+        }],
+        &exrcodec::Encoding {
+            level,
+            ..exrcodec::Encoding::scanlines(compression)
+        },
+    )
+}
+
+/// The bytes the `exr` crate's own writer produced for a horizon file before
+/// [`crate::exrcodec`]; kept for the equality tests and `penumbra-bench codec`.
+pub fn encode_horizon_exr_exr_crate(
+    n: usize,
+    a: usize,
+    elev: &[f32],
+    precision: HorizonPrecision,
+    compression: TileCompression,
+) -> std::result::Result<Vec<u8>, String> {
+    use exr::prelude::*;
+    assert_eq!(elev.len(), n * n * a);
+    let samples = match precision {
+        HorizonPrecision::F32 => FlatSamples::F32(elev.to_vec()),
+        HorizonPrecision::F16 => FlatSamples::F16(elev.iter().map(|&v| f16::from_f32(v)).collect()),
+    };
+    let layer = Layer::new(
+        (n, n * a),
+        LayerAttributes::named("penumbra-horizon"),
+        match compression {
+            TileCompression::Zip => Encoding::SMALL_LOSSLESS,
+            TileCompression::None => Encoding::UNCOMPRESSED,
+        },
+        AnyChannels::sort(SmallVec::from_vec(vec![AnyChannel::new(
+            "elevation",
+            samples,
+        )])),
+    );
+    let mut buf = std::io::Cursor::new(Vec::with_capacity(n * n * a * 2));
+    Image::from_layer(layer)
+        .write()
+        .non_parallel()
+        .to_buffered(&mut buf)
+        .map_err(|e| e.to_string())?;
+    Ok(buf.into_inner())
+}
+
+/// Read a file of [`write_horizon_exr`] for tiles of `n` pixels: the `a` planes as f32.
+pub fn read_horizon_exr(path: &Path, n: usize) -> Result<(usize, Vec<f32>)> {
+    let bytes = std::fs::read(path).at(path)?;
+    decode_horizon_exr(&bytes, n).map_err(|msg| {
+        Error::invalid(
+            path,
+            format!("{msg}; delete it and rerun `penumbra horizon`"),
+        )
+    })
+}
+
+/// Decode the bytes of a horizon file; the error says what is wrong (without the path).
+pub fn decode_horizon_exr(
+    bytes: &[u8],
+    n: usize,
+) -> std::result::Result<(usize, Vec<f32>), String> {
+    let mut image =
+        exrcodec::decode(bytes, true).map_err(|e| format!("not a readable horizon EXR ({e})"))?;
+    let (w, h) = image.size();
+    if w != n || h % n != 0 || h == 0 {
+        return Err(format!(
+            "horizon map is {w}×{h}, not {n} wide and a multiple of {n} high"
+        ));
+    }
+    let elev = image
+        .take("elevation")
+        .and_then(|mut l| l.drain(..).next())
+        .ok_or_else(|| "no 'elevation' channel".to_string())?;
+    Ok((h / n, elev))
+}
+pub const PATTERN: &str = "horizon/{level}/{face}/{y}/{x}.exr";
+/// Version of the horizon products' layout and convention (part of the run key).
+pub const FORMAT: &str = "penumbra-horizon-1";
+pub const AZIMUTH_CONVENTION: &str = "plane azimuth on the tile's cube face: counter-clockwise \
+     from the face's +U axis towards +V, degrees; plane k = 360*k/A; compass azimuth differs per \
+     pixel (docs/horizons.md)";
+pub const LAYOUT: &str = "image tile_size wide and A*tile_size high: rows k*n..(k+1)*n hold \
+     plane k, row-major like the height tile's interior (no halo)";
+/// Path of a tile's raw maps below `dir`.
+pub fn tile_path(dir: &Path, id: TileId) -> PathBuf {
+    super::tile_path(dir, PATTERN, id)
+}
+
+/// Which algorithm computes the horizons.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// Each pixel's own ray searched exactly out to a near field (`near_px`, default 24 px),
+    /// beyond that a per-azimuth sweep of parallel great circles with an upper convex hull
+    /// per line.
+    #[default]
+    Fast,
+    /// Exact, as `Reference`, but each ray walked over a maximum pyramid of the context that
+    /// skips whatever provably cannot rise above the best slope found so far, seeded with the
+    /// neighbours' horizons (`horizon::pyramid`): the reference's answer at a fraction of its
+    /// time.
+    Exact,
+    /// Brute force: each pixel's own ray walked cell by cell to the end of the context, the
+    /// maximum over the continuous bilinear surface.
+    Reference,
+}
+
+impl std::str::FromStr for Method {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "fast" => Ok(Method::Fast),
+            "exact" => Ok(Method::Exact),
+            "reference" => Ok(Method::Reference),
+            _ => Err(format!("unknown method '{s}' (fast, exact, reference)")),
+        }
+    }
+}
+
+impl Method {
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Fast => "fast",
+            Method::Exact => "exact",
+            Method::Reference => "reference",
+        }
+    }
+}
+
+/// Raw horizon maps: per height tile one EXR of `azimuths` stacked planes.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct HorizonProduct {
+    /// Path pattern, one EXR per height tile of the levels listed.
+    pub path: String,
+    /// The one channel: elevation angle in degrees above the local horizontal.
+    pub channel: String,
+    /// Sample type: `f16` or `f32`.
+    pub precision: String,
+    /// Azimuth samples per pixel (A); plane k holds plane azimuth 360·k/A degrees.
+    pub azimuths: usize,
+    /// The azimuth convention in one line.
+    pub azimuth: String,
+    /// How the planes are stored in the image.
+    pub layout: String,
+    /// `fast`, `exact` or `reference`.
+    pub method: String,
+    /// The fast method's exact near field (plane pixels); absent for the reference and in
+    /// tilesets made before it was recorded (4 px then).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub near_px: Option<f64>,
+    /// Tile levels that have horizon maps.
+    pub levels: Vec<u8>,
+    /// Lowest and highest terrain of the body used to bound the distance searched (m).
+    pub terrain_min_m: f64,
+    pub terrain_max_m: f64,
+    /// Per level: the distance any terrain could still rise above the horizon (km, at the
+    /// largest tile maximum) and the context margin actually searched (px), with the number
+    /// of tiles whose margin was capped by `max_margin_px`.
+    pub distances: Vec<HorizonLevelDistance>,
+    /// Hash of the tool version, the height tiles' run key and the horizon options.
+    pub run_key: String,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct HorizonLevelDistance {
+    pub level: u8,
+    pub needed_km: f64,
+    pub max_margin_px: u64,
+    pub tiles_capped: u64,
+    /// Tiles whose reach went beyond the fast method's full-resolution margin and was seen
+    /// through far rings of coarser levels.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub tiles_with_far_rings: u64,
+}
+
+fn is_zero(v: &u64) -> bool {
+    *v == 0
+}
