@@ -1,9 +1,9 @@
 //! `bake`: run the stages a scene needs, in order, on one tileset.
 //!
-//! A [`Plan`] lists the stages to run; each stage reads the tileset the previous one left and
-//! records its product in the manifest. Stages a scene does not select are not run and leave
-//! nothing behind. Today: tiling, mipmaps, and (when levels are asked for) raw horizon maps;
-//! Fourier pyramids join as they are built.
+//! A [`Plan`] lists the stages to run; the stage graph ([`crate::graph`]) orders them by the
+//! products each reads and writes, and each records its product in the manifest. Stages a
+//! scene does not select are not run and leave nothing behind. Today: tiling, mipmaps, and
+//! (when levels are asked for) horizons, streamed into Fourier pyramids unless told not to.
 
 use std::path::{Path, PathBuf};
 
@@ -12,10 +12,14 @@ use serde::Serialize;
 use crate::body::Body;
 use crate::dem::{self, Dem};
 use crate::error::{Error, Result};
-use crate::horizon::{self, HorizonOptions, HorizonReport};
-use crate::mip::{self, MipOptions, MipReport};
+use crate::fourier::FourierOptions;
+use crate::graph::{self, HorizonNode, Node, Ran};
+use crate::horizon::{HorizonOptions, HorizonReport};
+use crate::mip::{MipOptions, MipReport};
 use crate::progress::Progress;
+use crate::runner::Select;
 use crate::scene::{self, SceneSpec};
+use crate::tileset::Product;
 use crate::tiling::{self, Embedded, TileOptions, TileReport};
 
 /// A stage of the pipeline.
@@ -53,6 +57,10 @@ pub struct Plan {
     pub tile: TileOptions,
     pub mip: MipOptions,
     pub horizon: HorizonOptions,
+    /// Compress the horizons into Fourier pyramids as they are computed.
+    pub fourier: Option<FourierOptions>,
+    /// With `fourier`: write the raw maps too.
+    pub keep_raw: bool,
     /// Horizons at this level, or the finest when the tileset has fewer (the embedded scene's
     /// default), instead of `horizon.levels`.
     pub horizon_level_at_most: Option<u8>,
@@ -65,6 +73,8 @@ impl Default for Plan {
             tile: TileOptions::default(),
             mip: MipOptions::default(),
             horizon: HorizonOptions::default(),
+            fourier: None,
+            keep_raw: false,
             horizon_level_at_most: None,
         }
     }
@@ -79,10 +89,32 @@ pub struct BakeReport {
     pub horizon: Option<HorizonReport>,
 }
 
+/// Run the plan's stages on the tileset in `out` as a walk of the stage graph: each stage
+/// after the stages whose products it reads.
 pub fn bake(input: &Input, out: &Path, plan: &Plan, progress: &dyn Progress) -> Result<BakeReport> {
     // One writer for the whole bake: no other process can slip in between two stages. (A
     // folder this makes is removed again if the bake fails before its first commit.)
     let _writer = crate::tileset::writer::Writer::begin(out)?;
+    let tile = TileNode {
+        input,
+        opts: &plan.tile,
+    };
+    let mip = graph::mip(plan.mip.clone());
+    let horizon = BakeHorizon {
+        node: HorizonNode::new(plan.horizon.clone(), plan.fourier.clone(), plan.keep_raw)?,
+        at_most: plan.horizon_level_at_most,
+    };
+    let nodes: Vec<&dyn Node> = plan
+        .stages
+        .iter()
+        .map(|s| -> &dyn Node {
+            match s {
+                Stage::Tile => &tile,
+                Stage::Mip => &mip,
+                Stage::Horizon => &horizon,
+            }
+        })
+        .collect();
     let mut report = BakeReport {
         out: out.to_path_buf(),
         stages: plan.stages.clone(),
@@ -90,42 +122,100 @@ pub fn bake(input: &Input, out: &Path, plan: &Plan, progress: &dyn Progress) -> 
         mip: None,
         horizon: None,
     };
-    for stage in &plan.stages {
-        match stage {
-            Stage::Tile => {
-                let r = match input {
-                    Input::Embedded(spec) => {
-                        let parts = scene::generate(spec);
-                        let hash = scene::content_hash(&parts);
-                        let dem = Dem::new(parts, plan.tile.max_fill_px)?;
-                        let body = Body::preset("moon")?;
-                        let label = format!("south-pole-scene-{}px-{}m", spec.size, spec.pixel_m);
-                        let emb = Embedded {
-                            label,
-                            blake3: hash,
-                        };
-                        tiling::tile_dem(&dem, &body, out, &plan.tile, Some(&emb), progress)?
-                    }
-                    Input::Dem { path, body } => {
-                        let dem = dem::open(path, plan.tile.max_fill_px)?;
-                        let body = body_for(&dem, body)?;
-                        tiling::tile_dem(&dem, &body, out, &plan.tile, None, progress)?
-                    }
-                };
-                report.tile = Some(r);
-            }
-            Stage::Mip => report.mip = Some(mip::build_mips(out, &plan.mip, progress)?),
-            Stage::Horizon => {
-                let mut opts = plan.horizon.clone();
-                if let Some(l) = plan.horizon_level_at_most {
-                    let levels = crate::manifest::Tileset::load(out)?.layout.levels;
-                    opts.levels = Some(vec![l.min(levels - 1)]);
-                }
-                report.horizon = Some(horizon::build_horizons(out, &opts, progress)?)
-            }
+    for ran in graph::walk(out, &nodes, progress)? {
+        match ran {
+            Ran::Tile(r) => report.tile = Some(r),
+            Ran::Mip(r) => report.mip = Some(r),
+            Ran::Horizon(r) => report.horizon = Some(r),
+            Ran::Fourier(_) | Ran::Partial { .. } => {}
         }
     }
     Ok(report)
+}
+
+/// The tiling stage as a node of the graph: it makes the tileset from a DEM or the embedded
+/// scene.
+struct TileNode<'a> {
+    input: &'a Input,
+    opts: &'a TileOptions,
+}
+
+impl Node for TileNode<'_> {
+    fn name(&self) -> &'static str {
+        tiling::STAGE.name
+    }
+    fn writes(&self) -> Vec<Product> {
+        tiling::STAGE.writes.to_vec()
+    }
+    fn reads(&self) -> Vec<Product> {
+        Vec::new()
+    }
+    fn run(&self, out: &Path, select: &Select, progress: &dyn Progress) -> Result<Ran> {
+        if *select != Select::All {
+            return Err(Error::usage("the tiling stage runs whole"));
+        }
+        let r = match self.input {
+            Input::Embedded(spec) => {
+                let parts = scene::generate(spec);
+                let hash = scene::content_hash(&parts);
+                let dem = Dem::new(parts, self.opts.max_fill_px)?;
+                let body = Body::preset("moon")?;
+                let label = format!("south-pole-scene-{}px-{}m", spec.size, spec.pixel_m);
+                let emb = Embedded {
+                    label,
+                    blake3: hash,
+                };
+                tiling::tile_dem(&dem, &body, out, self.opts, Some(&emb), progress)?
+            }
+            Input::Dem { path, body } => {
+                let dem = dem::open(path, self.opts.max_fill_px)?;
+                let body = body_for(&dem, body)?;
+                tiling::tile_dem(&dem, &body, out, self.opts, None, progress)?
+            }
+        };
+        Ok(Ran::Tile(r))
+    }
+}
+
+/// The horizon node of a bake, whose levels may depend on the tileset tiling makes (the
+/// embedded scene's level, or the finest).
+struct BakeHorizon {
+    node: HorizonNode,
+    at_most: Option<u8>,
+}
+
+impl Node for BakeHorizon {
+    fn name(&self) -> &'static str {
+        self.node.name()
+    }
+    fn writes(&self) -> Vec<Product> {
+        self.node.writes()
+    }
+    fn reads(&self) -> Vec<Product> {
+        self.node.reads()
+    }
+    fn run(&self, out: &Path, select: &Select, progress: &dyn Progress) -> Result<Ran> {
+        match self.at_most {
+            None => self.node.run(out, select, progress),
+            Some(l) => {
+                let levels = crate::manifest::Tileset::load(out)?.layout.levels;
+                let mut opts = self.node.opts.clone();
+                opts.levels = Some(vec![l.min(levels - 1)]);
+                let node = HorizonNode {
+                    opts,
+                    fourier: self
+                        .node
+                        .fourier
+                        .as_ref()
+                        .map(|f| crate::fourier::FourierSink {
+                            opts: f.opts.clone(),
+                        }),
+                    keep_raw: self.node.keep_raw,
+                };
+                node.run(out, select, progress)
+            }
+        }
+    }
 }
 
 /// The body to tile `dem` for. A radius given by the caller is taken as it is (with the preset's

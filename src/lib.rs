@@ -15,6 +15,7 @@ pub mod exrcodec;
 pub mod format;
 pub mod fourier;
 pub mod fsio;
+pub mod graph;
 pub mod horizon;
 pub mod layout;
 pub mod manifest;
@@ -24,6 +25,7 @@ pub mod query;
 pub mod runner;
 pub mod scene;
 pub mod shadow;
+pub mod sink;
 pub mod tileset;
 pub mod tiling;
 

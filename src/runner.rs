@@ -10,22 +10,32 @@
 //! nothing), write its files below [`Run::out`] (keeping those a resumed run already made), and
 //! hand its updated manifest to [`Run::commit`].
 
+use std::borrow::Cow;
+use std::io::Write as _;
 use std::path::Path;
 
-use crate::error::{Error, Result};
-use crate::manifest::Tileset;
-use crate::tileset::writer::{Staging, Writer};
-use crate::tileset::Product;
+use rayon::prelude::*;
+use serde::de::DeserializeOwned;
+use serde::Serialize;
 
-/// What a stage declares.
-#[derive(Clone, Copy, Debug)]
+use crate::error::{Error, IoContext, Result};
+use crate::layout::TileId;
+use crate::manifest::Tileset;
+use crate::progress::Progress;
+use crate::tileset::writer::{Staging, Writer};
+use crate::tileset::{Product, Store};
+
+/// What a stage declares (constant for most stages; composed for a stage with sinks).
+#[derive(Clone, Debug)]
 pub struct StageSpec {
     /// Name of the stage (its staging folder, progress label).
     pub name: &'static str,
     /// Products it writes; the first is the one whose run key decides "up to date".
-    pub writes: &'static [Product],
+    pub writes: Cow<'static, [Product]>,
+    /// Products it reads (the graph runs their stages first).
+    pub reads: Cow<'static, [Product]>,
     /// Version strings of its output format and algorithms: a change recomputes.
-    pub format: &'static [&'static str],
+    pub format: Cow<'static, [&'static str]>,
 }
 
 /// The run key of a stage: the tool version, the stage's format, the run keys of the products
@@ -33,7 +43,7 @@ pub struct StageSpec {
 pub fn run_key(spec: &StageSpec, inputs: &[&str], params: &[&[u8]]) -> String {
     let mut h = blake3::Hasher::new();
     h.update(env!("CARGO_PKG_VERSION").as_bytes());
-    for f in spec.format {
+    for f in spec.format.iter() {
         h.update(f.as_bytes());
     }
     for k in inputs {
@@ -109,6 +119,11 @@ impl Run {
         self.writer.dir()
     }
 
+    /// Leave the staged run uncommitted for a later run of the same key to complete.
+    pub fn leave(mut self) {
+        self.writer.leave_staged();
+    }
+
     /// Swap the finished run in with `manifest` as the tileset's manifest.
     pub fn commit(self, manifest: Tileset) -> Result<()> {
         let Run {
@@ -117,7 +132,7 @@ impl Run {
             staging,
             changed,
         } = self;
-        writer.commit(staging, spec.writes, manifest, changed)
+        writer.commit(staging, &spec.writes, manifest, changed)
     }
 }
 
@@ -134,4 +149,366 @@ pub fn check_output_cap(param: &'static str, gib: f64) -> Result<()> {
         ));
     }
     Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------
+// Stages as units of work
+
+/// One unit of a stage's work: normally one output tile, with what it reads and what it costs.
+/// Units are named by their output tile, stable across processes, so that a run can be split
+/// between processes ([`Select`]) and finished by whichever completes the last unit.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Unit {
+    /// The tile this unit writes (a unit writing several tiles is named by the first).
+    pub tile: TileId,
+    /// Every tile it writes (tiling writes a group of tiles sampled together).
+    pub writes: Vec<TileId>,
+    /// What it reads.
+    pub reads: Vec<Reads>,
+    /// Estimated cost, in the stage's own unit (pixels, pixel·azimuths): for balancing shards
+    /// and for plans, not a promise.
+    pub cost: f64,
+}
+
+impl Unit {
+    /// A unit writing the one tile `tile`.
+    pub fn tile(tile: TileId, reads: Vec<Reads>, cost: f64) -> Unit {
+        Unit {
+            tile,
+            writes: vec![tile],
+            reads,
+            cost,
+        }
+    }
+
+    /// The unit's name: `level/face/x/y` of its tile.
+    pub fn key(&self) -> String {
+        let t = self.tile;
+        format!("{}/{}/{}/{}", t.level, t.face.name(), t.x, t.y)
+    }
+}
+
+/// What a unit reads.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Reads {
+    /// One tile of a product.
+    Tile { product: Product, tile: TileId },
+    /// The tiles of a product's level within `margin_px` pixels of a tile (across face edges).
+    Around {
+        product: Product,
+        tile: TileId,
+        margin_px: u64,
+    },
+    /// A source outside the tileset (a DEM, an albedo image).
+    Source { path: String },
+}
+
+/// Which units a run executes.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub enum Select {
+    /// Every unit: the run commits.
+    #[default]
+    All,
+    /// Shard `index` of `count` (0-based): a contiguous run of units of about a `count`th of
+    /// the cost. The run commits when it completes the last units left.
+    Shard { index: usize, count: usize },
+    /// The units with these keys ([`Unit::key`]).
+    Keys(Vec<String>),
+}
+
+impl Select {
+    /// Parse `K/N` (shard K of N, 0-based).
+    pub fn shard(s: &str) -> std::result::Result<Select, String> {
+        let (k, n) = s
+            .split_once('/')
+            .ok_or_else(|| format!("'{s}' is not K/N (e.g. 0/4)"))?;
+        let (k, n): (usize, usize) = (
+            k.trim()
+                .parse()
+                .map_err(|_| format!("'{k}' is not a shard index"))?,
+            n.trim()
+                .parse()
+                .map_err(|_| format!("'{n}' is not a shard count"))?,
+        );
+        if n == 0 || n > MAX_SHARDS || k >= n {
+            return Err(format!(
+                "shard {k}/{n}: the count must be 1..={MAX_SHARDS} and the index below it"
+            ));
+        }
+        Ok(Select::Shard { index: k, count: n })
+    }
+
+    /// The indices (into `units`) this selection takes.
+    pub fn pick(&self, units: &[Unit]) -> Vec<usize> {
+        match self {
+            Select::All => (0..units.len()).collect(),
+            Select::Shard { index, count } => {
+                // Cut the cumulative cost into `count` equal spans; unit i belongs to the span
+                // its cost midpoint falls in (the same cut whatever process computes it).
+                let total: f64 = units.iter().map(|u| u.cost.max(0.0)).sum();
+                let mut acc = 0.0;
+                let mut out = Vec::new();
+                for (i, u) in units.iter().enumerate() {
+                    let c = u.cost.max(0.0);
+                    let mid = acc + c / 2.0;
+                    acc += c;
+                    let span = if total > 0.0 {
+                        ((mid / total * *count as f64) as usize).min(count - 1)
+                    } else {
+                        i * count / units.len().max(1)
+                    };
+                    if span == *index {
+                        out.push(i);
+                    }
+                }
+                out
+            }
+            Select::Keys(keys) => units
+                .iter()
+                .enumerate()
+                .filter(|(_, u)| keys.contains(&u.key()))
+                .map(|(i, _)| i)
+                .collect(),
+        }
+    }
+}
+
+/// Most shards a run can be split into.
+pub const MAX_SHARDS: usize = 100_000;
+
+/// How a stage's units run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Order {
+    /// Spread over the thread pool (each unit single-threaded).
+    Parallel,
+    /// One after another in plan order, each using the whole pool (and the tile cache's
+    /// locality from one unit to the next).
+    Sequential,
+}
+
+/// What a unit of a stage sees.
+pub struct Cx<'a, P> {
+    /// The tileset as committed, read through the store.
+    pub store: &'a Store,
+    /// The staging root the run writes its product folders under.
+    pub out: &'a Path,
+    /// The stage's plan of this run.
+    pub plan: &'a P,
+    /// The run key.
+    pub key: &'a str,
+    pub progress: &'a dyn Progress,
+}
+
+/// A unit's result as the finish sees it.
+pub struct Finished<D> {
+    pub unit: Unit,
+    pub done: D,
+    /// Whether this process computed it (else a run of the same key, an earlier shard or an
+    /// interrupted run, did).
+    pub here: bool,
+}
+
+/// A stage: what it writes and reads, its units, how to do one, and how to finish the run.
+/// [`execute`] runs it with the staging, resume and commit every stage shares.
+pub trait Stage: Sync {
+    /// What a run knows once the tileset is checked (levels, ranges, encoders).
+    type Plan: Sync;
+    /// What one unit reports to the finish. It is stored beside the unit's files so that
+    /// another process can finish the run: it must round-trip through JSON exactly (floats
+    /// that may be NaN as bits).
+    type Done: Serialize + DeserializeOwned + Send;
+    /// What one worker keeps from unit to unit (buffers).
+    type Scratch: Send;
+    /// What a run reports.
+    type Report;
+
+    fn spec(&self) -> StageSpec;
+    /// Check the options alone, before the tileset is even read.
+    fn check(&self) -> Result<()> {
+        Ok(())
+    }
+    /// Check the options and the tileset and plan the run; refuses before anything is
+    /// written. Called on the manifest as read, and again under the writer lock.
+    fn plan(&self, dir: &Path, ts: &Tileset) -> Result<Self::Plan>;
+    /// The run key (from the inputs' run keys and every parameter that changes a byte).
+    fn key(&self, ts: &Tileset, plan: &Self::Plan) -> String;
+    /// The units, in the order a whole run executes them.
+    fn units(&self, ts: &Tileset, plan: &Self::Plan) -> Result<Vec<Unit>>;
+    fn order(&self) -> Order {
+        Order::Parallel
+    }
+    fn scratch(&self, plan: &Self::Plan) -> Self::Scratch;
+    /// Do one unit: write its files below `cx.out`.
+    fn run_unit(
+        &self,
+        cx: &Cx<Self::Plan>,
+        unit: &Unit,
+        scratch: &mut Self::Scratch,
+    ) -> Result<Self::Done>;
+    /// Every unit done (in plan order): write what spans units (face pyramids) and return
+    /// the manifest to commit and the report.
+    fn finish(
+        &self,
+        cx: &Cx<Self::Plan>,
+        done: Vec<Finished<Self::Done>>,
+    ) -> Result<(Tileset, Self::Report)>;
+    /// The report of a run that found its output up to date.
+    fn up_to_date(&self, store: &Store, plan: &Self::Plan, units: &[Unit]) -> Self::Report;
+}
+
+/// What [`execute`] did.
+pub enum Outcome<R> {
+    /// The run committed (or was up to date).
+    Done(R),
+    /// The selected units are done and staged; others are left for another run of the
+    /// same key.
+    Partial {
+        ran: usize,
+        done: usize,
+        total: usize,
+    },
+}
+
+/// Folder of a run's unit records, below its staging root.
+const UNITS_DIR: &str = "units";
+
+fn record_path(out: &Path, unit: &Unit) -> std::path::PathBuf {
+    let t = unit.tile;
+    out.join(UNITS_DIR).join(format!(
+        "{}-{}-{}-{}.json",
+        t.level,
+        t.face.name(),
+        t.x,
+        t.y
+    ))
+}
+
+/// Run `stage` on the tileset in `dir`: the units `select` picks that an interrupted or
+/// partial run of the same key has not already done, then, when every unit is done, the
+/// stage's finish and the commit.
+pub fn execute<S: Stage>(
+    stage: &S,
+    dir: &Path,
+    select: &Select,
+    progress: &dyn Progress,
+) -> Result<Outcome<S::Report>> {
+    let spec = stage.spec();
+    // Everything that can refuse the run is checked before the tileset's folder is touched.
+    stage.check()?;
+    stage.plan(dir, &Tileset::load(dir)?)?;
+    let writer = Writer::begin(dir)?;
+    let store = Store::open_unlocked(dir)?;
+    let ts = store.manifest();
+    let plan = stage.plan(dir, ts)?;
+    let key = stage.key(ts, &plan);
+    let units = stage.units(ts, &plan)?;
+    let picked = select.pick(&units);
+    if *select != Select::All && picked.is_empty() {
+        return Err(Error::usage(format!(
+            "the selection picks none of the {} units of the {} stage",
+            units.len(),
+            spec.name
+        )));
+    }
+    let run = match start(writer, spec.clone(), &key, Some(ts))? {
+        Start::UpToDate => return Ok(Outcome::Done(stage.up_to_date(&store, &plan, &units))),
+        Start::Run(run) => run,
+    };
+    let out = run.out().to_path_buf();
+    std::fs::create_dir_all(out.join(UNITS_DIR)).at(out.join(UNITS_DIR))?;
+    // Units an earlier run of this key finished (its records are written after its files).
+    let recorded = |u: &Unit| -> Option<S::Done> {
+        let p = record_path(&out, u);
+        let bytes = std::fs::read(&p).ok()?;
+        serde_json::from_slice(&bytes).ok()
+    };
+    let mut done: Vec<Option<(S::Done, bool)>> = units
+        .iter()
+        .map(|u| {
+            if run.resume() {
+                recorded(u).map(|d| (d, false))
+            } else {
+                None
+            }
+        })
+        .collect();
+    let todo: Vec<usize> = picked
+        .iter()
+        .copied()
+        .filter(|&i| done[i].is_none())
+        .collect();
+    let cx = Cx {
+        store: &store,
+        out: &out,
+        plan: &plan,
+        key: &key,
+        progress,
+    };
+    let one = |i: usize, scratch: &mut S::Scratch| -> Result<S::Done> {
+        let d = stage.run_unit(&cx, &units[i], scratch)?;
+        let bytes = serde_json::to_vec(&d).expect("unit records serialise");
+        crate::fsio::write_staged(&record_path(&out, &units[i]), |f| {
+            f.write_all(&bytes).at(record_path(&out, &units[i]))
+        })?;
+        progress.inc(1);
+        Ok(d)
+    };
+    progress.start(spec.name, todo.len() as u64);
+    let results: Vec<(usize, Result<S::Done>)> = match stage.order() {
+        Order::Parallel => todo
+            .par_iter()
+            .map_init(|| stage.scratch(&plan), |s, &i| (i, one(i, s)))
+            .collect(),
+        Order::Sequential => {
+            let mut s = stage.scratch(&plan);
+            let mut r = Vec::with_capacity(todo.len());
+            for &i in &todo {
+                let x = one(i, &mut s);
+                let failed = x.is_err();
+                r.push((i, x));
+                if failed {
+                    break;
+                }
+            }
+            r
+        }
+    };
+    progress.finish();
+    let ran = results.len();
+    for (i, r) in results {
+        done[i] = Some((r?, true));
+    }
+    let finished = done.iter().filter(|d| d.is_some()).count();
+    if finished < units.len() {
+        run.leave();
+        return Ok(Outcome::Partial {
+            ran,
+            done: finished,
+            total: units.len(),
+        });
+    }
+    let done: Vec<Finished<S::Done>> = units
+        .into_iter()
+        .zip(done)
+        .map(|(unit, d)| {
+            let (done, here) = d.expect("every unit done");
+            Finished { unit, done, here }
+        })
+        .collect();
+    let (manifest, report) = stage.finish(&cx, done)?;
+    run.commit(manifest)?;
+    Ok(Outcome::Done(report))
+}
+
+impl<R> Outcome<R> {
+    /// The report of a run that had to commit (a whole run); an error for a partial one.
+    pub fn into_report(self, stage: &str) -> Result<R> {
+        match self {
+            Outcome::Done(r) => Ok(r),
+            Outcome::Partial { done, total, .. } => Err(Error::usage(format!(
+                "the {stage} stage ran {done} of its {total} units and did not commit"
+            ))),
+        }
+    }
 }

@@ -11,6 +11,7 @@
 //! atomically; the output does not depend on the thread count. A rerun with the same run key
 //! keeps tiles already on disk.
 
+use std::borrow::Cow;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
@@ -34,8 +35,9 @@ use crate::tileset::{Product, STATE_DIR};
 /// The tiling stage writes the height (and albedo) tiles every later product derives from.
 pub const STAGE: StageSpec = StageSpec {
     name: "tile",
-    writes: &[Product::Height, Product::Albedo],
-    format: &[],
+    writes: Cow::Borrowed(&[Product::Height, Product::Albedo]),
+    reads: Cow::Borrowed(&[]),
+    format: Cow::Borrowed(&[]),
 };
 
 /// Refuse to tile into a folder that holds something other than a tileset: a commit replaces

@@ -15,5 +15,7 @@ pub mod sun;
 pub use self::series::{evaluate, max_coefficients, Sigma, Transform};
 pub use crate::format::fourier::{Encoding, Layout, Pyramid, Reduce};
 pub mod stage;
+pub mod stream;
 
-pub use self::stage::{build_fourier, Encoder, FourierOptions, FourierReport, STAGE};
+pub use self::stage::{build_fourier, Encoder, FourierOptions, FourierReport, FourierStage, STAGE};
+pub use self::stream::{FourierSink, StreamedFourier};

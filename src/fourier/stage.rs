@@ -3,11 +3,12 @@
 //! on each tile's maps as they are computed ([`Encoder`]), so that raw maps need never be
 //! written.
 
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::series::{max_coefficients, Scratch, Sigma, Transform};
 use crate::format::fourier::{
@@ -20,8 +21,7 @@ use crate::format::height::HeightTile;
 use crate::layout::TileId;
 use crate::manifest::{self, FourierProduct, HorizonLevelDistance, Tileset};
 use crate::progress::Progress;
-use crate::runner::{self, StageSpec, Start};
-use crate::tileset::writer::Writer;
+use crate::runner::{self, Cx, Finished, Order, Reads, Select, Stage, StageSpec, Unit};
 use crate::tileset::{Product, Store};
 
 /// What the user chose.
@@ -149,7 +149,7 @@ pub fn sun_radius_deg(distance_au: Option<f64>, body: &str) -> Result<f64> {
 }
 
 /// What one tile's compression found.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
 pub struct TileStats {
     /// Coefficients kept (0 when fully lit).
     pub k: usize,
@@ -489,8 +489,9 @@ pub fn kept(path: &Path, n: usize, a: usize) -> Option<TileStats> {
 /// The stage from stored raw maps.
 pub const STAGE: StageSpec = StageSpec {
     name: "fourier",
-    writes: &[Product::Fourier],
-    format: &[FORMAT],
+    writes: Cow::Borrowed(&[Product::Fourier]),
+    reads: Cow::Borrowed(&[Product::Height, Product::Horizon]),
+    format: Cow::Borrowed(&[FORMAT]),
 };
 
 #[derive(Clone, Debug, Serialize)]
@@ -514,14 +515,47 @@ pub struct FourierReport {
     pub up_to_date: bool,
 }
 
-/// Compress the stored raw horizon maps of the levels asked into pyramids.
+/// Compress the stored raw horizon maps of the levels asked into Fourier pyramids.
 pub fn build_fourier(
     dir: &Path,
     opts: &FourierOptions,
     progress: &dyn Progress,
 ) -> Result<FourierReport> {
-    type Plan = (Vec<u8>, Vec<TileId>, usize);
-    let check = |ts: &Tileset| -> Result<Plan> {
+    runner::execute(
+        &FourierStage { opts: opts.clone() },
+        dir,
+        &Select::All,
+        progress,
+    )?
+    .into_report("fourier")
+}
+
+/// The Fourier stage from stored raw maps: one unit per tile of the levels asked.
+pub struct FourierStage {
+    pub opts: FourierOptions,
+}
+
+/// What a run from raw maps knows once the tileset is checked.
+pub struct FourierPlan {
+    levels: Vec<u8>,
+    tiles: Vec<TileId>,
+    azimuths: usize,
+    encoder: Encoder,
+    ts: Tileset,
+}
+
+impl Stage for FourierStage {
+    type Plan = FourierPlan;
+    type Done = TileStats;
+    type Scratch = ();
+    type Report = FourierReport;
+
+    fn spec(&self) -> StageSpec {
+        STAGE
+    }
+
+    fn plan(&self, dir: &Path, ts: &Tileset) -> Result<FourierPlan> {
+        let opts = &self.opts;
         let mpath = dir.join(manifest::MANIFEST);
         let h = ts.products.horizon.as_ref().ok_or_else(|| {
             Error::invalid(
@@ -555,88 +589,128 @@ pub fn build_fourier(
             .filter(|t| levels.contains(&t.level))
             .collect();
         check_output_size(opts, tiles.len(), ts.layout.tile_size as usize)?;
-        Ok((levels, tiles, h.azimuths))
-    };
-    check(&Tileset::load(dir)?)?;
-    let writer = Writer::begin(dir)?;
-    let store = Store::open_unlocked(dir)?;
-    let ts = store.manifest();
-    let (levels, tiles, a) = check(ts)?;
-    let h = ts.products.horizon.as_ref().expect("checked");
-    let n = ts.layout.tile_size as usize;
-    let key = runner::run_key(
-        &STAGE,
-        &[&h.run_key],
-        &[serde_json::to_string(opts).unwrap_or_default().as_bytes()],
-    );
-    let mut report = FourierReport {
-        out: dir.to_path_buf(),
-        levels: levels.clone(),
-        azimuths: a,
-        coefficients: opts.coefficients,
-        layout: opts.layout,
-        encoding: opts.encoding,
-        sigma: opts.sigma,
-        tiles: tiles.len() as u64,
-        tiles_written: 0,
-        tiles_kept: 0,
-        tiles_fully_lit: 0,
-        bytes_written: 0,
-        raw_bytes_per_tile: (a * n * n * 2) as u64,
-        bytes_per_tile: pyramid::file_bytes(n, opts.coefficients, opts.layout) as u64,
-        up_to_date: false,
-    };
-    let run = match runner::start(writer, STAGE, &key, Some(ts))? {
-        Start::UpToDate => {
-            report.up_to_date = true;
-            report.tiles_kept = report.tiles;
-            report.tiles_fully_lit = ts
+        Ok(FourierPlan {
+            levels,
+            tiles,
+            azimuths: h.azimuths,
+            encoder: Encoder::new(opts, ts, h.azimuths, h.terrain_min_m),
+            ts: ts.clone(),
+        })
+    }
+
+    fn key(&self, ts: &Tileset, _plan: &FourierPlan) -> String {
+        let h = ts.products.horizon.as_ref().expect("checked");
+        runner::run_key(
+            &STAGE,
+            &[&h.run_key],
+            &[serde_json::to_string(&self.opts)
+                .unwrap_or_default()
+                .as_bytes()],
+        )
+    }
+
+    fn units(&self, ts: &Tileset, plan: &FourierPlan) -> Result<Vec<Unit>> {
+        let n = ts.layout.tile_size as usize;
+        Ok(plan
+            .tiles
+            .iter()
+            .map(|&id| {
+                let reads = vec![
+                    Reads::Tile {
+                        product: Product::Height,
+                        tile: id,
+                    },
+                    Reads::Tile {
+                        product: Product::Horizon,
+                        tile: id,
+                    },
+                ];
+                Unit::tile(id, reads, (n * n * plan.azimuths) as f64)
+            })
+            .collect())
+    }
+
+    fn order(&self) -> Order {
+        // The encoder spreads a tile's pixels over the threads.
+        Order::Sequential
+    }
+
+    fn scratch(&self, _plan: &FourierPlan) {}
+
+    fn run_unit(&self, cx: &Cx<FourierPlan>, unit: &Unit, _: &mut ()) -> Result<TileStats> {
+        let id = unit.tile;
+        let tile = cx.store.height(id)?.expect("listed tiles exist");
+        let elev = cx.store.horizon(id)?;
+        let (p, stats) = cx.plan.encoder.encode(&elev, &tile);
+        pyramid::write(&tile_path(cx.out, id), &p)?;
+        Ok(stats)
+    }
+
+    fn finish(
+        &self,
+        cx: &Cx<FourierPlan>,
+        done: Vec<Finished<TileStats>>,
+    ) -> Result<(Tileset, FourierReport)> {
+        let (opts, ts) = (&self.opts, &cx.plan.ts);
+        let h = ts.products.horizon.as_ref().expect("checked");
+        let mut report = self.up_to_date(cx.store, cx.plan, &[]);
+        report.up_to_date = false;
+        report.tiles_kept = 0;
+        let mut tally = Tally::default();
+        for f in done {
+            if f.here {
+                tally.add(f.unit.tile, f.done);
+                report.tiles_written += 1;
+                report.bytes_written += f.done.bytes;
+            } else {
+                tally.add_kept(f.unit.tile, f.done);
+                report.tiles_kept += 1;
+            }
+        }
+        report.tiles_fully_lit = tally.fully_lit;
+        let mut manifest = ts.clone();
+        manifest.products.fourier = Some(product(
+            ts,
+            opts,
+            cx.plan.levels.clone(),
+            cx.plan.azimuths,
+            tally,
+            Source {
+                kind: "raw",
+                method: &h.method,
+                near_px: h.near_px,
+                terrain: (h.terrain_min_m, h.terrain_max_m),
+                distances: h.distances.clone(),
+            },
+            cx.key.to_string(),
+        ));
+        Ok((manifest, report))
+    }
+
+    fn up_to_date(&self, store: &Store, plan: &FourierPlan, _units: &[Unit]) -> FourierReport {
+        let (opts, n, a) = (&self.opts, plan.ts.layout.tile_size as usize, plan.azimuths);
+        let tiles = plan.tiles.len() as u64;
+        FourierReport {
+            out: store.dir().to_path_buf(),
+            levels: plan.levels.clone(),
+            azimuths: a,
+            coefficients: opts.coefficients,
+            layout: opts.layout,
+            encoding: opts.encoding,
+            sigma: opts.sigma,
+            tiles,
+            tiles_written: 0,
+            tiles_kept: tiles,
+            tiles_fully_lit: store
+                .manifest()
                 .products
                 .fourier
                 .as_ref()
-                .map_or(0, |f| f.tiles_fully_lit);
-            return Ok(report);
+                .map_or(0, |f| f.tiles_fully_lit),
+            bytes_written: 0,
+            raw_bytes_per_tile: (a * n * n * 2) as u64,
+            bytes_per_tile: pyramid::file_bytes(n, opts.coefficients, opts.layout) as u64,
+            up_to_date: true,
         }
-        Start::Run(r) => r,
-    };
-    let enc = Encoder::new(opts, ts, a, h.terrain_min_m);
-    let mut tally = Tally::default();
-    progress.start("fourier", tiles.len() as u64);
-    for &id in &tiles {
-        let out = tile_path(run.out(), id);
-        if let Some(stats) = run.resume().then(|| kept(&out, n, a)).flatten() {
-            tally.add_kept(id, stats);
-            report.tiles_kept += 1;
-            progress.inc(1);
-            continue;
-        }
-        let tile = store.height(id)?.expect("listed tiles exist");
-        let elev = store.horizon(id)?;
-        let (p, stats) = enc.encode(&elev, &tile);
-        pyramid::write(&out, &p)?;
-        tally.add(id, stats);
-        report.tiles_written += 1;
-        report.bytes_written += stats.bytes;
-        progress.inc(1);
     }
-    progress.finish();
-    report.tiles_fully_lit = tally.fully_lit;
-    let mut manifest = ts.clone();
-    manifest.products.fourier = Some(product(
-        ts,
-        opts,
-        levels,
-        a,
-        tally,
-        Source {
-            kind: "raw",
-            method: &h.method,
-            near_px: h.near_px,
-            terrain: (h.terrain_min_m, h.terrain_max_m),
-            distances: h.distances.clone(),
-        },
-        key,
-    ));
-    run.commit(manifest)?;
-    Ok(report)
 }

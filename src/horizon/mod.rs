@@ -26,7 +26,7 @@ pub use self::method::{
 pub use self::near::{DEFAULT_NEAR_PX, MAX_NEAR_PX};
 pub use self::stage::{
     build_horizons, context_for, default_fine_margin_px, reach_rad, terrain_range, HorizonOptions,
-    HorizonReport, Reach, StreamedFourier, FINE_MARGIN_PX, STAGE, STAGE_BOTH, STAGE_FOURIER,
+    HorizonReport, HorizonStage, Reach, FINE_MARGIN_PX, STAGE,
 };
 pub use crate::format::horizon::{
     read_horizon_exr, tile_path, write_horizon_exr, HorizonPrecision, AZIMUTH_CONVENTION, PATTERN,

@@ -2,12 +2,13 @@
 //! the neighbouring faces as far as any terrain could rise above the horizon), the horizons of
 //! its pixels, and the raw maps on disk; plus the on-demand query of one point.
 
-use std::collections::HashMap;
+use std::borrow::Cow;
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::far::FarRing;
 use super::geometry::{Context, Rect};
@@ -17,15 +18,14 @@ use crate::cube::{Face, Projection};
 use crate::error::{Error, Result};
 use crate::format::height::HeightTile;
 use crate::format::horizon::{
-    read_horizon_exr, tile_path, write_horizon_exr, HorizonPrecision, AZIMUTH_CONVENTION, FORMAT,
-    LAYOUT, PATTERN,
+    tile_path, write_horizon_exr, HorizonPrecision, AZIMUTH_CONVENTION, FORMAT, LAYOUT, PATTERN,
 };
 use crate::format::TileCompression;
 use crate::layout::TileId;
 use crate::manifest::{self, HorizonLevelDistance, HorizonProduct, Tileset};
 use crate::progress::Progress;
-use crate::runner::{self, StageSpec, Start};
-use crate::tileset::writer::Writer;
+use crate::runner::{self, Cx, Finished, Order, Reads, Select, Stage, StageSpec, Unit};
+use crate::sink::{HorizonSink, HorizonSource, HorizonTile, SinkRun};
 use crate::tileset::{Product, Store};
 
 /// Revision of the algorithms' results (part of the run key: a rerun after a change that moves
@@ -78,12 +78,6 @@ pub struct HorizonOptions {
     /// it, out to the whole reach, far rings of coarser levels ([`FarRing`]). None:
     /// [`default_fine_margin_px`].
     pub fine_margin_px: Option<u64>,
-    /// Compress each tile's horizons into Fourier pyramids as they are computed.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub fourier: Option<crate::fourier::FourierOptions>,
-    /// With `fourier`: also write the raw maps.
-    #[serde(skip_serializing_if = "std::ops::Not::not")]
-    pub keep_raw: bool,
 }
 
 impl Default for HorizonOptions {
@@ -98,24 +92,6 @@ impl Default for HorizonOptions {
             max_output_gib: 8.0,
             near_px: DEFAULT_NEAR_PX,
             fine_margin_px: None,
-            fourier: None,
-            keep_raw: false,
-        }
-    }
-}
-
-impl HorizonOptions {
-    /// Whether this run writes the raw maps.
-    pub fn writes_raw(&self) -> bool {
-        self.fourier.is_none() || self.keep_raw
-    }
-
-    /// The stage spec of this run: raw maps, pyramids, or both.
-    pub fn stage(&self) -> StageSpec {
-        match (&self.fourier, self.keep_raw) {
-            (None, _) => STAGE,
-            (Some(_), false) => STAGE_FOURIER,
-            (Some(_), true) => STAGE_BOTH,
         }
     }
 }
@@ -133,25 +109,16 @@ pub struct HorizonReport {
     pub pixel_azimuths: u64,
     pub distances: Vec<HorizonLevelDistance>,
     pub up_to_date: bool,
-    /// Whether raw maps were written, and the pyramids' summary when compressed.
+    /// Whether raw maps were written.
     pub raw: bool,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub fourier: Option<StreamedFourier>,
-    /// Seconds spent computing horizons and compressing them (this run's tiles).
+    /// What each sink the horizons streamed into made (`fourier`: the pyramids' summary),
+    /// by sink name.
+    #[serde(flatten)]
+    pub streamed: BTreeMap<String, serde_json::Value>,
+    /// Seconds spent computing horizons and handing them to the sinks (compressing them;
+    /// this run's tiles).
     pub horizon_s: f64,
     pub compress_s: f64,
-}
-
-/// What the streamed compression made.
-#[derive(Clone, Debug, Serialize)]
-pub struct StreamedFourier {
-    pub coefficients: usize,
-    pub layout: crate::fourier::Layout,
-    pub encoding: crate::fourier::Encoding,
-    pub sigma: crate::fourier::Sigma,
-    pub tiles_fully_lit: u64,
-    pub bytes_written: u64,
-    pub bytes_per_tile: u64,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -598,15 +565,6 @@ pub(crate) fn check_layout(dir: &Path, ts: &Tileset) -> Result<()> {
 }
 
 pub(crate) fn check_options(opts: &HorizonOptions) -> Result<()> {
-    if let Some(f) = &opts.fourier {
-        crate::fourier::stage::check_options(f, opts.azimuths)?;
-    } else if opts.keep_raw {
-        return Err(Error::param(
-            "keep_raw",
-            "only means something with Fourier compression (--fourier): raw maps are what the \
-             horizon stage writes otherwise",
-        ));
-    }
     runner::check_output_cap("max_output_gib", opts.max_output_gib)?;
     let a = opts.azimuths;
     if !(4..=4096).contains(&a) {
@@ -632,25 +590,12 @@ pub(crate) fn check_options(opts: &HorizonOptions) -> Result<()> {
     Ok(())
 }
 
-/// The horizon stage writes the raw maps from the height tiles (and the mipmaps' extrema).
+/// The horizon stage writing raw maps only.
 pub const STAGE: StageSpec = StageSpec {
     name: "horizon",
-    writes: &[Product::Horizon],
-    format: &[FORMAT, ALGORITHM],
-};
-
-/// The horizon stage compressing each tile into Fourier pyramids as it goes (no raw maps).
-pub const STAGE_FOURIER: StageSpec = StageSpec {
-    name: "horizon",
-    writes: &[Product::Fourier],
-    format: &[FORMAT, ALGORITHM, crate::format::fourier::FORMAT],
-};
-
-/// Both: pyramids and the raw maps (`--keep-raw`).
-pub const STAGE_BOTH: StageSpec = StageSpec {
-    name: "horizon",
-    writes: &[Product::Fourier, Product::Horizon],
-    format: &[FORMAT, ALGORITHM, crate::format::fourier::FORMAT],
+    writes: Cow::Borrowed(&[Product::Horizon]),
+    reads: Cow::Borrowed(&[Product::Height, Product::Mip]),
+    format: Cow::Borrowed(&[FORMAT, ALGORITHM]),
 };
 
 /// The levels a run computes, checked against the tileset.
@@ -694,19 +639,121 @@ fn check_output_size(opts: &HorizonOptions, levels: &[u8], tiles: usize, n: usiz
     Ok(())
 }
 
-/// What a horizon run computes: its levels, their tiles and the terrain range bounding the
-/// search distance.
-type Plan = (Vec<u8>, Vec<TileId>, (f64, f64));
-
-/// Compute and store the raw horizon maps of the levels asked.
+/// Compute and store the raw horizon maps of the levels asked (no sink: `horizon` without
+/// `--fourier`; [`crate::graph`] composes the stage with the Fourier encoder).
 pub fn build_horizons(
     dir: &Path,
     opts: &HorizonOptions,
     progress: &dyn Progress,
 ) -> Result<HorizonReport> {
-    check_options(opts)?;
-    // Everything that can refuse the run is checked before the tileset's folder is touched.
-    let check = |ts: &Tileset| -> Result<Plan> {
+    let stage = HorizonStage {
+        opts: opts.clone(),
+        raw: true,
+        sinks: Vec::new(),
+    };
+    runner::execute(&stage, dir, &Select::All, progress)?.into_report("horizon")
+}
+
+/// The horizon stage as units, one per tile of the levels asked (in tile order, each using
+/// every thread): each tile's maps are written as raw maps (`raw`) and/or handed to the
+/// `sinks` the graph composed.
+pub struct HorizonStage<'a> {
+    pub opts: HorizonOptions,
+    /// Write the raw maps.
+    pub raw: bool,
+    pub sinks: Vec<&'a dyn HorizonSink>,
+}
+
+/// What a horizon run knows once the tileset is checked.
+pub struct HorizonPlan {
+    levels: Vec<u8>,
+    tiles: Vec<TileId>,
+    /// The terrain range bounding the search distance.
+    range: (f64, f64),
+    fine_margin: u64,
+    sinks: Vec<Box<dyn SinkRun>>,
+    ts: Tileset,
+}
+
+/// What one tile's unit did (floats as bits: the record round-trips exactly).
+#[derive(Serialize, Deserialize)]
+pub struct TileDone {
+    /// How far the tile's context reached (None: the tile is all no data).
+    reach: Option<ReachDone>,
+    /// Each sink's record, in the order of the stage's sinks.
+    sinks: Vec<serde_json::Value>,
+    pixel_azimuths: u64,
+    horizon_s: f64,
+    sink_s: f64,
+}
+
+#[derive(Serialize, Deserialize)]
+struct ReachDone {
+    /// The reach (radians) as bits.
+    rad: u64,
+    /// The margin searched at full resolution, px.
+    margin_px: u64,
+    far_rings: bool,
+    capped: bool,
+}
+
+/// What one worker keeps from tile to tile.
+pub struct HorizonScratch {
+    covers: Covers,
+    /// The tile cache's clock at the previous tile.
+    mark: u64,
+}
+
+impl HorizonStage<'_> {
+    /// The products written and the version strings: the sinks' first, then the raw maps.
+    fn writes(&self) -> Vec<Product> {
+        let mut w: Vec<Product> = self
+            .sinks
+            .iter()
+            .flat_map(|s| s.products().iter().copied())
+            .collect();
+        if self.raw {
+            w.push(Product::Horizon);
+        }
+        w
+    }
+}
+
+impl Stage for HorizonStage<'_> {
+    type Plan = HorizonPlan;
+    type Done = TileDone;
+    type Scratch = HorizonScratch;
+    type Report = HorizonReport;
+
+    fn spec(&self) -> StageSpec {
+        let mut format = vec![FORMAT, ALGORITHM];
+        for s in &self.sinks {
+            format.extend_from_slice(s.formats());
+        }
+        StageSpec {
+            name: "horizon",
+            writes: Cow::Owned(self.writes()),
+            reads: Cow::Borrowed(&[Product::Height, Product::Mip]),
+            format: Cow::Owned(format),
+        }
+    }
+
+    fn check(&self) -> Result<()> {
+        if !self.raw && self.sinks.is_empty() {
+            return Err(Error::usage(
+                "a horizon run that neither writes raw maps nor streams them anywhere makes \
+                 nothing",
+            ));
+        }
+        check_options(&self.opts)?;
+        for s in &self.sinks {
+            s.check(self.opts.azimuths)?;
+        }
+        Ok(())
+    }
+
+    fn plan(&self, dir: &Path, ts: &Tileset) -> Result<HorizonPlan> {
+        let opts = &self.opts;
         let manifest_path = dir.join(manifest::MANIFEST);
         check_layout(dir, ts)?;
         if ts.products.height.is_none() {
@@ -723,153 +770,132 @@ pub fn build_horizons(
             .into_iter()
             .filter(|t| levels.contains(&t.level))
             .collect();
-        if opts.writes_raw() {
-            check_output_size(opts, &levels, tiles.len(), ts.layout.tile_size as usize)?;
+        let n = ts.layout.tile_size as usize;
+        if self.raw {
+            check_output_size(opts, &levels, tiles.len(), n)?;
         }
-        if let Some(f) = &opts.fourier {
-            crate::fourier::stage::check_tileset(f, ts)?;
-            crate::fourier::stage::check_output_size(f, tiles.len(), ts.layout.tile_size as usize)?;
-        }
-        Ok((levels, tiles, range))
-    };
-    check(&Tileset::load(dir)?)?;
-    let writer = Writer::begin(dir)?;
-    let store = Store::open_unlocked(dir)?;
-    let (levels, tiles, (tmin, tmax)) = check(store.manifest())?;
-    let ts = store.manifest();
-    let lay = ts.layout;
-    let n = lay.tile_size as usize;
-    let height_path = &ts.products.height.as_ref().expect("checked").path;
-    let spec = opts.stage();
-    let fine_margin = opts
-        .fine_margin_px
-        .unwrap_or_else(|| default_fine_margin_px(lay.tile_size));
-    let run_key = runner::run_key(
-        &spec,
-        &[&ts.run_key],
-        &[
-            height_path.as_bytes(),
-            serde_json::to_string(opts).unwrap_or_default().as_bytes(),
-            format!("{tmin} {tmax}").as_bytes(),
-            // The margin in effect, so that a changed default recomputes.
-            format!("fine margin {fine_margin}").as_bytes(),
-        ],
-    );
-    let streamed =
-        |f: &crate::fourier::FourierOptions, fully_lit: u64, bytes: u64| StreamedFourier {
-            coefficients: f.coefficients,
-            layout: f.layout,
-            encoding: f.encoding,
-            sigma: f.sigma,
-            tiles_fully_lit: fully_lit,
-            bytes_written: bytes,
-            bytes_per_tile: crate::format::fourier::file_bytes(n, f.coefficients, f.layout) as u64,
-        };
-    let run = match runner::start(writer, spec, &run_key, Some(ts))? {
-        Start::UpToDate => {
-            let distances = match (&ts.products.fourier, &ts.products.horizon) {
-                (Some(f), _) if opts.fourier.is_some() => f.distances.clone(),
-                (_, Some(h)) => h.distances.clone(),
-                _ => Vec::new(),
-            };
-            let lit = ts
-                .products
-                .fourier
-                .as_ref()
-                .map_or(0, |f| f.tiles_fully_lit);
-            return Ok(HorizonReport {
-                out: dir.to_path_buf(),
-                levels,
-                azimuths: opts.azimuths,
-                method: opts.method,
-                tiles: tiles.len() as u64,
-                tiles_written: 0,
-                tiles_kept: tiles.len() as u64,
-                pixel_azimuths: 0,
-                distances,
-                up_to_date: true,
-                raw: opts.writes_raw(),
-                fourier: opts.fourier.as_ref().map(|f| streamed(f, lit, 0)),
-                horizon_s: 0.0,
-                compress_s: 0.0,
-            });
-        }
-        Start::Run(run) => run,
-    };
-
-    let mut covers = HashMap::new();
-    let mut dist: Vec<HorizonLevelDistance> = levels
-        .iter()
-        .map(|&level| HorizonLevelDistance {
-            level,
-            needed_km: 0.0,
-            max_margin_px: 0,
-            tiles_capped: 0,
-            tiles_with_far_rings: 0,
+        let sinks = self
+            .sinks
+            .iter()
+            .map(|s| s.prepare(ts, tiles.len(), opts.azimuths, range.0))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(HorizonPlan {
+            levels,
+            tiles,
+            range,
+            fine_margin: opts
+                .fine_margin_px
+                .unwrap_or_else(|| default_fine_margin_px(ts.layout.tile_size)),
+            sinks,
+            ts: ts.clone(),
         })
-        .collect();
-    let (mut written, mut kept, mut pixaz) = (0u64, 0u64, 0u64);
-    let encoder = opts
-        .fourier
-        .as_ref()
-        .map(|f| crate::fourier::Encoder::new(f, ts, opts.azimuths, tmin));
-    let mut tally = crate::fourier::stage::Tally::default();
-    let (mut horizon_s, mut compress_s) = (0.0f64, 0.0f64);
-    progress.start("horizons", tiles.len() as u64);
-    // The height tiles the previous tile read stay cached for this one, older ones go: the
-    // cache holds about one tile's contexts, not the level.
-    let mut mark = store.cache().now();
-    for &id in &tiles {
-        store.cache().keep_since(mark);
-        mark = store.cache().now();
-        let out = tile_path(run.out(), id);
-        let fout = crate::format::fourier::tile_path(run.out(), id);
+    }
+
+    fn key(&self, ts: &Tileset, plan: &HorizonPlan) -> String {
+        let height_path = &ts.products.height.as_ref().expect("checked").path;
+        let (tmin, tmax) = plan.range;
+        // The options as JSON, the sinks' options appended as fields of the same object (and
+        // `keep_raw` when raw maps are written beside a sink).
+        let mut params = serde_json::to_string(&self.opts).unwrap_or_default();
+        params.pop();
+        for s in &self.sinks {
+            for (name, json) in s.key_fields() {
+                params.push_str(&format!(",\"{name}\":{json}"));
+            }
+        }
+        if self.raw && !self.sinks.is_empty() {
+            params.push_str(",\"keep_raw\":true");
+        }
+        params.push('}');
+        runner::run_key(
+            &self.spec(),
+            &[&ts.run_key],
+            &[
+                height_path.as_bytes(),
+                params.as_bytes(),
+                format!("{tmin} {tmax}").as_bytes(),
+                // The margin in effect, so that a changed default recomputes.
+                format!("fine margin {}", plan.fine_margin).as_bytes(),
+            ],
+        )
+    }
+
+    fn units(&self, ts: &Tileset, plan: &HorizonPlan) -> Result<Vec<Unit>> {
+        let n = ts.layout.tile_size as u64;
+        let margin = if self.opts.method == Method::Fast {
+            plan.fine_margin.min(self.opts.max_margin_px)
+        } else {
+            self.opts.max_margin_px
+        };
+        Ok(plan
+            .tiles
+            .iter()
+            .map(|&id| {
+                let reads = vec![
+                    Reads::Around {
+                        product: Product::Height,
+                        tile: id,
+                        margin_px: margin,
+                    },
+                    Reads::Tile {
+                        product: Product::Mip,
+                        tile: id,
+                    },
+                ];
+                Unit::tile(id, reads, (n * n * self.opts.azimuths as u64) as f64)
+            })
+            .collect())
+    }
+
+    fn order(&self) -> Order {
+        // A tile's pixels are spread over the threads; the height tiles the previous tile
+        // read stay cached for the next.
+        Order::Sequential
+    }
+
+    fn scratch(&self, _plan: &HorizonPlan) -> HorizonScratch {
+        HorizonScratch {
+            covers: HashMap::new(),
+            mark: 0,
+        }
+    }
+
+    fn run_unit(
+        &self,
+        cx: &Cx<HorizonPlan>,
+        unit: &Unit,
+        scratch: &mut HorizonScratch,
+    ) -> Result<TileDone> {
+        let (opts, store, plan) = (&self.opts, cx.store, cx.plan);
+        let ts = &plan.ts;
+        let lay = ts.layout;
+        let n = lay.tile_size as usize;
+        let id = unit.tile;
+        // The height tiles the previous tile read stay cached for this one, older ones go:
+        // the cache holds about one tile's contexts, not the level.
+        store.cache().keep_since(scratch.mark);
+        scratch.mark = store.cache().now();
+        let (tmin, tmax) = plan.range;
         let tile = store.height(id)?.expect("listed tiles exist");
         let top = interior_max(&tile, lay.halo as usize, n);
-        // The distances are recorded for every tile, kept ones too, so that a resumed run's
-        // manifest is the uninterrupted run's.
         let reach = top.map(|top| {
             let rad = reach_rad(ts.body.radius_m, tmin, tmax, top as f64);
-            let reach = margin_for(ts, id, rad, opts.max_margin_px);
-            let d = dist.iter_mut().find(|d| d.level == id.level).unwrap();
-            d.needed_km = d.needed_km.max(rad * ts.body.radius_m / 1000.0);
-            if opts.method == Method::Fast {
-                // Far rings see the rest of the reach.
-                let fine = reach.margin_px.min(fine_margin);
-                d.max_margin_px = d.max_margin_px.max(fine);
-                if fine < reach.needed_px {
-                    d.tiles_with_far_rings += 1;
-                }
-            } else {
-                d.max_margin_px = d.max_margin_px.max(reach.margin_px);
-                if reach.margin_px < reach.needed_px {
-                    d.tiles_capped += 1;
-                }
-            }
-            reach
+            (rad, margin_for(ts, id, rad, opts.max_margin_px))
         });
-        if run.resume() {
-            let raw_kept = !opts.writes_raw()
-                || out.exists() && read_horizon_exr(&out, n).is_ok_and(|(a, _)| a == opts.azimuths);
-            let pyramid = encoder
-                .as_ref()
-                .map(|_| crate::fourier::stage::kept(&fout, n, opts.azimuths));
-            if raw_kept && !matches!(pyramid, Some(None)) {
-                if let Some(Some(stats)) = pyramid {
-                    tally.add_kept(id, stats);
-                }
-                kept += 1;
-                progress.inc(1);
-                continue;
-            }
-        }
         let t0 = std::time::Instant::now();
-        let elev = if let Some(reach) = reach {
-            let (ctx, rect, rings) =
-                tile_rasters(&store, id, reach, opts.method, fine_margin, &mut covers)?;
-            pixaz += (n * n * opts.azimuths) as u64;
+        let mut pixaz = 0;
+        let elev = if let Some((_, reach)) = reach {
+            let (ctx, rect, rings) = tile_rasters(
+                store,
+                id,
+                reach,
+                opts.method,
+                plan.fine_margin,
+                &mut scratch.covers,
+            )?;
+            pixaz = (n * n * opts.azimuths) as u64;
             horizons_seeing_rings(
-                &store,
+                store,
                 &ctx,
                 rect,
                 &rings,
@@ -880,10 +906,10 @@ pub fn build_horizons(
         } else {
             vec![f32::NAN; n * n * opts.azimuths]
         };
-        horizon_s += t0.elapsed().as_secs_f64();
-        if opts.writes_raw() {
+        let horizon_s = t0.elapsed().as_secs_f64();
+        if self.raw {
             write_horizon_exr(
-                &out,
+                &tile_path(cx.out, id),
                 n,
                 opts.azimuths,
                 &elev,
@@ -891,74 +917,159 @@ pub fn build_horizons(
                 opts.compression,
             )?;
         }
-        if let Some(enc) = &encoder {
-            let t1 = std::time::Instant::now();
-            let (p, stats) = enc.encode(&elev, &tile);
-            crate::format::fourier::write(&fout, &p)?;
-            compress_s += t1.elapsed().as_secs_f64();
-            tally.add(id, stats);
+        let t1 = std::time::Instant::now();
+        let sinks = plan
+            .sinks
+            .iter()
+            .map(|s| {
+                s.accept(
+                    cx.out,
+                    HorizonTile {
+                        id,
+                        planes: &elev,
+                        height: &tile,
+                    },
+                )
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let reach = reach.map(|(rad, reach)| {
+            let margin_px = if opts.method == Method::Fast {
+                // Far rings see the rest of the reach.
+                reach.margin_px.min(plan.fine_margin)
+            } else {
+                reach.margin_px
+            };
+            ReachDone {
+                rad: rad.to_bits(),
+                margin_px,
+                far_rings: opts.method == Method::Fast && margin_px < reach.needed_px,
+                capped: opts.method != Method::Fast && reach.margin_px < reach.needed_px,
+            }
+        });
+        Ok(TileDone {
+            reach,
+            sinks,
+            pixel_azimuths: pixaz,
+            horizon_s,
+            sink_s: t1.elapsed().as_secs_f64(),
+        })
+    }
+
+    fn finish(
+        &self,
+        cx: &Cx<HorizonPlan>,
+        done: Vec<Finished<TileDone>>,
+    ) -> Result<(Tileset, HorizonReport)> {
+        let (opts, plan) = (&self.opts, cx.plan);
+        let ts = &plan.ts;
+        let (tmin, tmax) = plan.range;
+        // The distances are recorded for every tile, kept ones too, so that a resumed run's
+        // manifest is the uninterrupted run's.
+        let mut dist: Vec<HorizonLevelDistance> = plan
+            .levels
+            .iter()
+            .map(|&level| HorizonLevelDistance {
+                level,
+                needed_km: 0.0,
+                max_margin_px: 0,
+                tiles_capped: 0,
+                tiles_with_far_rings: 0,
+            })
+            .collect();
+        let mut report = self.up_to_date(cx.store, plan, &[]);
+        report.up_to_date = false;
+        report.tiles_kept = 0;
+        let mut records: Vec<Vec<(TileId, serde_json::Value, bool)>> =
+            plan.sinks.iter().map(|_| Vec::new()).collect();
+        for f in done {
+            let id = f.unit.tile;
+            if let Some(r) = &f.done.reach {
+                let d = dist.iter_mut().find(|d| d.level == id.level).unwrap();
+                let rad = f64::from_bits(r.rad);
+                d.needed_km = d.needed_km.max(rad * ts.body.radius_m / 1000.0);
+                d.max_margin_px = d.max_margin_px.max(r.margin_px);
+                d.tiles_with_far_rings += r.far_rings as u64;
+                d.tiles_capped += r.capped as u64;
+            }
+            if f.here {
+                report.tiles_written += 1;
+                report.pixel_azimuths += f.done.pixel_azimuths;
+                report.horizon_s += f.done.horizon_s;
+                report.compress_s += f.done.sink_s;
+            } else {
+                report.tiles_kept += 1;
+            }
+            for (rec, v) in records.iter_mut().zip(f.done.sinks) {
+                rec.push((id, v, f.here));
+            }
         }
-        written += 1;
-        progress.inc(1);
-    }
-    progress.finish();
-    let mut manifest = ts.clone();
-    let fourier_summary = opts
-        .fourier
-        .as_ref()
-        .map(|f| streamed(f, tally.fully_lit, tally.bytes_written));
-    if let Some(f) = &opts.fourier {
-        manifest.products.fourier = Some(crate::fourier::stage::product(
-            ts,
-            f,
-            levels.clone(),
-            opts.azimuths,
-            tally,
-            crate::fourier::stage::Source {
-                kind: "streamed",
-                method: opts.method.name(),
+        let source = HorizonSource {
+            levels: plan.levels.clone(),
+            azimuths: opts.azimuths,
+            method: opts.method.name().into(),
+            near_px: (opts.method == Method::Fast).then_some(opts.near_px),
+            terrain_min_m: tmin,
+            terrain_max_m: tmax,
+            distances: dist.clone(),
+        };
+        let mut manifest = ts.clone();
+        for ((sink, run), rec) in self.sinks.iter().zip(&plan.sinks).zip(records) {
+            let summary = run.finish(&mut manifest, rec, &source, cx.key)?;
+            report.streamed.insert(sink.name().to_string(), summary);
+        }
+        if self.raw {
+            manifest.products.horizon = Some(HorizonProduct {
+                path: PATTERN.into(),
+                channel: "elevation".into(),
+                precision: opts.precision.name().into(),
+                azimuths: opts.azimuths,
+                azimuth: AZIMUTH_CONVENTION.into(),
+                layout: LAYOUT.into(),
+                method: opts.method.name().into(),
                 near_px: (opts.method == Method::Fast).then_some(opts.near_px),
-                terrain: (tmin, tmax),
+                levels: plan.levels.clone(),
+                terrain_min_m: tmin,
+                terrain_max_m: tmax,
                 distances: dist.clone(),
-            },
-            run_key.clone(),
-        ));
+                run_key: cx.key.to_string(),
+            });
+        }
+        report.distances = dist;
+        Ok((manifest, report))
     }
-    let raw_product = HorizonProduct {
-        path: PATTERN.into(),
-        channel: "elevation".into(),
-        precision: opts.precision.name().into(),
-        azimuths: opts.azimuths,
-        azimuth: AZIMUTH_CONVENTION.into(),
-        layout: LAYOUT.into(),
-        method: opts.method.name().into(),
-        near_px: (opts.method == Method::Fast).then_some(opts.near_px),
-        levels: levels.clone(),
-        terrain_min_m: tmin,
-        terrain_max_m: tmax,
-        distances: dist.clone(),
-        run_key,
-    };
-    if opts.writes_raw() {
-        manifest.products.horizon = Some(raw_product);
+
+    fn up_to_date(&self, store: &Store, plan: &HorizonPlan, _units: &[Unit]) -> HorizonReport {
+        let ts = store.manifest();
+        let products = &ts.products;
+        // The distances of the product the run's first write records.
+        let distances = match (self.sinks.is_empty(), &products.fourier, &products.horizon) {
+            (false, Some(f), _) => f.distances.clone(),
+            (_, _, Some(h)) => h.distances.clone(),
+            _ => Vec::new(),
+        };
+        let streamed = self
+            .sinks
+            .iter()
+            .zip(&plan.sinks)
+            .map(|(s, run)| (s.name().to_string(), run.up_to_date(ts)))
+            .collect();
+        HorizonReport {
+            out: store.dir().to_path_buf(),
+            levels: plan.levels.clone(),
+            azimuths: self.opts.azimuths,
+            method: self.opts.method,
+            tiles: plan.tiles.len() as u64,
+            tiles_written: 0,
+            tiles_kept: plan.tiles.len() as u64,
+            pixel_azimuths: 0,
+            distances,
+            up_to_date: true,
+            raw: self.raw,
+            streamed,
+            horizon_s: 0.0,
+            compress_s: 0.0,
+        }
     }
-    run.commit(manifest)?;
-    Ok(HorizonReport {
-        out: dir.to_path_buf(),
-        levels,
-        azimuths: opts.azimuths,
-        method: opts.method,
-        tiles: tiles.len() as u64,
-        tiles_written: written,
-        tiles_kept: kept,
-        pixel_azimuths: pixaz,
-        distances: dist,
-        up_to_date: false,
-        raw: opts.writes_raw(),
-        fourier: fourier_summary,
-        horizon_s,
-        compress_s,
-    })
 }
 
 /// Highest interior height of a stored tile (None when it is all no data).

@@ -27,7 +27,7 @@ pub use self::kernels::{
     f16_down, f16_up, face_pyramid, level_sizes, max_pyramid, max_pyramid_into, minmax_pyramid,
     minmax_pyramid_into, MaxPyramid, MinMaxPyramid,
 };
-pub use self::stage::{build_mips, MipOptions, MipReport, STAGE};
+pub use self::stage::{build_mips, MipOptions, MipReport, MipStage, STAGE};
 pub use crate::format::mip::{
     decode_mip_exr, encode_mip_exr, encode_mip_exr_exr_crate, face_chunk_path, face_path,
     read_mip_exr, tile_paths, write_mip_exr, MipFile, Precision, FACE_CHUNK_PATTERN,

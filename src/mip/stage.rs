@@ -1,11 +1,11 @@
 //! The mip stage over a tileset (every tile's pyramids, the face pyramids, the manifest entry)
 //! and the query of the texel containing a point. Specified in docs/mipmaps.md.
 
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::kernels::{
     f16_down, f16_up, face_pyramid, fmax, fmin, minmax_pyramid_into, nan_if, MinMaxPyramid,
@@ -14,16 +14,14 @@ use super::kernels::{
 use crate::cube::Face;
 use crate::error::{Error, Result};
 use crate::format::mip::{
-    face_chunk_path, face_path, read_mip_exr, tile_paths, write_mip_exr, Precision,
-    FACE_CHUNK_PATTERN, FACE_CHUNK_TILES, FACE_PATTERN, MAX_PATTERN, MINMAX_PATTERN, MIP_FORMAT,
-    TEXEL_CONVENTION,
+    face_chunk_path, face_path, tile_paths, write_mip_exr, Precision, FACE_CHUNK_PATTERN,
+    FACE_CHUNK_TILES, FACE_PATTERN, MAX_PATTERN, MINMAX_PATTERN, MIP_FORMAT, TEXEL_CONVENTION,
 };
 use crate::format::TileCompression;
 use crate::layout::TileId;
 use crate::manifest::{self, MipLevelRange, MipProduct, Tileset};
 use crate::progress::Progress;
-use crate::runner::{self, StageSpec, Start};
-use crate::tileset::writer::Writer;
+use crate::runner::{self, Cx, Finished, Reads, Select, Stage, StageSpec, Unit};
 use crate::tileset::{Product, Store};
 
 // ---------------------------------------------------------------------------------------------
@@ -105,8 +103,9 @@ fn nan_to_none(v: f32) -> Option<f64> {
 /// The mip stage writes the max and (min, max) pyramids of the height tiles.
 pub const STAGE: StageSpec = StageSpec {
     name: "mip",
-    writes: &[Product::Mip],
-    format: &[MIP_FORMAT],
+    writes: Cow::Borrowed(&[Product::Mip]),
+    reads: Cow::Borrowed(&[Product::Height]),
+    format: Cow::Borrowed(&[MIP_FORMAT]),
 };
 
 /// Refuse what the mip stage cannot build from.
@@ -129,206 +128,278 @@ fn check_tileset(dir: &Path, ts: &Tileset) -> Result<()> {
 
 /// Build every mip product of the tileset in `dir` and record them in its manifest.
 pub fn build_mips(dir: &Path, opts: &MipOptions, progress: &dyn Progress) -> Result<MipReport> {
-    let chunk = opts.face_chunk_tiles;
-    if !chunk.is_power_of_two() || chunk < 2 {
-        return Err(Error::usage(format!(
-            "face-pyramid chunks of {chunk} tiles per side: not a power of two of at least 2"
-        )));
-    }
-    let before = Tileset::load(dir)?;
-    check_tileset(dir, &before)?;
-    check_output_size(opts, &before)?;
-    let writer = Writer::begin(dir)?;
-    let store = Store::open_unlocked(dir)?;
-    let ts = store.manifest().clone();
-    check_tileset(dir, &ts)?;
-    let manifest_path = dir.join(manifest::MANIFEST);
-    let height = ts.products.height.clone().expect("checked");
-    let lay = ts.layout;
-    let (n, s, halo) = (lay.tile_size as usize, lay.stored_size(), lay.halo as usize);
-    let run_key = runner::run_key(
-        &STAGE,
-        &[&ts.run_key],
-        &[
-            height.path.as_bytes(),
-            serde_json::to_string(opts).unwrap_or_default().as_bytes(),
-        ],
-    );
-    let tiles: Vec<TileId> = ts.tile_set().into_iter().collect();
-    let tile_bytes = (s * s * 4) as u64;
-    let run = match runner::start(writer, STAGE, &run_key, Some(&ts))? {
-        Start::UpToDate => {
-            let m = ts.products.mip.as_ref().expect("up to date");
-            return Ok(MipReport {
-                out: dir.to_path_buf(),
-                tiles: tiles.len() as u64,
-                tiles_written: 0,
-                tiles_kept: tiles.len() as u64,
-                face_pyramids: 0,
-                face_chunks: 0,
-                precision: opts.precision,
-                global_min_m: m.global_min_m,
-                global_max_m: m.global_max_m,
-                input_bytes: 0,
-                up_to_date: true,
-            });
-        }
-        Start::Run(run) => run,
-    };
-    let (out, resume) = (run.out().to_path_buf(), run.resume());
+    runner::execute(&MipStage::new(opts.clone()), dir, &Select::All, progress)?.into_report("mip")
+}
 
-    progress.start("mipmaps", tiles.len() as u64);
-    let results: Vec<Result<(f32, f32, bool)>> = tiles
-        .par_iter()
+/// The mip stage as units: one per height tile (its max and (min, max) pyramids), then the
+/// face pyramids of the tiles' extrema.
+pub struct MipStage {
+    pub opts: MipOptions,
+}
+
+impl MipStage {
+    pub fn new(opts: MipOptions) -> MipStage {
+        MipStage { opts }
+    }
+}
+
+/// What a mip run knows once the tileset is checked.
+pub struct MipPlan {
+    height_path: String,
+    /// Tile size, stored size, halo.
+    n: usize,
+    s: usize,
+    halo: usize,
+    ts: Tileset,
+}
+
+/// A tile's extrema as its files hold them (bits: NaN when the tile is no data).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
+pub struct TileTop {
+    lo: u32,
+    hi: u32,
+}
+
+impl Stage for MipStage {
+    type Plan = MipPlan;
+    type Done = TileTop;
+    type Scratch = MinMaxPyramid;
+    type Report = MipReport;
+
+    fn spec(&self) -> StageSpec {
+        STAGE
+    }
+
+    fn check(&self) -> Result<()> {
+        let chunk = self.opts.face_chunk_tiles;
+        if !chunk.is_power_of_two() || chunk < 2 {
+            return Err(Error::usage(format!(
+                "face-pyramid chunks of {chunk} tiles per side: not a power of two of at least 2"
+            )));
+        }
+        Ok(())
+    }
+
+    fn plan(&self, dir: &Path, ts: &Tileset) -> Result<MipPlan> {
+        check_tileset(dir, ts)?;
+        check_output_size(&self.opts, ts)?;
+        let lay = ts.layout;
+        Ok(MipPlan {
+            height_path: ts.products.height.as_ref().expect("checked").path.clone(),
+            n: lay.tile_size as usize,
+            s: lay.stored_size(),
+            halo: lay.halo as usize,
+            ts: ts.clone(),
+        })
+    }
+
+    fn key(&self, ts: &Tileset, plan: &MipPlan) -> String {
+        runner::run_key(
+            &STAGE,
+            &[&ts.run_key],
+            &[
+                plan.height_path.as_bytes(),
+                serde_json::to_string(&self.opts)
+                    .unwrap_or_default()
+                    .as_bytes(),
+            ],
+        )
+    }
+
+    fn units(&self, ts: &Tileset, plan: &MipPlan) -> Result<Vec<Unit>> {
+        Ok(ts
+            .tile_set()
+            .into_iter()
+            .map(|id| {
+                let reads = vec![Reads::Tile {
+                    product: Product::Height,
+                    tile: id,
+                }];
+                Unit::tile(id, reads, (plan.s * plan.s) as f64)
+            })
+            .collect())
+    }
+
+    fn scratch(&self, plan: &MipPlan) -> MinMaxPyramid {
         // One pyramid per worker, reused from tile to tile: fresh level buffers would cost a
         // page fault per 4 KiB written, more than computing the pyramid.
-        .map_init(
-            || MinMaxPyramid::new(n),
-            |pyr, &id| {
-                let r = mip_tile(&store, &out, id, n, s, halo, opts, resume, pyr);
-                progress.inc(1);
-                r
-            },
-        )
-        .collect();
-    progress.finish();
-    let mut tops = BTreeMap::new();
-    let (mut written, mut kept) = (0u64, 0u64);
-    for (id, r) in tiles.iter().zip(results) {
-        let (lo, hi, k) = r?;
-        if k {
-            kept += 1;
-        } else {
-            written += 1;
-        }
-        tops.insert(*id, (lo, hi));
+        MinMaxPyramid::new(plan.n)
     }
 
-    // Face pyramids of whole-tile extrema, and per-level and global ranges. A face of at most
-    // `chunk` tiles per side is one file; a larger one is cut into chunks of `chunk`² tiles,
-    // built one at a time from the tiles present, and a file of the chunks' extrema above
-    // them: nothing here grows with the number of tiles per side.
-    let chunk = chunk as usize;
-    let mut ranges = Vec::new();
-    let (mut face_pyramids, mut face_chunks) = (0u64, 0u64);
-    let mut chunked = false;
-    let (mut gmin, mut gmax) = (POS_INF, NEG_INF);
-    for level in 0..lay.levels {
-        let g = lay.tiles_per_side(level) as usize;
-        let (mut lmin, mut lmax) = (POS_INF, NEG_INF);
-        for face in Face::ALL {
-            let on_face = tops.range(
-                TileId {
-                    level,
-                    face,
-                    x: 0,
-                    y: 0,
-                }..=TileId {
-                    level,
-                    face,
-                    x: u32::MAX,
-                    y: u32::MAX,
-                },
-            );
-            let top = if g <= chunk {
-                let mut lo = vec![f32::NAN; g * g];
-                let mut hi = vec![f32::NAN; g * g];
-                let mut any = false;
-                for (id, &(a, b)) in on_face {
-                    let k = id.y as usize * g + id.x as usize;
-                    lo[k] = a;
-                    hi[k] = b;
-                    any = true;
-                }
-                if !any {
-                    continue;
-                }
-                write_face_pyramid(&face_path(&out, level, face), g, lo, hi, opts)?
+    fn run_unit(&self, cx: &Cx<MipPlan>, unit: &Unit, p: &mut MinMaxPyramid) -> Result<TileTop> {
+        let (lo, hi) = mip_tile(cx.store, cx.out, unit.tile, cx.plan, &self.opts, p)?;
+        Ok(TileTop {
+            lo: lo.to_bits(),
+            hi: hi.to_bits(),
+        })
+    }
+
+    fn finish(
+        &self,
+        cx: &Cx<MipPlan>,
+        done: Vec<Finished<TileTop>>,
+    ) -> Result<(Tileset, MipReport)> {
+        let (opts, out, ts) = (&self.opts, cx.out, &cx.plan.ts);
+        let lay = ts.layout;
+        let manifest_path = cx.store.manifest_path();
+        let tile_bytes = (cx.plan.s * cx.plan.s * 4) as u64;
+        let mut tops = BTreeMap::new();
+        let (mut written, mut kept) = (0u64, 0u64);
+        for f in &done {
+            if f.here {
+                written += 1;
             } else {
-                let mut chunks: BTreeMap<(usize, usize), Vec<ChunkTile>> = BTreeMap::new();
-                for (id, &(a, b)) in on_face {
-                    let (x, y) = (id.x as usize, id.y as usize);
-                    chunks.entry((y / chunk, x / chunk)).or_default().push((
-                        (y % chunk) * chunk + x % chunk,
-                        a,
-                        b,
-                    ));
-                }
-                if chunks.is_empty() {
-                    continue;
-                }
-                let nc = g / chunk;
-                let mut clo = vec![f32::NAN; nc * nc];
-                let mut chi = vec![f32::NAN; nc * nc];
-                for ((cy, cx), list) in chunks {
-                    let mut lo = vec![f32::NAN; chunk * chunk];
-                    let mut hi = vec![f32::NAN; chunk * chunk];
-                    for (k, a, b) in list {
+                kept += 1;
+            }
+            tops.insert(
+                f.unit.tile,
+                (f32::from_bits(f.done.lo), f32::from_bits(f.done.hi)),
+            );
+        }
+
+        // Face pyramids of whole-tile extrema, and per-level and global ranges. A face of at
+        // most `chunk` tiles per side is one file; a larger one is cut into chunks of `chunk`²
+        // tiles, built one at a time from the tiles present, and a file of the chunks' extrema
+        // above them: nothing here grows with the number of tiles per side.
+        let chunk = opts.face_chunk_tiles as usize;
+        let mut ranges = Vec::new();
+        let (mut face_pyramids, mut face_chunks) = (0u64, 0u64);
+        let mut chunked = false;
+        let (mut gmin, mut gmax) = (POS_INF, NEG_INF);
+        for level in 0..lay.levels {
+            let g = lay.tiles_per_side(level) as usize;
+            let (mut lmin, mut lmax) = (POS_INF, NEG_INF);
+            for face in Face::ALL {
+                let on_face = tops.range(
+                    TileId {
+                        level,
+                        face,
+                        x: 0,
+                        y: 0,
+                    }..=TileId {
+                        level,
+                        face,
+                        x: u32::MAX,
+                        y: u32::MAX,
+                    },
+                );
+                let top = if g <= chunk {
+                    let mut lo = vec![f32::NAN; g * g];
+                    let mut hi = vec![f32::NAN; g * g];
+                    let mut any = false;
+                    for (id, &(a, b)) in on_face {
+                        let k = id.y as usize * g + id.x as usize;
                         lo[k] = a;
                         hi[k] = b;
+                        any = true;
                     }
-                    let path = face_chunk_path(&out, level, face, cx as u32, cy as u32);
-                    let (a, b) = write_face_pyramid(&path, chunk, lo, hi, opts)?;
-                    clo[cy * nc + cx] = a;
-                    chi[cy * nc + cx] = b;
-                    face_chunks += 1;
-                }
-                chunked = true;
-                write_face_pyramid(&face_path(&out, level, face), nc, clo, chi, opts)?
-            };
-            lmin = fmin(lmin, top.0);
-            lmax = fmax(lmax, top.1);
-            face_pyramids += 1;
+                    if !any {
+                        continue;
+                    }
+                    write_face_pyramid(&face_path(out, level, face), g, lo, hi, opts)?
+                } else {
+                    let mut chunks: BTreeMap<(usize, usize), Vec<ChunkTile>> = BTreeMap::new();
+                    for (id, &(a, b)) in on_face {
+                        let (x, y) = (id.x as usize, id.y as usize);
+                        chunks.entry((y / chunk, x / chunk)).or_default().push((
+                            (y % chunk) * chunk + x % chunk,
+                            a,
+                            b,
+                        ));
+                    }
+                    if chunks.is_empty() {
+                        continue;
+                    }
+                    let nc = g / chunk;
+                    let mut clo = vec![f32::NAN; nc * nc];
+                    let mut chi = vec![f32::NAN; nc * nc];
+                    for ((cy, cx), list) in chunks {
+                        let mut lo = vec![f32::NAN; chunk * chunk];
+                        let mut hi = vec![f32::NAN; chunk * chunk];
+                        for (k, a, b) in list {
+                            lo[k] = a;
+                            hi[k] = b;
+                        }
+                        let path = face_chunk_path(out, level, face, cx as u32, cy as u32);
+                        let (a, b) = write_face_pyramid(&path, chunk, lo, hi, opts)?;
+                        clo[cy * nc + cx] = a;
+                        chi[cy * nc + cx] = b;
+                        face_chunks += 1;
+                    }
+                    chunked = true;
+                    write_face_pyramid(&face_path(out, level, face), nc, clo, chi, opts)?
+                };
+                lmin = fmin(lmin, top.0);
+                lmax = fmax(lmax, top.1);
+                face_pyramids += 1;
+            }
+            gmin = fmin(gmin, lmin);
+            gmax = fmax(gmax, lmax);
+            ranges.push(MipLevelRange {
+                level,
+                min_m: nan_to_none(nan_if(lmin, POS_INF)),
+                max_m: nan_to_none(nan_if(lmax, NEG_INF)),
+            });
         }
-        gmin = fmin(gmin, lmin);
-        gmax = fmax(gmax, lmax);
-        ranges.push(MipLevelRange {
-            level,
-            min_m: nan_to_none(nan_if(lmin, POS_INF)),
-            max_m: nan_to_none(nan_if(lmax, NEG_INF)),
-        });
+        if !(gmin.is_finite() && gmax.is_finite()) {
+            return Err(Error::invalid(
+                &manifest_path,
+                "every height tile is no data: nothing to build mipmaps from",
+            ));
+        }
+        let product = MipProduct {
+            products: vec!["max".into(), "minmax".into()],
+            max_path: MAX_PATTERN.into(),
+            max_channels: vec!["max".into()],
+            minmax_path: MINMAX_PATTERN.into(),
+            minmax_channels: vec!["min".into(), "max".into()],
+            face_path: FACE_PATTERN.into(),
+            face_chunk_path: chunked.then(|| FACE_CHUNK_PATTERN.into()),
+            face_chunk_tiles: chunked.then_some(chunk as u32),
+            precision: opts.precision,
+            face_precision: Precision::F32,
+            level_rounding: "up".into(),
+            texel: TEXEL_CONVENTION.into(),
+            global_min_m: gmin as f64,
+            global_max_m: gmax as f64,
+            levels: ranges,
+            run_key: cx.key.to_string(),
+        };
+        let (gmin, gmax) = (product.global_min_m, product.global_max_m);
+        let mut manifest = ts.clone();
+        manifest.products.mip = Some(product);
+        let report = MipReport {
+            out: cx.store.dir().to_path_buf(),
+            tiles: done.len() as u64,
+            tiles_written: written,
+            tiles_kept: kept,
+            face_pyramids,
+            face_chunks,
+            precision: opts.precision,
+            global_min_m: gmin,
+            global_max_m: gmax,
+            input_bytes: written * tile_bytes,
+            up_to_date: false,
+        };
+        Ok((manifest, report))
     }
-    if !(gmin.is_finite() && gmax.is_finite()) {
-        return Err(Error::invalid(
-            &manifest_path,
-            "every height tile is no data: nothing to build mipmaps from",
-        ));
+
+    fn up_to_date(&self, store: &Store, _plan: &MipPlan, units: &[Unit]) -> MipReport {
+        let m = store.manifest().products.mip.as_ref().expect("up to date");
+        MipReport {
+            out: store.dir().to_path_buf(),
+            tiles: units.len() as u64,
+            tiles_written: 0,
+            tiles_kept: units.len() as u64,
+            face_pyramids: 0,
+            face_chunks: 0,
+            precision: self.opts.precision,
+            global_min_m: m.global_min_m,
+            global_max_m: m.global_max_m,
+            input_bytes: 0,
+            up_to_date: true,
+        }
     }
-    let product = MipProduct {
-        products: vec!["max".into(), "minmax".into()],
-        max_path: MAX_PATTERN.into(),
-        max_channels: vec!["max".into()],
-        minmax_path: MINMAX_PATTERN.into(),
-        minmax_channels: vec!["min".into(), "max".into()],
-        face_path: FACE_PATTERN.into(),
-        face_chunk_path: chunked.then(|| FACE_CHUNK_PATTERN.into()),
-        face_chunk_tiles: chunked.then_some(chunk as u32),
-        precision: opts.precision,
-        face_precision: Precision::F32,
-        level_rounding: "up".into(),
-        texel: TEXEL_CONVENTION.into(),
-        global_min_m: gmin as f64,
-        global_max_m: gmax as f64,
-        levels: ranges,
-        run_key,
-    };
-    let (gmin, gmax) = (product.global_min_m, product.global_max_m);
-    let mut manifest = ts.clone();
-    manifest.products.mip = Some(product);
-    run.commit(manifest)?;
-    Ok(MipReport {
-        out: dir.to_path_buf(),
-        tiles: tiles.len() as u64,
-        tiles_written: written,
-        tiles_kept: kept,
-        face_pyramids,
-        face_chunks,
-        precision: opts.precision,
-        global_min_m: gmin,
-        global_max_m: gmax,
-        input_bytes: written * tile_bytes,
-        up_to_date: false,
-    })
 }
 
 /// A tile of a face-pyramid chunk: (index in the chunk's grid, min, max); chunks are keyed by
@@ -357,29 +428,17 @@ fn write_face_pyramid(
     Ok(p.top())
 }
 
-/// One tile: (1×1 min, 1×1 max, kept from an earlier run).
-#[allow(clippy::too_many_arguments)]
+/// One tile: its files, and its (1×1 min, 1×1 max) as the files hold them.
 fn mip_tile(
     store: &Store,
     out: &Path,
     id: TileId,
-    n: usize,
-    s: usize,
-    halo: usize,
+    plan: &MipPlan,
     opts: &MipOptions,
-    resume: bool,
     p: &mut MinMaxPyramid,
-) -> Result<(f32, f32, bool)> {
+) -> Result<(f32, f32)> {
+    let (n, s, halo) = (plan.n, plan.s, plan.halo);
     let (pmax, pmm) = tile_paths(out, id);
-    if resume && pmax.exists() && pmm.exists() {
-        if let Ok(f) = read_mip_exr(&pmm) {
-            if f.sizes[0] == n {
-                if let (Some(lo), Some(hi)) = (f.channels.get("min"), f.channels.get("max")) {
-                    return Ok((lo.last().unwrap()[0], hi.last().unwrap()[0], true));
-                }
-            }
-        }
-    }
     let t = store.read_height(id)?;
     minmax_pyramid_into(&t.height, s, halo, p)?;
     write_mip_exr(
@@ -403,7 +462,7 @@ fn mip_tile(
     let (lo, hi) = p.top();
     // f16 files hold rounded bounds: the face pyramid uses the same rounded values.
     Ok(match opts.precision {
-        Precision::F32 => (lo, hi, false),
-        Precision::F16 => (f16_down(lo).to_f32(), f16_up(hi).to_f32(), false),
+        Precision::F32 => (lo, hi),
+        Precision::F16 => (f16_down(lo).to_f32(), f16_up(hi).to_f32()),
     })
 }

@@ -29,7 +29,8 @@ pub use cache::TileCache;
 pub use lock::STATE_DIR;
 
 /// The products a tileset can hold.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Product {
     /// Height tiles (`height/`), written by the tiling stage.
     Height,

@@ -181,6 +181,12 @@ impl Writer {
         Ok(Staging { root, resume })
     }
 
+    /// Leave the staged run as it is, uncommitted, for a later process with the same run key
+    /// to complete and commit (a run of some of a stage's units: [`crate::runner::Select`]).
+    pub fn leave_staged(&mut self) {
+        self.staging = None;
+    }
+
     /// Swap a completed run into the tileset: the product folders of `writes` found in the
     /// staging folder replace the tileset's; folders of `writes` the run did not make and, when
     /// the products `changed` (a new run key), of every product downstream of `writes` are
