@@ -10,6 +10,11 @@ use serde::Serialize;
 
 use penumbra::manifest::Tileset;
 
+use crate::common::{
+    best_of, in_pool, penumbra_exe, random_pixels, tempfile_dir, timed, EARTH_RADIUS_M,
+    LDEM4_BENCH_TILING, MARS_RADIUS_M,
+};
+
 #[derive(Subcommand)]
 pub enum BenchCommand {
     /// Tiling throughput and peak RSS on the shared DEMs, against gdalwarp reprojecting the same
@@ -241,10 +246,6 @@ pub enum BenchCommand {
     },
 }
 
-/// The `penumbra tile` options of the LDEM_4 tileset the mip and codec benchmarks measure
-/// (510 tiles of 256² on 4 levels).
-pub const LDEM4_BENCH_TILING: &[&str] = &["--body", "moon", "--tile-size", "256", "--levels", "4"];
-
 struct Case {
     name: &'static str,
     file: &'static str,
@@ -330,43 +331,6 @@ struct Row {
     /// Penumbra output Mpx/s ÷ gdalwarp output Mpx/s.
     ratio_vs_gdalwarp: Option<f64>,
     note: String,
-}
-
-/// Run `cmd` under GNU time; (wall seconds, peak RSS MiB).
-pub(crate) fn timed(cmd: &mut Command, scratch: &Path) -> Result<(f64, f64)> {
-    let tf = scratch.join("time.txt");
-    let prog = cmd.get_program().to_owned();
-    let args: Vec<_> = cmd.get_args().map(|a| a.to_owned()).collect();
-    let t0 = std::time::Instant::now();
-    let out = if Path::new("/usr/bin/time").exists() {
-        Command::new("/usr/bin/time")
-            .arg("-f")
-            .arg("%e %M")
-            .arg("-o")
-            .arg(&tf)
-            .arg(&prog)
-            .args(&args)
-            .output()?
-    } else {
-        cmd.output()?
-    };
-    let wall = t0.elapsed().as_secs_f64();
-    if !out.status.success() {
-        bail!(
-            "{} failed: {}",
-            prog.to_string_lossy(),
-            String::from_utf8_lossy(&out.stderr)
-        );
-    }
-    let rss = std::fs::read_to_string(&tf)
-        .ok()
-        .and_then(|s| {
-            s.split_whitespace()
-                .nth(1)
-                .and_then(|k| k.parse::<f64>().ok())
-        })
-        .map_or(f64::NAN, |k| k / 1024.0);
-    Ok((wall, rss))
 }
 
 fn gdalwarp_available() -> bool {
@@ -736,53 +700,6 @@ fn run_tiling(
         );
     }
     Ok(())
-}
-
-/// The `penumbra` binary whose `tile` the benchmarks time in a child process: the one built
-/// beside this executable (both in target/release/), so the figures are for this checkout's
-/// build, not for whatever `penumbra` is installed.
-pub(crate) fn penumbra_exe() -> Result<PathBuf> {
-    let exe = std::env::current_exe()?
-        .with_file_name(format!("penumbra{}", std::env::consts::EXE_SUFFIX));
-    if !exe.is_file() {
-        bail!(
-            "{}: not found; build it beside penumbra-bench first: \
-             cargo build --release --workspace",
-            exe.display()
-        );
-    }
-    Ok(exe)
-}
-
-/// A bench's scratch folder (`penumbra-bench-<pid>` under `--work` or the system's temp
-/// folder), removed when it goes out of scope, so that a bench that fails half-way leaves no
-/// tilesets or rasters behind.
-pub(crate) struct ScratchDir(PathBuf);
-
-impl std::ops::Deref for ScratchDir {
-    type Target = Path;
-    fn deref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl AsRef<Path> for ScratchDir {
-    fn as_ref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for ScratchDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-pub(crate) fn tempfile_dir(work: Option<PathBuf>) -> Result<ScratchDir> {
-    let base = work.unwrap_or_else(std::env::temp_dir);
-    let p = base.join(format!("penumbra-bench-{}", std::process::id()));
-    std::fs::create_dir_all(&p).with_context(|| format!("creating {}", p.display()))?;
-    Ok(ScratchDir(p))
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1211,17 +1128,6 @@ fn walk_count(dir: &Path, keep: &dyn Fn(&Path) -> bool) -> u64 {
 // ---------------------------------------------------------------------------------------------
 // bench mip
 
-/// Best wall time of `reps` runs of `f`, in seconds.
-pub(crate) fn best_of(reps: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
-    let mut best = f64::INFINITY;
-    for _ in 0..reps {
-        let t0 = std::time::Instant::now();
-        f()?;
-        best = best.min(t0.elapsed().as_secs_f64());
-    }
-    Ok(best)
-}
-
 /// A deterministic synthetic tile: ridges, craters and xorshift noise, with a no-data hole.
 fn synthetic_tile(s: usize) -> Vec<f32> {
     let mut state = 0x9E37_79B9_7F4A_7C15u64;
@@ -1269,13 +1175,6 @@ fn mip_row(case: &str, threads: usize, bytes: f64, t: f64, memcpy_gb_s: f64) -> 
         ratio_vs_memcpy: gb_s / memcpy_gb_s,
         scaling: None,
     }
-}
-
-pub(crate) fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> Result<T> {
-    Ok(rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()?
-        .install(f))
 }
 
 /// Runs of each tiling case and of its gdalwarp peer, the best reported.
@@ -1587,12 +1486,9 @@ fn run_mip(
 // ---------------------------------------------------------------------------------------------
 // bench horizon
 
-/// Earth's mean radius: r.horizon always uses it, so every tool sees the same curvature.
-pub(crate) const EARTH_RADIUS_M: f64 = 6_371_008.8;
 /// Pixel spacing of the peers' synthetic UTM DEMs.
 const PEER_PIXEL_M: f64 = 30.0;
 /// Fritsch et al.'s Mars whole-body bake: 800 m/px, ≈150 CPU-hours.
-pub(crate) const MARS_RADIUS_M: f64 = 3_396_190.0;
 const MARS_PIXEL_M: f64 = 800.0;
 const MARS_HMIN_M: f64 = -8_200.0;
 const MARS_HMAX_M: f64 = 21_200.0;
@@ -1651,24 +1547,6 @@ fn read_npy_f32(path: &Path) -> Result<(usize, usize, Vec<f32>)> {
         .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
         .collect();
     Ok((h, w, v))
-}
-
-/// `n` distinct pixels of a w × h raster drawn by a fixed-seed xorshift.
-pub(crate) fn random_pixels(w: usize, h: usize, n: usize) -> Vec<(usize, usize)> {
-    let n = n.min(w * h);
-    let mut state = 0x2545_F491_4F6C_DD1Du64;
-    let mut seen = std::collections::HashSet::new();
-    let mut out = Vec::with_capacity(n);
-    while out.len() < n {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        let i = (state % (w * h) as u64) as usize;
-        if seen.insert(i) {
-            out.push((i % w, i / w));
-        }
-    }
-    out
 }
 
 #[derive(Serialize)]
@@ -2716,18 +2594,6 @@ mod tests {
             err.contains(&dir.display().to_string()) && err.contains("--against"),
             "{err}"
         );
-    }
-
-    #[test]
-    fn scratch_folder_goes_with_its_guard() {
-        let work = std::env::temp_dir().join(format!("scratch-guard-{}", std::process::id()));
-        let dir = tempfile_dir(Some(work.clone())).unwrap();
-        std::fs::write(dir.join("left.bin"), b"x").unwrap();
-        let path = dir.to_path_buf();
-        assert!(path.join("left.bin").is_file());
-        drop(dir);
-        assert!(!path.exists());
-        std::fs::remove_dir(&work).unwrap();
     }
 
     #[test]

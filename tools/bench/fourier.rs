@@ -23,7 +23,7 @@ use penumbra::fourier::{evaluate, Encoding, Layout, Pyramid, Sigma};
 use penumbra::horizon::{horizons_with, Context as HzContext, Method, Rect, DEFAULT_NEAR_PX};
 use penumbra::tileio::HeightTile;
 
-use crate::bench::{random_pixels, EARTH_RADIUS_M, MARS_RADIUS_M};
+use crate::common::{random_pixels, EARTH_RADIUS_M, MARS_RADIUS_M};
 
 const MOON_RADIUS_M: f64 = 1_737_400.0;
 /// Tile size the bytes and times are reported for.

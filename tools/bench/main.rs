@@ -5,6 +5,7 @@
 
 mod bench;
 mod codec;
+mod common;
 mod far;
 mod fourier;
 mod shadows;
