@@ -117,6 +117,8 @@ pub(crate) fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> 
 pub(crate) const EARTH_RADIUS_M: f64 = 6_371_008.8;
 /// Mars's radius (m): the sphere of the Mars whole-body extrapolation and of the Mars DEMs.
 pub(crate) const MARS_RADIUS_M: f64 = 3_396_190.0;
+/// The Moon's radius (m).
+pub(crate) const MOON_RADIUS_M: f64 = 1_737_400.0;
 
 /// `n` distinct pixels of a w × h raster drawn by a fixed-seed xorshift.
 pub(crate) fn random_pixels(w: usize, h: usize, n: usize) -> Vec<(usize, usize)> {

@@ -4,6 +4,7 @@
 //! no benchmark drivers.
 
 mod bench;
+mod cases;
 mod codec;
 mod common;
 mod far;
