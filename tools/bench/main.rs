@@ -9,7 +9,10 @@ mod codec;
 mod common;
 mod far;
 mod fourier;
+mod mip;
+mod mip_memory;
 mod shadows;
+mod tiling;
 
 use std::process::ExitCode;
 
