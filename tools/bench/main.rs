@@ -2,13 +2,20 @@
 //! (gdalwarp, memcpy, the peers' horizon tools), printed as tables for docs/benchmarks.md or as
 //! JSON. A separate binary so that the `penumbra` command people prepare terrain with carries
 //! no benchmark drivers.
+//!
+//! One module per benchmark: [`tiling`], [`mip`], [`codec`] (also `exr-crate-rewrite`),
+//! [`mip_memory`], [`far`] (`far-field`), [`horizon`], [`shadows`], [`fourier`]. What they
+//! share is below them: [`common`] (scratch folder, the `penumbra` binary and GNU time, best-of
+//! timing, thread pools, pseudo-random pixels, radii) and [`cases`] (the DEM blocks fourier and
+//! shadows measure on); neither imports a benchmark, and no benchmark imports another. This file
+//! parses the command line and dispatches.
 
-mod bench;
 mod cases;
 mod codec;
 mod common;
 mod far;
 mod fourier;
+mod horizon;
 mod mip;
 mod mip_memory;
 mod shadows;
@@ -369,7 +376,7 @@ fn dispatch(cmd: BenchCommand, quiet: bool) -> Result<()> {
             data,
             markdown,
             json,
-        } => crate::bench::run_horizon(
+        } => crate::horizon::run_horizon(
             &peers,
             &data,
             azimuths,

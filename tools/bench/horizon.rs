@@ -1,5 +1,8 @@
-//! The benchmarks: throughput against a baseline measured in the same run, printed as a table
-//! (markdown with `--markdown`, for docs/benchmarks.md) or JSON.
+//! `penumbra-bench horizon`: horizon throughput on the peers' synthetic 30 m UTM DEM (the whole
+//! map as observers and as context, 1 thread and all cores), the brute-force reference on
+//! random pixels, the fast sweep's error against it (there and on blocks of the shared real
+//! DEMs), the peers' horizon tools from their results.tsv, and an extrapolation to a Mars
+//! 800 m/px whole-body bake.
 
 use std::path::Path;
 
@@ -7,9 +10,6 @@ use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
 use crate::common::{best_of, in_pool, random_pixels, EARTH_RADIUS_M, MARS_RADIUS_M};
-
-// ---------------------------------------------------------------------------------------------
-// bench horizon
 
 /// Pixel spacing of the peers' synthetic UTM DEMs.
 const PEER_PIXEL_M: f64 = 30.0;
