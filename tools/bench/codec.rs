@@ -16,7 +16,7 @@ use penumbra::exrcodec::{self, Blocks, Channel, Samples, ZipLevel};
 use penumbra::tileio::TileCompression;
 use serde::Serialize;
 
-use crate::bench::{best_of, in_pool, penumbra_exe, tempfile_dir, LDEM4_BENCH_TILING};
+use crate::common::{best_of, in_pool, penumbra_exe, tempfile_dir, LDEM4_BENCH_TILING};
 
 /// One channel's stored samples, every level.
 #[derive(Clone)]

@@ -12,7 +12,7 @@ use serde::Serialize;
 use penumbra::layout::TileId;
 use penumbra::manifest::Tileset;
 
-use crate::bench::{penumbra_exe, tempfile_dir, timed};
+use crate::common::{penumbra_exe, tempfile_dir, timed};
 
 /// One DEM, how it is tiled, and the level whose horizons are computed (its finest).
 struct Case {

@@ -23,7 +23,7 @@ use penumbra::shadow::trace::{Method, Runs, Work};
 use penumbra::shadow::Tracer;
 use penumbra::tileio::HeightTile;
 
-use crate::fourier::{dem_case, real_cases, Case};
+use crate::cases::{dem_case, real_cases, Case};
 
 /// Sun elevations (degrees) and compass azimuths at the block's centre (degrees).
 const SUN_EL: [f64; 4] = [1.0, 5.0, 15.0, 45.0];

@@ -17,8 +17,8 @@ use crate::camera::{norm, scale, Camera, SunPos};
 use crate::gpu::Gpu;
 use crate::lod::{LodParams, View};
 use crate::options::Options;
-use crate::render::{FrameParams, FrameTime, Renderer, Targets};
-use crate::scene::{GpuTile, Scene};
+use crate::render::{FrameParams, FrameTime, GpuTile, Renderer, Targets};
+use crate::scene::Scene;
 use crate::shadow::{GpuMethod, Shadows};
 
 /// Azimuth and elevation (degrees) of the default sun at the view's target.

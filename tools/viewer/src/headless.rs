@@ -14,8 +14,7 @@ use crate::core::Core;
 use crate::gpu::Gpu;
 use crate::options::Options;
 use crate::output;
-use crate::render::{Readback, Targets};
-use crate::scene::GpuTile;
+use crate::render::{GpuTile, Readback, Targets};
 use crate::validate::{self, Validation};
 
 /// The adapter a frame was rendered on.

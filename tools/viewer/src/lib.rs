@@ -10,8 +10,8 @@
 //! - [`lod`]: which tiles to draw (screen-space error, frustum and horizon culling).
 //! - [`mesh`]: a tile's displaced grid relative to its centre, skirts, per-texel normals.
 //! - [`scene`]: the tiles on the GPU (mesh, normals, albedo, shadow data), made on first use.
-//! - [`render`]: the terrain pass into colour, lit-fraction and texel-id targets, GPU
-//!   timestamps, readback.
+//! - [`render`]: the terrain pass, drawing [`render::GpuTile`]s (what the scene makes) into
+//!   colour, lit-fraction and texel-id targets, GPU timestamps, readback.
 //! - [`core`]: what the window and the headless mode share: one frame.
 //! - [`headless`], [`validate`], [`output`]: off-screen frames, the GPU against the CPU,
 //!   files.

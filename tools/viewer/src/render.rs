@@ -14,13 +14,13 @@ use std::time::{Duration, Instant};
 use anyhow::{anyhow, Context as _, Result};
 use bytemuck::{Pod, Zeroable};
 use penumbra::cube::Vec3;
+use penumbra::layout::TileId;
 use wgpu::util::DeviceExt;
 
 use crate::camera::sub;
 use crate::gpu::Gpu;
 use crate::mesh;
-use crate::scene::GpuTile;
-use crate::shadow::Shadows;
+use crate::shadow::{Shadows, TileShadow};
 
 /// The colour target's format: sRGB, so that shading is linear and the PNG is display-ready.
 pub const COLOUR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
@@ -55,6 +55,23 @@ pub struct TileUniform {
     pub info: [i32; 4],
     /// 1 with albedo, halo, stored size.
     pub albedo: [f32; 4],
+}
+
+/// One tile ready to draw.
+pub struct GpuTile {
+    pub tile: TileId,
+    /// Interior pixels per side.
+    pub n: usize,
+    /// Origin of the vertices, body frame (m).
+    pub centre: Vec3,
+    pub vertices: wgpu::Buffer,
+    pub uniform: wgpu::Buffer,
+    pub bind_group: wgpu::BindGroup,
+    /// [`TileUniform::albedo`].
+    pub albedo_params: [f32; 4],
+    pub shadow: TileShadow,
+    /// Frame counter when last drawn (the scene's, to let go of the least recently drawn).
+    pub(crate) last_used: u64,
 }
 
 /// What a frame shows.

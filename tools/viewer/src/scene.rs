@@ -12,7 +12,6 @@ use std::collections::HashMap;
 use std::time::Instant;
 
 use anyhow::{Context as _, Result};
-use penumbra::cube::Vec3;
 use penumbra::layout::TileId;
 use penumbra::tileset::{tile_path, Store};
 use wgpu::util::DeviceExt;
@@ -21,25 +20,8 @@ use crate::camera::SunPos;
 use crate::gpu::Gpu;
 use crate::lod::Quadtree;
 use crate::mesh;
-use crate::render::{Renderer, TileUniform};
-use crate::shadow::{GpuMethod, Shadows, TileShadow};
-
-/// One tile ready to draw.
-pub struct GpuTile {
-    pub tile: TileId,
-    /// Interior pixels per side.
-    pub n: usize,
-    /// Origin of the vertices, body frame (m).
-    pub centre: Vec3,
-    pub vertices: wgpu::Buffer,
-    pub uniform: wgpu::Buffer,
-    pub bind_group: wgpu::BindGroup,
-    /// [`TileUniform::albedo`].
-    pub albedo_params: [f32; 4],
-    pub shadow: TileShadow,
-    /// Frame counter when last drawn.
-    last_used: u64,
-}
+use crate::render::{GpuTile, Renderer, TileUniform};
+use crate::shadow::{GpuMethod, Shadows};
 
 /// Tiles kept beyond those of the current frame (the least recently drawn go first).
 pub const SPARE_TILES: usize = 64;

@@ -18,8 +18,7 @@ use anyhow::Result;
 use penumbra::fourier::sun::Sun;
 use serde::Serialize;
 
-use crate::render::Readback;
-use crate::scene::GpuTile;
+use crate::render::{GpuTile, Readback};
 use crate::shadow::{CpuTwin, GpuMethod};
 
 /// One comparison's numbers.

@@ -1,0 +1,156 @@
+//! What the benchmarks share: the scratch folder, the `penumbra` binary beside this one and
+//! GNU time around a child process, best-of timing and thread pools, the pseudo-random pixels
+//! and the bodies' radii. No benchmark module is imported here.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use anyhow::{bail, Context, Result};
+
+/// The `penumbra tile` options of the LDEM_4 tileset the mip and codec benchmarks measure
+/// (510 tiles of 256² on 4 levels).
+pub const LDEM4_BENCH_TILING: &[&str] = &["--body", "moon", "--tile-size", "256", "--levels", "4"];
+
+/// Run `cmd` under GNU time; (wall seconds, peak RSS MiB).
+pub(crate) fn timed(cmd: &mut Command, scratch: &Path) -> Result<(f64, f64)> {
+    let tf = scratch.join("time.txt");
+    let prog = cmd.get_program().to_owned();
+    let args: Vec<_> = cmd.get_args().map(|a| a.to_owned()).collect();
+    let t0 = std::time::Instant::now();
+    let out = if Path::new("/usr/bin/time").exists() {
+        Command::new("/usr/bin/time")
+            .arg("-f")
+            .arg("%e %M")
+            .arg("-o")
+            .arg(&tf)
+            .arg(&prog)
+            .args(&args)
+            .output()?
+    } else {
+        cmd.output()?
+    };
+    let wall = t0.elapsed().as_secs_f64();
+    if !out.status.success() {
+        bail!(
+            "{} failed: {}",
+            prog.to_string_lossy(),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let rss = std::fs::read_to_string(&tf)
+        .ok()
+        .and_then(|s| {
+            s.split_whitespace()
+                .nth(1)
+                .and_then(|k| k.parse::<f64>().ok())
+        })
+        .map_or(f64::NAN, |k| k / 1024.0);
+    Ok((wall, rss))
+}
+
+/// The `penumbra` binary whose `tile` the benchmarks time in a child process: the one built
+/// beside this executable (both in target/release/), so the figures are for this checkout's
+/// build, not for whatever `penumbra` is installed.
+pub(crate) fn penumbra_exe() -> Result<PathBuf> {
+    let exe = std::env::current_exe()?
+        .with_file_name(format!("penumbra{}", std::env::consts::EXE_SUFFIX));
+    if !exe.is_file() {
+        bail!(
+            "{}: not found; build it beside penumbra-bench first: \
+             cargo build --release --workspace",
+            exe.display()
+        );
+    }
+    Ok(exe)
+}
+
+/// A bench's scratch folder (`penumbra-bench-<pid>` under `--work` or the system's temp
+/// folder), removed when it goes out of scope, so that a bench that fails half-way leaves no
+/// tilesets or rasters behind.
+pub(crate) struct ScratchDir(PathBuf);
+
+impl std::ops::Deref for ScratchDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for ScratchDir {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for ScratchDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+pub(crate) fn tempfile_dir(work: Option<PathBuf>) -> Result<ScratchDir> {
+    let base = work.unwrap_or_else(std::env::temp_dir);
+    let p = base.join(format!("penumbra-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&p).with_context(|| format!("creating {}", p.display()))?;
+    Ok(ScratchDir(p))
+}
+
+/// Best wall time of `reps` runs of `f`, in seconds.
+pub(crate) fn best_of(reps: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
+    let mut best = f64::INFINITY;
+    for _ in 0..reps {
+        let t0 = std::time::Instant::now();
+        f()?;
+        best = best.min(t0.elapsed().as_secs_f64());
+    }
+    Ok(best)
+}
+
+pub(crate) fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> Result<T> {
+    Ok(rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()?
+        .install(f))
+}
+
+/// Earth's mean radius: r.horizon always uses it, so every tool sees the same curvature.
+pub(crate) const EARTH_RADIUS_M: f64 = 6_371_008.8;
+/// Mars's radius (m): the sphere of the Mars whole-body extrapolation and of the Mars DEMs.
+pub(crate) const MARS_RADIUS_M: f64 = 3_396_190.0;
+/// The Moon's radius (m).
+pub(crate) const MOON_RADIUS_M: f64 = 1_737_400.0;
+
+/// `n` distinct pixels of a w × h raster drawn by a fixed-seed xorshift.
+pub(crate) fn random_pixels(w: usize, h: usize, n: usize) -> Vec<(usize, usize)> {
+    let n = n.min(w * h);
+    let mut state = 0x2545_F491_4F6C_DD1Du64;
+    let mut seen = std::collections::HashSet::new();
+    let mut out = Vec::with_capacity(n);
+    while out.len() < n {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        let i = (state % (w * h) as u64) as usize;
+        if seen.insert(i) {
+            out.push((i % w, i / w));
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scratch_folder_goes_with_its_guard() {
+        let work = std::env::temp_dir().join(format!("scratch-guard-{}", std::process::id()));
+        let dir = tempfile_dir(Some(work.clone())).unwrap();
+        std::fs::write(dir.join("left.bin"), b"x").unwrap();
+        let path = dir.to_path_buf();
+        assert!(path.join("left.bin").is_file());
+        drop(dir);
+        assert!(!path.exists());
+        std::fs::remove_dir(&work).unwrap();
+    }
+}
