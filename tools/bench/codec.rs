@@ -13,7 +13,7 @@ use std::process::Command;
 use anyhow::{bail, Context, Result};
 use half::f16;
 use penumbra::exrcodec::{self, Blocks, Channel, Samples, ZipLevel};
-use penumbra::tileio::TileCompression;
+use penumbra::format::TileCompression;
 use serde::Serialize;
 
 use crate::common::{best_of, in_pool, penumbra_exe, tempfile_dir, LDEM4_BENCH_TILING};

@@ -15,13 +15,13 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use penumbra::cube::{Face, Vec3};
-use penumbra::fourier::pyramid::file_bytes;
+use penumbra::format::fourier::file_bytes;
+use penumbra::format::height::HeightTile;
 use penumbra::fourier::stage::{Encoder, FourierOptions};
 use penumbra::fourier::sun::{lit_fraction, sun_distance_au, sun_radius_deg, Frame, Model, Sun};
 use penumbra::fourier::Reduce;
 use penumbra::fourier::{evaluate, Encoding, Layout, Pyramid, Sigma};
 use penumbra::horizon::{horizons_with, Context as HzContext, Method, Rect, DEFAULT_NEAR_PX};
-use penumbra::tileio::HeightTile;
 
 use crate::cases::{real_cases, Case};
 use crate::common::{random_pixels, MOON_RADIUS_M};

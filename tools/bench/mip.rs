@@ -70,7 +70,7 @@ fn reset_mips(dir: &Path) -> Result<()> {
     }
     let mut ts = Tileset::load(dir)?;
     ts.products.mip = None;
-    penumbra::tileio::write_atomic_bytes(
+    penumbra::fsio::write_atomic_bytes(
         &dir.join(penumbra::manifest::MANIFEST),
         serde_json::to_string_pretty(&ts)?.as_bytes(),
     )?;
@@ -198,7 +198,7 @@ pub fn run_mip(
         let mut tiles = Vec::new();
         for id in ts.tile_set() {
             let p = penumbra::tileset::tile_path(&out, &pattern, id);
-            tiles.push(penumbra::tileio::read_height_tile(&p)?.height);
+            tiles.push(penumbra::format::height::read_height_tile(&p)?.height);
         }
         let total = (tiles.len() * ts_s * ts_s * 4) as f64;
         let case = format!(
@@ -250,8 +250,8 @@ pub fn run_mip(
             in_pool(threads, || -> Result<()> {
                 for _ in 0..STAGE_REPS {
                     for compression in [
-                        penumbra::tileio::TileCompression::Zip,
-                        penumbra::tileio::TileCompression::None,
+                        penumbra::format::TileCompression::Zip,
+                        penumbra::format::TileCompression::None,
                     ] {
                         let opts = MipOptions {
                             compression,
@@ -263,8 +263,8 @@ pub fn run_mip(
                         mip::build_mips(&out, &opts, &penumbra::progress::NoProgress)?;
                         let t = t0.elapsed().as_secs_f64();
                         let best = match compression {
-                            penumbra::tileio::TileCompression::Zip => &mut t_zip,
-                            penumbra::tileio::TileCompression::None => &mut t_raw,
+                            penumbra::format::TileCompression::Zip => &mut t_zip,
+                            penumbra::format::TileCompression::None => &mut t_raw,
                         };
                         *best = best.min(t);
                     }

@@ -14,6 +14,7 @@ use anyhow::{bail, Result};
 use rayon::prelude::*;
 use serde::Serialize;
 
+use penumbra::format::height::HeightTile;
 use penumbra::fourier::stage::{Encoder, FourierOptions};
 use penumbra::fourier::sun::{lit_fraction, sun_radius_deg, Frame, Model, Sun};
 use penumbra::fourier::{evaluate, Pyramid};
@@ -21,7 +22,6 @@ use penumbra::horizon::{horizons_with, Method as HzMethod, DEFAULT_NEAR_PX};
 use penumbra::shadow::smap::SMap;
 use penumbra::shadow::trace::{Method, Runs, Work};
 use penumbra::shadow::Tracer;
-use penumbra::tileio::HeightTile;
 
 use crate::cases::{dem_case, real_cases, Case};
 

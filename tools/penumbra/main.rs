@@ -15,6 +15,7 @@ use penumbra::error::Error;
 use penumbra::format::TileCompression;
 use penumbra::fourier::sun::Model;
 use penumbra::fourier::{Encoding, FourierOptions, Layout, Reduce, Sigma};
+use penumbra::graph::{self, Node};
 use penumbra::horizon::{HorizonOptions, HorizonPrecision, Method};
 use penumbra::mip::{MipOptions, Precision};
 use penumbra::query::HorizonFrom;
@@ -75,6 +76,8 @@ enum Command {
         keep_raw: bool,
         #[command(flatten)]
         fourier_flags: FourierFlags,
+        #[command(flatten)]
+        shard: ShardFlag,
         /// Print the report as JSON.
         #[arg(long)]
         json: bool,
@@ -89,6 +92,8 @@ enum Command {
         levels: Option<Vec<u8>>,
         #[command(flatten)]
         flags: FourierFlags,
+        #[command(flatten)]
+        shard: ShardFlag,
         /// Refuse a run whose pyramids would exceed this many GiB.
         #[arg(long, default_value_t = penumbra::runner::DEFAULT_MAX_OUTPUT_GIB, allow_hyphen_values = true)]
         max_output_gib: f64,
@@ -102,6 +107,8 @@ enum Command {
         dir: PathBuf,
         #[command(flatten)]
         flags: MipFlags,
+        #[command(flatten)]
+        shard: ShardFlag,
         /// EXR compression of the mipmaps: zip (lossless) or none (fastest).
         #[arg(long, default_value = "zip")]
         compression: TileCompression,
@@ -168,6 +175,22 @@ enum Command {
     /// Ask a tileset about one point.
     #[command(subcommand)]
     Query(QueryCommand),
+}
+
+/// Run part of a stage: the selection of its units (docs/architecture.md, "Units").
+#[derive(Args, Clone, Debug)]
+struct ShardFlag {
+    /// Run only shard K of N (0-based) of the stage's units, about a N-th of its cost; the
+    /// units stay staged and the run commits when the last units left are done, by whichever
+    /// run of the same options completes them.
+    #[arg(long, value_name = "K/N", value_parser = penumbra::runner::Select::shard)]
+    shard: Option<penumbra::runner::Select>,
+}
+
+impl ShardFlag {
+    fn select(&self) -> penumbra::runner::Select {
+        self.shard.clone().unwrap_or_default()
+    }
 }
 
 #[derive(Subcommand)]
@@ -630,6 +653,8 @@ fn run(cli: Cli) -> Result<()> {
                 tile: a.flags.options(),
                 mip: MipOptions::default(),
                 horizon: HorizonOptions::default(),
+                fourier: None,
+                keep_raw: false,
                 horizon_level_at_most: None,
             };
             let input = Input::Dem {
@@ -660,8 +685,8 @@ fn run(cli: Cli) -> Result<()> {
                 plan.horizon.levels = Some(levels);
                 plan.horizon.compression = a.flags.compression;
                 if !a.no_fourier {
-                    plan.horizon.fourier = Some(a.fourier.options(None, a.flags.max_output_gib));
-                    plan.horizon.keep_raw = a.keep_raw;
+                    plan.fourier = Some(a.fourier.options(None, a.flags.max_output_gib));
+                    plan.keep_raw = a.keep_raw;
                 }
             }
             let input = match &a.dem {
@@ -688,12 +713,13 @@ fn run(cli: Cli) -> Result<()> {
             flags,
             compression,
             max_output_gib,
+            shard,
             json,
         } => {
             let t0 = std::time::Instant::now();
-            let opts = flags.options(compression, max_output_gib);
-            let report = penumbra::mip::build_mips(&dir, &opts, &progress)?;
-            output::print_mip(&report, t0.elapsed().as_secs_f64(), json)?;
+            let node = graph::mip(flags.options(compression, max_output_gib));
+            let ran = node.run(&dir, &shard.select(), &progress)?;
+            output::print_ran(&ran, t0.elapsed().as_secs_f64(), json)?;
         }
         Command::Horizon {
             dir,
@@ -705,6 +731,7 @@ fn run(cli: Cli) -> Result<()> {
             fourier,
             keep_raw,
             fourier_flags,
+            shard,
             json,
         } => {
             let opts = HorizonOptions {
@@ -717,25 +744,32 @@ fn run(cli: Cli) -> Result<()> {
                 max_output_gib,
                 near_px: flags.near_px,
                 fine_margin_px: flags.fine_margin_px,
-                fourier: fourier
-                    .then(|| fourier_flags.options(None, penumbra::runner::DEFAULT_MAX_OUTPUT_GIB)),
-                keep_raw,
             };
+            let fourier = fourier
+                .then(|| fourier_flags.options(None, penumbra::runner::DEFAULT_MAX_OUTPUT_GIB));
             let t0 = std::time::Instant::now();
-            let report = penumbra::horizon::build_horizons(&dir, &opts, &progress)?;
-            output::print_horizon(&report, t0.elapsed().as_secs_f64(), json)?;
+            let ran = graph::horizons(
+                &dir,
+                &opts,
+                fourier.as_ref(),
+                keep_raw,
+                &shard.select(),
+                &progress,
+            )?;
+            output::print_ran(&ran, t0.elapsed().as_secs_f64(), json)?;
         }
         Command::Fourier {
             dir,
             levels,
             flags,
             max_output_gib,
+            shard,
             json,
         } => {
             let t0 = std::time::Instant::now();
-            let opts = flags.options(levels, max_output_gib);
-            let report = penumbra::fourier::build_fourier(&dir, &opts, &progress)?;
-            output::print_fourier(&report, t0.elapsed().as_secs_f64(), json)?;
+            let node = graph::fourier(flags.options(levels, max_output_gib));
+            let ran = node.run(&dir, &shard.select(), &progress)?;
+            output::print_ran(&ran, t0.elapsed().as_secs_f64(), json)?;
         }
         Command::Shadow {
             dir,

@@ -9,6 +9,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use penumbra::bake::BakeReport;
 use penumbra::fourier::FourierReport;
+use penumbra::graph::Ran;
 use penumbra::horizon::HorizonReport;
 use penumbra::manifest::Tileset;
 use penumbra::mip::MipReport;
@@ -130,7 +131,11 @@ fn write_horizon_line(out: &mut impl Write, h: &HorizonReport) -> Result<()> {
         h.azimuths,
         h.method.name()
     )?;
-    if let Some(f) = &h.fourier {
+    let fourier = h
+        .streamed
+        .get("fourier")
+        .and_then(|v| serde_json::from_value::<penumbra::fourier::StreamedFourier>(v.clone()).ok());
+    if let Some(f) = &fourier {
         writeln!(
             out,
             "  Fourier pyramids: K = {} {} {} (sigma {}), {} written{}; {} per tile ({}), raw maps {}",
@@ -169,6 +174,41 @@ fn write_horizon_line(out: &mut impl Write, h: &HorizonReport) -> Result<()> {
         )?;
     }
     Ok(())
+}
+
+/// A stage's run: its report, or what a partial run (`--shard`) did.
+pub fn print_ran(ran: &Ran, wall_s: f64, json: bool) -> Result<()> {
+    match ran {
+        // Tiling runs through `bake` (print_bake); a tiling report alone prints as JSON.
+        Ran::Tile(r) => print_json(r),
+        Ran::Mip(r) => print_mip(r, wall_s, json),
+        Ran::Horizon(r) => print_horizon(r, wall_s, json),
+        Ran::Fourier(r) => print_fourier(r, wall_s, json),
+        Ran::Partial {
+            stage,
+            ran,
+            done,
+            total,
+        } => {
+            if json {
+                return print_json(&serde_json::json!({
+                    "stage": stage,
+                    "partial": true,
+                    "units_run": ran,
+                    "units_done": done,
+                    "units": total,
+                    "wall_s": wall_s,
+                }));
+            }
+            let mut out = std::io::stdout().lock();
+            writeln!(
+                out,
+                "{stage}: {ran} units run, {done} of {total} done; the stage commits when a run \
+                 with the same options completes the rest ({wall_s:.2} s)"
+            )?;
+            Ok(())
+        }
+    }
 }
 
 pub fn print_horizon(r: &HorizonReport, wall_s: f64, json: bool) -> Result<()> {

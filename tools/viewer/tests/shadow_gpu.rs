@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use penumbra::bake::{bake, Input, Plan};
 use penumbra::fourier::sun::{sun_radius_deg, Frame, Sun};
 use penumbra::fourier::FourierOptions;
-use penumbra::horizon::{build_horizons, HorizonOptions};
+use penumbra::horizon::HorizonOptions;
 use penumbra::layout::TileId;
 use penumbra::manifest::Tileset;
 use penumbra::progress::NoProgress;
@@ -102,10 +102,17 @@ fn bake_small(input: Input, out: &Path, tile_size: u32, levels: Option<u8>, four
             levels: Some(vec![level]),
             azimuths: 64,
             max_margin_px: 256,
-            fourier: Some(FourierOptions::default()),
             ..Default::default()
         };
-        build_horizons(out, &opts, &NoProgress).unwrap();
+        penumbra::graph::horizons(
+            out,
+            &opts,
+            Some(&FourierOptions::default()),
+            false,
+            &penumbra::runner::Select::All,
+            &NoProgress,
+        )
+        .unwrap();
     }
     eprintln!(
         "baked {} in {:.1} s (level {level})",

@@ -123,9 +123,10 @@ pub fn scene() -> &'static Path {
             horizon: HorizonOptions {
                 levels: Some(vec![9]),
                 azimuths: 90,
-                fourier: Some(FourierOptions::default()),
                 ..HorizonOptions::default()
             },
+            fourier: Some(FourierOptions::default()),
+            keep_raw: false,
             horizon_level_at_most: None,
         };
         let spec = SceneSpec {
@@ -211,9 +212,10 @@ pub fn shoemaker() -> Option<&'static Path> {
             horizon: HorizonOptions {
                 levels: Some(vec![13]),
                 azimuths: 90,
-                fourier: Some(FourierOptions::default()),
                 ..HorizonOptions::default()
             },
+            fourier: Some(FourierOptions::default()),
+            keep_raw: false,
             horizon_level_at_most: None,
         };
         // The GeoTIFF names no body; its projection is on the 1737.4 km Moon.
