@@ -127,7 +127,7 @@ pub fn bake(input: &Input, out: &Path, plan: &Plan, progress: &dyn Progress) -> 
             Ran::Tile(r) => report.tile = Some(r),
             Ran::Mip(r) => report.mip = Some(r),
             Ran::Horizon(r) => report.horizon = Some(r),
-            Ran::Fourier(_) | Ran::Partial { .. } => {}
+            Ran::Fourier(_) | Ran::Other(_) | Ran::Partial { .. } => {}
         }
     }
     Ok(report)

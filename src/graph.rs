@@ -29,6 +29,8 @@ pub enum Ran {
     Mip(MipReport),
     Horizon(HorizonReport),
     Fourier(FourierReport),
+    /// A stage the graph does not list (its report as JSON).
+    Other(serde_json::Value),
     /// Some of the stage's units ran; the stage has not committed.
     Partial {
         stage: &'static str,

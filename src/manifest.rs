@@ -73,6 +73,11 @@ pub struct Products {
     /// Fourier-compressed horizon pyramids (docs/fourier.md); absent unless made.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fourier: Option<FourierProduct>,
+    /// Products the registry does not list ([`crate::tileset::Product::Other`]), by name:
+    /// kept as they are, and removed with their folders (`dirs`) when a product they `reads`
+    /// is rewritten.
+    #[serde(flatten)]
+    pub extra: BTreeMap<String, serde_json::Value>,
 }
 
 /// Tiles present at one level, as row runs `[y, x_first, x_last]` per face.

@@ -11,14 +11,13 @@
 //! hand its updated manifest to [`Run::commit`].
 
 use std::borrow::Cow;
-use std::io::Write as _;
 use std::path::Path;
 
 use rayon::prelude::*;
 use serde::de::DeserializeOwned;
 use serde::Serialize;
 
-use crate::error::{Error, IoContext, Result};
+use crate::error::{Error, Result};
 use crate::layout::TileId;
 use crate::manifest::Tileset;
 use crate::progress::Progress;
@@ -370,18 +369,10 @@ pub enum Outcome<R> {
     },
 }
 
-/// Folder of a run's unit records, below its staging root.
-const UNITS_DIR: &str = "units";
-
-fn record_path(out: &Path, unit: &Unit) -> std::path::PathBuf {
+/// The name of a unit's record: `level-face-x-y`.
+fn record_name(unit: &Unit) -> String {
     let t = unit.tile;
-    out.join(UNITS_DIR).join(format!(
-        "{}-{}-{}-{}.json",
-        t.level,
-        t.face.name(),
-        t.x,
-        t.y
-    ))
+    format!("{}-{}-{}-{}", t.level, t.face.name(), t.x, t.y)
 }
 
 /// Run `stage` on the tileset in `dir`: the units `select` picks that an interrupted or
@@ -416,12 +407,9 @@ pub fn execute<S: Stage>(
         Start::Run(run) => run,
     };
     let out = run.out().to_path_buf();
-    std::fs::create_dir_all(out.join(UNITS_DIR)).at(out.join(UNITS_DIR))?;
     // Units an earlier run of this key finished (its records are written after its files).
     let recorded = |u: &Unit| -> Option<S::Done> {
-        let p = record_path(&out, u);
-        let bytes = std::fs::read(&p).ok()?;
-        serde_json::from_slice(&bytes).ok()
+        serde_json::from_slice(&run.staging.read_record(&record_name(u))?).ok()
     };
     let mut done: Vec<Option<(S::Done, bool)>> = units
         .iter()
@@ -448,9 +436,7 @@ pub fn execute<S: Stage>(
     let one = |i: usize, scratch: &mut S::Scratch| -> Result<S::Done> {
         let d = stage.run_unit(&cx, &units[i], scratch)?;
         let bytes = serde_json::to_vec(&d).expect("unit records serialise");
-        crate::fsio::write_staged(&record_path(&out, &units[i]), |f| {
-            f.write_all(&bytes).at(record_path(&out, &units[i]))
-        })?;
+        run.staging.write_record(&record_name(&units[i]), &bytes)?;
         progress.inc(1);
         Ok(d)
     };

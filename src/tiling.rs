@@ -401,6 +401,7 @@ pub fn tile_dem(
             mip: None,
             horizon: None,
             fourier: None,
+            extra: Default::default(),
         },
         coverage: manifest::coverage_of(&present, levels),
         parameters,

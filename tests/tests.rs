@@ -42,3 +42,7 @@ mod shadow_methods;
 // The layering of docs/architecture.md on the source: no import circle between files, product
 // files read and written only by the formats layer and the store.
 mod architecture;
+
+// The stage graph: shards in separate processes give one run's bytes; a toy stage defined in
+// the test alone runs through the graph and the store.
+mod graph;

@@ -34,6 +34,10 @@ mod tests;
 
 pub use crate::exrcodec::TileCompression;
 
+/// The top-level folders the listed products own (`tileset::Product::dirs`); a product the
+/// registry does not list may claim none of them.
+pub const LISTED_DIRS: &[&str] = &["height", "albedo", "maxmip", "minmax", "horizon", "fourier"];
+
 /// A source file a product was made from, as the manifest records it.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct SourceFile {

@@ -382,6 +382,67 @@ pub fn check(ts: &Tileset, path: &Path) -> Result<()> {
     if let Some(f) = &p.fourier {
         fourier(path, ts, f)?;
     }
+    for (name, entry) in &p.extra {
+        unlisted(path, name, entry)?;
+    }
+    Ok(())
+}
+
+/// Most products the registry does not list, and most names in one's `dirs` or `reads`.
+const MAX_UNLISTED: usize = 64;
+
+/// A plain name: a folder of the tileset's top level or a product's name.
+fn plain_name(s: &str) -> bool {
+    (1..=64).contains(&s.len())
+        && s.bytes()
+            .next()
+            .is_some_and(|b| b.is_ascii_lowercase() || b.is_ascii_digit())
+        && s.bytes()
+            .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_' || b == b'-')
+}
+
+/// A product the registry does not list: whatever it holds, but the folders it claims (which
+/// a later writer removes when it is stale) must be plain top-level names that no listed
+/// product owns, and what it reads plain names.
+fn unlisted(path: &Path, name: &str, entry: &serde_json::Value) -> Result<()> {
+    let field = format!("products.{name}");
+    // Keys this penumbra does not know are read past, unless they claim folders.
+    let Some(obj) = entry.as_object().filter(|o| o.contains_key("dirs")) else {
+        return Ok(());
+    };
+    if !plain_name(name) {
+        return Err(bad(
+            path,
+            "products",
+            format!("'{name}' is not a product name"),
+        ));
+    }
+    let listed = crate::format::LISTED_DIRS;
+    for key in ["dirs", "reads"] {
+        let Some(v) = obj.get(key) else { continue };
+        let names = v
+            .as_array()
+            .filter(|a| a.len() <= MAX_UNLISTED)
+            .ok_or_else(|| {
+                bad(
+                    path,
+                    &format!("{field}.{key}"),
+                    format!("not a list of at most {MAX_UNLISTED} names"),
+                )
+            })?;
+        for n in names {
+            let ok = n
+                .as_str()
+                .is_some_and(|n| plain_name(n) && (key == "reads" || !listed.contains(&n)));
+            if !ok {
+                return Err(bad(
+                    path,
+                    &format!("{field}.{key}"),
+                    format!("{n} is not a plain name of its own"),
+                ));
+            }
+        }
+    }
     Ok(())
 }
 

@@ -29,8 +29,7 @@ pub use cache::TileCache;
 pub use lock::STATE_DIR;
 
 /// The products a tileset can hold.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Product {
     /// Height tiles (`height/`), written by the tiling stage.
     Height,
@@ -43,6 +42,29 @@ pub enum Product {
     /// Fourier-compressed horizon pyramids (from the raw maps, or streamed from the horizon
     /// stage).
     Fourier,
+    /// A product this registry does not list, defined where its stage is (a plug-in or a
+    /// test): its manifest entry is `products.<name>` (with a `run_key`), and the store
+    /// stamps it with the folders it owns and the products it reads, so that a later writer
+    /// invalidates it as it does the products above (docs/architecture.md, "How to add a
+    /// product format").
+    Other(&'static ProductDef),
+}
+
+/// What the store needs to know of a product it does not list.
+#[derive(Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct ProductDef {
+    /// Its name: the key of its manifest entry and of its index.
+    pub name: &'static str,
+    /// The top-level folders it owns (plain names).
+    pub dirs: &'static [&'static str],
+    /// The products it is computed from.
+    pub reads: &'static [Product],
+}
+
+impl serde::Serialize for Product {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
 }
 
 impl Product {
@@ -61,6 +83,7 @@ impl Product {
             Product::Mip => "mip",
             Product::Horizon => "horizon",
             Product::Fourier => "fourier",
+            Product::Other(d) => d.name,
         }
     }
 
@@ -72,6 +95,7 @@ impl Product {
             Product::Mip => &["maxmip", "minmax"],
             Product::Horizon => &["horizon"],
             Product::Fourier => &["fourier"],
+            Product::Other(d) => d.dirs,
         }
     }
 
@@ -85,6 +109,7 @@ impl Product {
             // Streamed pyramids depend on what the horizons do; pyramids made from stored raw
             // maps on those maps. Either way a new horizon run makes them stale.
             Product::Fourier => &[Product::Height, Product::Mip, Product::Horizon],
+            Product::Other(d) => d.reads,
         }
     }
 
@@ -119,6 +144,12 @@ impl Product {
             Product::Mip => ts.products.mip.as_ref().map(|m| m.run_key.as_str()),
             Product::Horizon => ts.products.horizon.as_ref().map(|h| h.run_key.as_str()),
             Product::Fourier => ts.products.fourier.as_ref().map(|f| f.run_key.as_str()),
+            Product::Other(d) => ts
+                .products
+                .extra
+                .get(d.name)
+                .and_then(|e| e.get("run_key"))
+                .and_then(|k| k.as_str()),
         }
     }
 
@@ -130,6 +161,9 @@ impl Product {
             Product::Mip => ts.products.mip = None,
             Product::Horizon => ts.products.horizon = None,
             Product::Fourier => ts.products.fourier = None,
+            Product::Other(d) => {
+                ts.products.extra.remove(d.name);
+            }
         }
     }
 }
@@ -279,5 +313,20 @@ impl Store {
     /// The shared height-tile cache (for stages that manage its budget).
     pub fn cache(&self) -> &TileCache {
         &self.cache
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The formats layer's list of product folders is the registry's.
+    #[test]
+    fn listed_dirs_are_the_registrys() {
+        let dirs: Vec<&str> = Product::ALL
+            .iter()
+            .flat_map(|p| p.dirs().iter().copied())
+            .collect();
+        assert_eq!(dirs, crate::format::LISTED_DIRS);
     }
 }

@@ -13,6 +13,7 @@
 //!   up-to-date check can verify that the files it vouches for are there;
 //! - `trash/`: folders replaced by a commit, removed right after it.
 
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
@@ -79,6 +80,24 @@ pub struct Staging {
     pub root: PathBuf,
     /// True when an interrupted run with the same run key left files here to keep.
     pub resume: bool,
+}
+
+impl Staging {
+    /// Folder of the run's unit records (the runner's bookkeeping, not product files).
+    const UNITS: &'static str = "units";
+
+    /// Record that unit `name` of the run is done, with what its stage needs to finish the
+    /// run (written after the unit's files, staged like them).
+    pub fn write_record(&self, name: &str, bytes: &[u8]) -> Result<()> {
+        let p = self.root.join(Self::UNITS).join(format!("{name}.json"));
+        fsio::write_staged(&p, |f| f.write_all(bytes).at(&p))
+    }
+
+    /// The record of unit `name`, if a run of this key left one.
+    pub fn read_record(&self, name: &str) -> Option<Vec<u8>> {
+        let p = self.root.join(Self::UNITS).join(format!("{name}.json"));
+        fsio::read_capped(&p, 1 << 24, "a unit record").ok()
+    }
 }
 
 impl Writer {
@@ -208,6 +227,52 @@ impl Writer {
         for p in &downstream {
             p.clear(&mut manifest);
         }
+        // Products the registry does not list: stamp what this run writes with the folders it
+        // owns and what it reads; remove those (in the tileset as committed, or carried over in
+        // the new manifest) that read, directly or not, what this run rewrites.
+        for &p in writes {
+            if let Product::Other(d) = p {
+                if let Some(serde_json::Value::Object(e)) = manifest.products.extra.get_mut(d.name)
+                {
+                    e.insert("dirs".into(), serde_json::json!(d.dirs));
+                    let reads: Vec<&str> = d.reads.iter().map(|r| r.name()).collect();
+                    e.insert("reads".into(), serde_json::json!(reads));
+                }
+            }
+        }
+        let unlisted_stale = if changed {
+            let current = Tileset::load(&self.dir).ok();
+            let mut changed_names: Vec<String> = writes
+                .iter()
+                .chain(&downstream)
+                .map(|p| p.name().to_string())
+                .collect();
+            let mut entries: Vec<(String, serde_json::Value)> = manifest
+                .products
+                .extra
+                .iter()
+                .chain(current.iter().flat_map(|c| c.products.extra.iter()))
+                .filter(|(n, _)| !writes.iter().any(|w| w.name() == n.as_str()))
+                .map(|(n, v)| (n.clone(), v.clone()))
+                .collect();
+            let mut stale = Vec::new();
+            while let Some(k) = entries.iter().position(|(_, v)| {
+                unlisted_field(v, "reads")
+                    .iter()
+                    .any(|r| changed_names.contains(r))
+            }) {
+                let (name, v) = entries.remove(k);
+                entries.retain(|(n, _)| *n != name);
+                changed_names.push(name.clone());
+                stale.push((name, unlisted_field(&v, "dirs")));
+            }
+            stale
+        } else {
+            Vec::new()
+        };
+        for (name, _) in &unlisted_stale {
+            manifest.products.extra.remove(name);
+        }
         let mut moves = Vec::new();
         let mut removes = Vec::new();
         let mut indexes = Vec::new();
@@ -232,6 +297,10 @@ impl Writer {
         for p in &downstream {
             removes.extend(p.dirs().iter().map(|d| d.to_string()));
             indexes.push(p.name().to_string());
+        }
+        for (name, dirs) in unlisted_stale {
+            removes.extend(dirs);
+            indexes.push(name);
         }
         let json = serde_json::to_string_pretty(&manifest).expect("manifest serialises");
         write_atomic_bytes(&staging.root.join(MANIFEST), json.as_bytes())?;
@@ -339,4 +408,18 @@ impl Drop for Writer {
             let _ = std::fs::remove_dir_all(self.state());
         }
     }
+}
+
+/// A list of plain names in an unlisted product's manifest entry (`dirs`, `reads`); the
+/// manifest's validation has checked them.
+fn unlisted_field(entry: &serde_json::Value, field: &str) -> Vec<String> {
+    entry
+        .get(field)
+        .and_then(|v| v.as_array())
+        .map(|a| {
+            a.iter()
+                .filter_map(|x| x.as_str().map(str::to_string))
+                .collect()
+        })
+        .unwrap_or_default()
 }

@@ -181,6 +181,7 @@ pub fn print_ran(ran: &Ran, wall_s: f64, json: bool) -> Result<()> {
     match ran {
         // Tiling runs through `bake` (print_bake); a tiling report alone prints as JSON.
         Ran::Tile(r) => print_json(r),
+        Ran::Other(v) => print_json(v),
         Ran::Mip(r) => print_mip(r, wall_s, json),
         Ran::Horizon(r) => print_horizon(r, wall_s, json),
         Ran::Fourier(r) => print_fourier(r, wall_s, json),
