@@ -29,6 +29,46 @@ fn assert_refused(args: &[&str], out: &Path, needle: &str) {
     assert!(!out.exists(), "{args:?} left {} behind", out.display());
 }
 
+/// `penumbra info DIR | head -1`: a reader that closes the pipe early is no error (exit 0, no
+/// message), as with other Unix tools, for the table and for JSON.
+#[test]
+fn a_closed_pipe_is_not_an_error() {
+    use std::process::Stdio;
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("tiles");
+    let o = out.to_str().unwrap();
+    json(&run(&[
+        "bake",
+        "--out",
+        o,
+        "--scene-size",
+        "1024",
+        "--levels",
+        "4",
+        "--no-horizons",
+        "--json",
+    ]));
+    for args in [
+        vec!["info", o],
+        vec!["info", o, "--json"],
+        vec!["query", "height", o, "--lat", "-89.5", "--lon", "10"],
+    ] {
+        for _ in 0..5 {
+            let mut child = penumbra_bin()
+                .args(&args)
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap();
+            // Close the reading end before the command writes anything.
+            drop(child.stdout.take());
+            let o = child.wait_with_output().unwrap();
+            assert_eq!(o.status.code(), Some(0), "{args:?}: {}", stderr(&o));
+            assert!(o.stderr.is_empty(), "{args:?}: {}", stderr(&o));
+        }
+    }
+}
+
 #[test]
 fn bake_info_and_query_on_the_embedded_scene() {
     let dir = tempfile::tempdir().unwrap();

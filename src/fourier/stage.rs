@@ -432,7 +432,7 @@ pub fn product(
         format: FORMAT.into(),
         levels,
         azimuths: a,
-        azimuth: crate::horizon::AZIMUTH_CONVENTION.into(),
+        azimuth: crate::format::horizon::AZIMUTH_CONVENTION.into(),
         coefficients: opts.coefficients,
         layout: opts.layout.name().into(),
         encoding: opts.encoding.name().into(),

@@ -606,6 +606,23 @@ pub fn compass_azimuth_deg(face: Face, u: f64, v: f64, phi: f64) -> f64 {
         .rem_euclid(360.0)
 }
 
+/// A horizon context of `w × h` heights (row-major, metres) with pixels of `pixel_m` on a Moon-sized
+/// sphere, centred on face +X.
+#[cfg(test)]
+pub(crate) fn lunar_context(w: usize, h: usize, heights: Vec<f32>, pixel_m: f64) -> Context {
+    let r = 1_737_400.0;
+    let s = (2.0 * r / pixel_m).round();
+    Context {
+        face: crate::cube::Face::Px,
+        face_pixels: s,
+        origin: ((s as i64 - w as i64) / 2, (s as i64 - h as i64) / 2),
+        width: w,
+        height: h,
+        heights,
+        radius_m: r,
+    }
+}
+
 #[cfg(test)]
 mod poly_check {
     use super::*;
@@ -714,21 +731,5 @@ mod poly_check {
                 );
             }
         }
-    }
-}
-/// A horizon context of `w × h` heights (row-major, metres) with pixels of `pixel_m` on a Moon-sized
-/// sphere, centred on face +X.
-#[cfg(test)]
-pub(crate) fn lunar_context(w: usize, h: usize, heights: Vec<f32>, pixel_m: f64) -> Context {
-    let r = 1_737_400.0;
-    let s = (2.0 * r / pixel_m).round();
-    Context {
-        face: crate::cube::Face::Px,
-        face_pixels: s,
-        origin: ((s as i64 - w as i64) / 2, (s as i64 - h as i64) / 2),
-        width: w,
-        height: h,
-        heights,
-        radius_m: r,
     }
 }

@@ -20,16 +20,25 @@ pub fn set_threads(threads: Option<usize>) -> Result<()> {
     Ok(())
 }
 
+/// Whether the error is a write to a closed pipe (`penumbra info DIR | head -1`), however it
+/// was wrapped: an I/O error, or the JSON writer's error around one.
+fn is_broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+            || c.downcast_ref::<serde_json::Error>()
+                .is_some_and(|j| j.io_error_kind() == Some(std::io::ErrorKind::BrokenPipe))
+    })
+}
+
 /// The exit status of a run of the binary `name`: success, or the error chain on stderr as
 /// `name: error: …` and exit code 2. A broken pipe (output piped into `head`) is success.
 pub fn exit_code(name: &str, result: Result<()>) -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            if let Some(io) = e.downcast_ref::<std::io::Error>() {
-                if io.kind() == std::io::ErrorKind::BrokenPipe {
-                    return ExitCode::SUCCESS;
-                }
+            if is_broken_pipe(&e) {
+                return ExitCode::SUCCESS;
             }
             // The library names an out-of-range option by its field; show the flag instead.
             if let Some(penumbra::Error::Param { param, msg }) = e.downcast_ref() {

@@ -459,7 +459,8 @@ pub fn print_mip_answer(a: &MipAnswer, json: bool) -> Result<()> {
         return print_json(a);
     }
     let f = |v: Option<f64>| v.map_or("no data".to_string(), |v| format!("{v:.3} m"));
-    println!(
+    writeln!(
+        std::io::stdout().lock(),
         "min {} max {} at {}°, {}° (mip level {} of tile level {}: {} texel {},{} of {}², face {}, tile {}/{})",
         f(a.min_m),
         f(a.max_m),
@@ -474,7 +475,7 @@ pub fn print_mip_answer(a: &MipAnswer, json: bool) -> Result<()> {
         a.face,
         a.tile[0],
         a.tile[1]
-    );
+    )?;
     Ok(())
 }
 
@@ -603,7 +604,8 @@ pub fn print_height(a: &HeightAnswer, json: bool) -> Result<()> {
         return print_json(a);
     }
     let mask = ["measured", "filled void", "no data"][a.mask.min(2) as usize];
-    println!(
+    writeln!(
+        std::io::stdout().lock(),
         "{:.3} m at {}°, {}° (level {}, face {}, tile {}/{}, pixel {:.2},{:.2}; {mask})",
         a.height_m,
         a.lat_deg,
@@ -614,6 +616,6 @@ pub fn print_height(a: &HeightAnswer, json: bool) -> Result<()> {
         a.tile[1],
         a.pixel[0],
         a.pixel[1]
-    );
+    )?;
     Ok(())
 }
