@@ -30,8 +30,12 @@ fn ok(args: &[&str]) -> String {
     String::from_utf8(o.stdout).unwrap()
 }
 
-/// Tiles and mipmaps of a small embedded scene (64 tiles of 32² at the finest of 4 levels).
+/// Tiles and mipmaps of a small embedded scene (4 levels of 32² tiles).
 fn base(dir: &Path) {
+    bake(dir, 32);
+}
+
+fn bake(dir: &Path, tile_size: u32) {
     ok(&[
         "bake",
         "--scene-size",
@@ -39,7 +43,7 @@ fn base(dir: &Path) {
         "--levels",
         "4",
         "--tile-size",
-        "32",
+        &tile_size.to_string(),
         "--no-horizons",
         "--out",
         dir.to_str().unwrap(),
@@ -387,18 +391,7 @@ fn a_toy_stage_runs_through_the_graph_and_the_store() {
         matches!(&again, Ran::Other(v) if v["up_to_date"] == true),
         "{again:?}"
     );
-    ok(&[
-        "bake",
-        "--scene-size",
-        "1024",
-        "--levels",
-        "4",
-        "--tile-size",
-        "64",
-        "--no-horizons",
-        "--out",
-        dir.to_str().unwrap(),
-    ]);
+    bake(&dir, 64);
     let ts = Tileset::load(&dir).unwrap();
     assert!(
         !ts.products.extra.contains_key("toy"),
