@@ -24,6 +24,9 @@
 /// The round-trip check of the randomised test and the fuzz target (tools/fuzz).
 #[path = "layout_check.rs"]
 pub(super) mod check;
+#[cfg(test)]
+#[path = "layout_roundtrip.rs"]
+mod roundtrip;
 
 /// Length symbols' base lengths and extra bits (RFC 1951 §3.2.5), symbols 257–285.
 const LEN_BASE: [u16; 29] = [
