@@ -2,19 +2,20 @@
 //! (layout_roundtrip.rs) and the fuzz target (tools/fuzz, through
 //! [`crate::exrcodec::fuzz_deflate_round_trip`]). The encoder compresses user data (any
 //! DEM's samples), so it must give every input back, whatever its bytes, to every inflater
-//! that reads the files: here miniz_oxide (which the `exr` crate and so most Rust readers
-//! use) and zune-inflate (which this codec's reader uses).
+//! that reads the files: here miniz_oxide (flate2's, the commonest in Rust), zune-inflate
+//! (which the `exr` crate and this codec's reader use) and libdeflate (which OpenEXR's own
+//! library inflates ZIP blocks with since 3.2).
 
 use super::{zlib, zlib_unless_weak, zlib_with, Portable, MAX_BLOCK, PROBE_MIN};
 
 /// Compress `data` with the match distances `dist` and check the stream; the stream's length,
 /// or what is wrong with it. The stream must inflate to `data` with miniz_oxide (which must
-/// consume it to its last byte: no garbage after the checksum) and with zune-inflate (checking
-/// the Adler-32), be no longer than storing `data` would be (the encoder chooses the shortest
-/// of its three block types), and [`zlib_unless_weak`] must give the same bytes or, for a block
-/// it may probe, none (below [`PROBE_MIN`] bytes, where it does not probe, only with
-/// `every_isa`). With `every_isa`, each instruction set this CPU has must also write the same
-/// bytes as the one [`zlib`] picked, with and without the probe.
+/// consume it to its last byte: no garbage after the checksum), with zune-inflate and with
+/// libdeflate (both checking the Adler-32), be no longer than storing `data` would be (the
+/// encoder chooses the shortest of its three block types), and [`zlib_unless_weak`] must give
+/// the same bytes or, for a block it may probe, none (below [`PROBE_MIN`] bytes, where it does
+/// not probe, only with `every_isa`). With `every_isa`, each instruction set this CPU has must
+/// also write the same bytes as the one [`zlib`] picked, with and without the probe.
 pub(in crate::exrcodec) fn round_trip(
     data: &[u8],
     dist: &[usize],
@@ -37,6 +38,7 @@ pub(in crate::exrcodec) fn round_trip(
     }
     inflate_miniz(&z, data)?;
     inflate_zune(&z, data)?;
+    inflate_libdeflate(&z, data)?;
     // Below PROBE_MIN the probe does not run and zlib_unless_weak is zlib: tried with
     // `every_isa` only.
     if n < PROBE_MIN && !every_isa {
@@ -134,6 +136,23 @@ fn inflate_zune(z: &[u8], want: &[u8]) -> Result<(), String> {
             got.len(),
             want.len(),
             first_difference(&got, want)
+        ));
+    }
+    Ok(())
+}
+
+/// Inflate with libdeflate into a buffer of exactly `want.len()` bytes (a stream that makes
+/// more does not fit), checking the Adler-32, and compare.
+fn inflate_libdeflate(z: &[u8], want: &[u8]) -> Result<(), String> {
+    let mut out = vec![0u8; want.len()];
+    let n = libdeflater::Decompressor::new()
+        .zlib_decompress(z, &mut out)
+        .map_err(|e| format!("libdeflate: {e:?}"))?;
+    if out[..n] != *want {
+        return Err(format!(
+            "libdeflate gave {n} bytes for {}, first difference at {}",
+            want.len(),
+            first_difference(&out[..n], want)
         ));
     }
     Ok(())

@@ -1,5 +1,5 @@
 //! Fuzz target `deflate`: the ZIP blocks' deflate encoder (src/exrcodec/layout.rs) must give
-//! back any block, in any block layout, to both inflaters the codec's files meet
+//! back any block, in any block layout, to the inflaters the codec's files meet
 //! (`penumbra::exrcodec::fuzz_deflate_round_trip` panics otherwise). See ../README.md.
 //!
 //! The input is 4 bytes of layout, then the block:
