@@ -21,6 +21,13 @@
 //! blocks; storing them cost 2.7 % in size and saved 22 % of the encoder's time
 //! (docs/benchmarks.md, "Weak blocks stored").
 
+/// The round-trip check of the randomised test and the fuzz target (tools/fuzz).
+#[path = "layout_check.rs"]
+pub(super) mod check;
+#[cfg(test)]
+#[path = "layout_roundtrip.rs"]
+mod roundtrip;
+
 /// Length symbols' base lengths and extra bits (RFC 1951 §3.2.5), symbols 257–285.
 const LEN_BASE: [u16; 29] = [
     3, 4, 5, 6, 7, 8, 9, 10, 11, 13, 15, 17, 19, 23, 27, 31, 35, 43, 51, 59, 67, 83, 99, 115, 131,

@@ -315,6 +315,32 @@ fn deflate_miniz(data: &[u8], level: u8) -> Vec<u8> {
     })
 }
 
+/// For the fuzz target (tools/fuzz) and tests only, not an API: compress `data` with the ZIP
+/// blocks' own deflate encoder (src/exrcodec/layout.rs) at the match distances of a block of
+/// `lines` lines of `width` samples whose channels take `bps` bytes each (in stored order),
+/// and panic, saying what differs, unless miniz_oxide, zune-inflate and libdeflate all inflate
+/// the stream to `data`, the stream is no longer than storing `data`, the probed variant keeps
+/// the same bytes, and every instruction set this CPU has writes them too. `bps` holds at most
+/// 16 channels of 1 to 16 bytes, `width` and `lines` are 1 to 2²⁰ (wider than any block the
+/// codec writes).
+#[doc(hidden)]
+pub fn fuzz_deflate_round_trip(data: &[u8], bps: &[usize], width: usize, lines: usize) {
+    assert!(
+        bps.len() <= 16
+            && bps.iter().all(|b| (1..=16).contains(b))
+            && (1..=1 << 20).contains(&width)
+            && (1..=1 << 20).contains(&lines),
+        "not a block layout: {bps:?} {width}×{lines}"
+    );
+    let dist = layout::distances(bps, width, lines);
+    if let Err(e) = layout::check::round_trip(data, &dist, true) {
+        panic!(
+            "{} bytes, layout {bps:?} {width}×{lines}, distances {dist:?}: {e}",
+            data.len()
+        );
+    }
+}
+
 /// Encode a single-part EXR file in memory. `size` is the largest level's (width, height);
 /// channels may come in any order (they are stored sorted by name, as OpenEXR requires).
 pub fn encode(
