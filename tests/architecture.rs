@@ -208,6 +208,53 @@ fn use_tree(toks: &[Tok], i: &mut usize, prefix: &[String], out: &mut Vec<Vec<St
     }
 }
 
+/// The `#[path = "…"]` among the attributes of the `mod` item at `toks[i]` (past its
+/// visibility and any other attributes).
+fn path_attribute(toks: &[Tok], i: usize) -> Option<String> {
+    let mut j = i;
+    while j > 0
+        && match &toks[j - 1] {
+            Tok::Ident(w) => matches!(w.as_str(), "pub" | "crate" | "super" | "self" | "in"),
+            Tok::Punct(c) => matches!(c, '(' | ')'),
+            _ => false,
+        }
+    {
+        j -= 1;
+    }
+    let mut found = None;
+    while j >= 2 && toks[j - 1] == Tok::Punct(']') {
+        // Back to the attribute's `#[`.
+        let mut k = j - 1;
+        let mut depth = 0i32;
+        loop {
+            match toks[k] {
+                Tok::Punct(']') => depth += 1,
+                Tok::Punct('[') => {
+                    depth -= 1;
+                    if depth == 0 {
+                        break;
+                    }
+                }
+                _ => {}
+            }
+            if k == 0 {
+                return found;
+            }
+            k -= 1;
+        }
+        if let [Tok::Ident(p), Tok::Punct('='), Tok::Str(s)] = &toks[k + 1..j - 1] {
+            if p == "path" {
+                found = Some(s.clone());
+            }
+        }
+        if k == 0 || toks[k - 1] != Tok::Punct('#') {
+            return found;
+        }
+        j = k - 1;
+    }
+    found
+}
+
 fn scan(path: &Path, module: &ModPath) -> FileFacts {
     let src = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let toks = lex(&src);
@@ -250,17 +297,7 @@ fn scan(path: &Path, module: &ModPath) -> FileFacts {
                 };
                 match toks.get(i + 2) {
                     Some(Tok::Punct(';')) => {
-                        // A #[path = "…"] attribute just before?
-                        let attr = (i >= 6)
-                            .then(|| &toks[i - 6..i])
-                            .and_then(|t| match t {
-                                [Tok::Punct('#'), Tok::Punct('['), Tok::Ident(p), Tok::Punct('='), Tok::Str(s), Tok::Punct(']')]
-                                    if p == "path" =>
-                                {
-                                    Some(s.clone())
-                                }
-                                _ => None,
-                            });
+                        let attr = path_attribute(&toks, i);
                         let file = match attr {
                             Some(s) => dir.join(s),
                             None if child_dir.join(format!("{name}.rs")).exists() => {
@@ -317,8 +354,10 @@ fn scan(path: &Path, module: &ModPath) -> FileFacts {
                 i += 1;
             }
             Tok::Ident(w) if toks.get(i + 1) == Some(&Tok::PathSep) => {
-                // An inline path a::b::c (not preceded by `::`).
-                if i > 0 && toks[i - 1] == Tok::PathSep {
+                // An inline path a::b::c (not preceded by `::`, and not the module of a
+                // `pub(in a::b)` visibility).
+                if i > 0 && (toks[i - 1] == Tok::PathSep || toks[i - 1] == Tok::Ident("in".into()))
+                {
                     i += 1;
                     continue;
                 }
@@ -586,6 +625,20 @@ fn the_checker_sees_a_cycle() {
     );
     let c = load_crate(&d.path().join("lib.rs"));
     assert!(cycles(&c.edges()).is_empty());
+    // A module behind `#[path]` (after other attributes and a visibility), whose item is
+    // visible `pub(in crate::b)`: no edge from the visibility, one from its use of a.rs.
+    w(
+        "b.rs",
+        "pub struct Thing;\n#[cfg(all())]\n#[path = \"b_impl.rs\"]\npub(crate) mod imp;\n",
+    );
+    w("b_impl.rs", "pub(in crate::b) fn h() { crate::a::f() }\n");
+    let c = load_crate(&d.path().join("lib.rs"));
+    assert!(c
+        .files
+        .contains_key(&vec!["b".to_string(), "imp".to_string()]));
+    let e = c.edges();
+    assert!(cycles(&e).is_empty(), "{e:?}");
+    assert!(e[&vec!["b".to_string(), "imp".to_string()]].contains(&vec!["a".to_string()]));
 }
 
 /// What names product-file I/O: the EXR codec, the PNG encoder, the staged/atomic writers and
