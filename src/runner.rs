@@ -408,8 +408,13 @@ pub fn execute<S: Stage>(
     };
     let out = run.out().to_path_buf();
     // Units an earlier run of this key finished (its records are written after its files).
+    let records = if run.resume() {
+        run.staging.read_records()?
+    } else {
+        Default::default()
+    };
     let recorded = |u: &Unit| -> Option<S::Done> {
-        serde_json::from_slice(&run.staging.read_record(&record_name(u))?).ok()
+        serde_json::from_slice(records.get(&record_name(u))?).ok()
     };
     let mut done: Vec<Option<(S::Done, bool)>> = units
         .iter()
@@ -426,6 +431,7 @@ pub fn execute<S: Stage>(
         .copied()
         .filter(|&i| done[i].is_none())
         .collect();
+    let log = run.staging.record_log()?;
     let cx = Cx {
         store: &store,
         out: &out,
@@ -436,7 +442,7 @@ pub fn execute<S: Stage>(
     let one = |i: usize, scratch: &mut S::Scratch| -> Result<S::Done> {
         let d = stage.run_unit(&cx, &units[i], scratch)?;
         let bytes = serde_json::to_vec(&d).expect("unit records serialise");
-        run.staging.write_record(&record_name(&units[i]), &bytes)?;
+        log.append(&record_name(&units[i]), &bytes)?;
         progress.inc(1);
         Ok(d)
     };

@@ -85,18 +85,76 @@ pub struct Staging {
 impl Staging {
     /// Folder of the run's unit records (the runner's bookkeeping, not product files).
     const UNITS: &'static str = "units";
+    /// Largest log of unit records read back.
+    const MAX_LOG_BYTES: u64 = 1 << 30;
 
-    /// Record that unit `name` of the run is done, with what its stage needs to finish the
-    /// run (written after the unit's files, staged like them).
-    pub fn write_record(&self, name: &str, bytes: &[u8]) -> Result<()> {
-        let p = self.root.join(Self::UNITS).join(format!("{name}.json"));
-        fsio::write_staged(&p, |f| f.write_all(bytes).at(&p))
+    /// The log this process appends its unit records to: one line per unit done,
+    /// `name<TAB>record`, written after the unit's files (one `write` each, kept by the kernel
+    /// through a kill like the staged files; a line cut short by a crash is not read back).
+    /// One file per process, so that runs of the same key add to the staging folder without
+    /// creating a file per unit.
+    pub fn record_log(&self) -> Result<RecordLog> {
+        let dir = self.root.join(Self::UNITS);
+        std::fs::create_dir_all(&dir).at(&dir)?;
+        let path = dir.join(format!("{}.log", std::process::id()));
+        let file = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&path)
+            .at(&path)?;
+        Ok(RecordLog {
+            path,
+            file: std::sync::Mutex::new(file),
+        })
     }
 
-    /// The record of unit `name`, if a run of this key left one.
-    pub fn read_record(&self, name: &str) -> Option<Vec<u8>> {
-        let p = self.root.join(Self::UNITS).join(format!("{name}.json"));
-        fsio::read_capped(&p, 1 << 24, "a unit record").ok()
+    /// Every unit record runs of this key left here, by unit name (the last of a name wins).
+    pub fn read_records(&self) -> Result<std::collections::HashMap<String, Vec<u8>>> {
+        let mut out = std::collections::HashMap::new();
+        let dir = self.root.join(Self::UNITS);
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            return Ok(out);
+        };
+        let mut logs: Vec<PathBuf> = entries
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| p.extension().is_some_and(|x| x == "log"))
+            .collect();
+        logs.sort();
+        for p in logs {
+            let bytes = fsio::read_capped(&p, Self::MAX_LOG_BYTES, "a log of unit records")?;
+            // Whole lines only: the last may have been cut by a crash.
+            for line in bytes.split_inclusive(|&b| b == b'\n') {
+                let Some(line) = line.strip_suffix(b"\n") else {
+                    break;
+                };
+                if let Some(tab) = line.iter().position(|&b| b == b'\t') {
+                    let name = String::from_utf8_lossy(&line[..tab]).into_owned();
+                    out.insert(name, line[tab + 1..].to_vec());
+                }
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// A process's log of unit records ([`Staging::record_log`]).
+pub struct RecordLog {
+    path: PathBuf,
+    file: std::sync::Mutex<std::fs::File>,
+}
+
+impl RecordLog {
+    /// Append the record of unit `name` (`record` holds no newline: compact JSON).
+    pub fn append(&self, name: &str, record: &[u8]) -> Result<()> {
+        debug_assert!(!name.contains(['\t', '\n']) && !record.contains(&b'\n'));
+        let mut line = Vec::with_capacity(name.len() + record.len() + 2);
+        line.extend_from_slice(name.as_bytes());
+        line.push(b'\t');
+        line.extend_from_slice(record);
+        line.push(b'\n');
+        let mut f = self.file.lock().unwrap_or_else(|e| e.into_inner());
+        f.write_all(&line).at(&self.path)
     }
 }
 
@@ -422,4 +480,32 @@ fn unlisted_field(entry: &serde_json::Value, field: &str) -> Vec<String> {
                 .collect()
         })
         .unwrap_or_default()
+}
+
+#[cfg(test)]
+mod record_tests {
+    use super::*;
+
+    /// Records from several processes' logs are read back by name; a line a crash cut short
+    /// is not; a later record of the same unit wins.
+    #[test]
+    fn unit_records_survive_in_whole_lines_only() {
+        let d = tempfile::tempdir().unwrap();
+        let s = Staging {
+            root: d.path().to_path_buf(),
+            resume: true,
+        };
+        assert!(s.read_records().unwrap().is_empty());
+        let log = s.record_log().unwrap();
+        log.append("3-px-0-1", b"{\"a\":1}").unwrap();
+        log.append("3-px-0-2", b"[1,2]").unwrap();
+        // Another process's log: one whole line, then one cut short.
+        let other = d.path().join("units").join("1.log");
+        std::fs::write(&other, b"3-px-0-2\t[3]\n3-px-0-3\t{\"cut").unwrap();
+        let r = s.read_records().unwrap();
+        assert_eq!(r.len(), 2, "{r:?}");
+        assert_eq!(r["3-px-0-1"], b"{\"a\":1}");
+        assert!(r["3-px-0-2"] == b"[1,2]" || r["3-px-0-2"] == b"[3]");
+        assert!(!r.contains_key("3-px-0-3"));
+    }
 }
