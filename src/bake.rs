@@ -201,18 +201,8 @@ impl Node for BakeHorizon {
                 let levels = crate::manifest::Tileset::load(out)?.layout.levels;
                 let mut opts = self.node.opts.clone();
                 opts.levels = Some(vec![l.min(levels - 1)]);
-                let node = HorizonNode {
-                    opts,
-                    fourier: self
-                        .node
-                        .fourier
-                        .as_ref()
-                        .map(|f| crate::fourier::FourierSink {
-                            opts: f.opts.clone(),
-                        }),
-                    keep_raw: self.node.keep_raw,
-                };
-                node.run(out, select, progress)
+                let fourier = self.node.fourier.as_ref().map(|f| f.opts.clone());
+                HorizonNode::new(opts, fourier, self.node.keep_raw)?.run(out, select, progress)
             }
         }
     }
