@@ -65,15 +65,21 @@ impl<S: Stage> Node for StageNode<S> {
         self.stage.spec().reads.to_vec()
     }
     fn run(&self, dir: &Path, select: &Select, progress: &dyn Progress) -> Result<Ran> {
-        Ok(match runner::execute(&self.stage, dir, select, progress)? {
-            Outcome::Done(r) => (self.report)(r),
-            Outcome::Partial { ran, done, total } => Ran::Partial {
-                stage: self.name(),
-                ran,
-                done,
-                total,
-            },
-        })
+        let outcome = runner::execute(&self.stage, dir, select, progress)?;
+        Ok(ran(self.name(), outcome, self.report))
+    }
+}
+
+/// What a run of `stage` did, as the graph tells reports apart.
+fn ran<R>(stage: &'static str, outcome: Outcome<R>, report: impl FnOnce(R) -> Ran) -> Ran {
+    match outcome {
+        Outcome::Done(r) => report(r),
+        Outcome::Partial { ran, done, total } => Ran::Partial {
+            stage,
+            ran,
+            done,
+            total,
+        },
     }
 }
 
@@ -142,17 +148,8 @@ impl Node for HorizonNode {
         self.stage().spec().reads.to_vec()
     }
     fn run(&self, dir: &Path, select: &Select, progress: &dyn Progress) -> Result<Ran> {
-        Ok(
-            match runner::execute(&self.stage(), dir, select, progress)? {
-                Outcome::Done(r) => Ran::Horizon(r),
-                Outcome::Partial { ran, done, total } => Ran::Partial {
-                    stage: "horizon",
-                    ran,
-                    done,
-                    total,
-                },
-            },
-        )
+        let outcome = runner::execute(&self.stage(), dir, select, progress)?;
+        Ok(ran(self.name(), outcome, Ran::Horizon))
     }
 }
 

@@ -199,8 +199,6 @@ pub enum Reads {
         tile: TileId,
         margin_px: u64,
     },
-    /// A source outside the tileset (a DEM, an albedo image).
-    Source { path: String },
 }
 
 /// Which units a run executes.

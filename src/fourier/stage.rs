@@ -475,17 +475,6 @@ pub fn check_output_size(opts: &FourierOptions, tiles: usize, n: usize) -> Resul
     Ok(())
 }
 
-/// A file an interrupted run left that decodes with this run's settings, with what the manifest
-/// needs from its header; None: rewrite it.
-pub fn kept(path: &Path, n: usize, a: usize) -> Option<TileStats> {
-    let (p, bytes) = crate::format::fourier::read(path, n, a).ok()?;
-    Some(TileStats {
-        k: p.k,
-        fully_lit: p.fully_lit,
-        bytes,
-    })
-}
-
 /// The stage from stored raw maps.
 pub const STAGE: StageSpec = StageSpec {
     name: "fourier",
@@ -541,7 +530,6 @@ pub struct FourierPlan {
     tiles: Vec<TileId>,
     azimuths: usize,
     encoder: Encoder,
-    ts: Tileset,
 }
 
 impl Stage for FourierStage {
@@ -594,7 +582,6 @@ impl Stage for FourierStage {
             tiles,
             azimuths: h.azimuths,
             encoder: Encoder::new(opts, ts, h.azimuths, h.terrain_min_m),
-            ts: ts.clone(),
         })
     }
 
@@ -651,7 +638,7 @@ impl Stage for FourierStage {
         cx: &Cx<FourierPlan>,
         done: Vec<Finished<TileStats>>,
     ) -> Result<(Tileset, FourierReport)> {
-        let (opts, ts) = (&self.opts, &cx.plan.ts);
+        let (opts, ts) = (&self.opts, cx.store.manifest());
         let h = ts.products.horizon.as_ref().expect("checked");
         let mut report = self.up_to_date(cx.store, cx.plan, &[]);
         report.up_to_date = false;
@@ -688,7 +675,11 @@ impl Stage for FourierStage {
     }
 
     fn up_to_date(&self, store: &Store, plan: &FourierPlan, _units: &[Unit]) -> FourierReport {
-        let (opts, n, a) = (&self.opts, plan.ts.layout.tile_size as usize, plan.azimuths);
+        let (opts, n, a) = (
+            &self.opts,
+            store.manifest().layout.tile_size as usize,
+            plan.azimuths,
+        );
         let tiles = plan.tiles.len() as u64;
         FourierReport {
             out: store.dir().to_path_buf(),

@@ -672,7 +672,6 @@ pub struct HorizonPlan {
     range: (f64, f64),
     fine_margin: u64,
     sinks: Vec<Box<dyn SinkRun>>,
-    ts: Tileset,
 }
 
 /// What one tile's unit did (floats as bits: the record round-trips exactly).
@@ -787,7 +786,6 @@ impl Stage for HorizonStage<'_> {
                 .fine_margin_px
                 .unwrap_or_else(|| default_fine_margin_px(ts.layout.tile_size)),
             sinks,
-            ts: ts.clone(),
         })
     }
 
@@ -867,7 +865,7 @@ impl Stage for HorizonStage<'_> {
         scratch: &mut HorizonScratch,
     ) -> Result<TileDone> {
         let (opts, store, plan) = (&self.opts, cx.store, cx.plan);
-        let ts = &plan.ts;
+        let ts = store.manifest();
         let lay = ts.layout;
         let n = lay.tile_size as usize;
         let id = unit.tile;
@@ -961,7 +959,7 @@ impl Stage for HorizonStage<'_> {
         done: Vec<Finished<TileDone>>,
     ) -> Result<(Tileset, HorizonReport)> {
         let (opts, plan) = (&self.opts, cx.plan);
-        let ts = &plan.ts;
+        let ts = cx.store.manifest();
         let (tmin, tmax) = plan.range;
         // The distances are recorded for every tile, kept ones too, so that a resumed run's
         // manifest is the uninterrupted run's.

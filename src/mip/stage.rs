@@ -150,7 +150,6 @@ pub struct MipPlan {
     n: usize,
     s: usize,
     halo: usize,
-    ts: Tileset,
 }
 
 /// A tile's extrema as its files hold them (bits: NaN when the tile is no data).
@@ -189,7 +188,6 @@ impl Stage for MipStage {
             n: lay.tile_size as usize,
             s: lay.stored_size(),
             halo: lay.halo as usize,
-            ts: ts.clone(),
         })
     }
 
@@ -239,7 +237,7 @@ impl Stage for MipStage {
         cx: &Cx<MipPlan>,
         done: Vec<Finished<TileTop>>,
     ) -> Result<(Tileset, MipReport)> {
-        let (opts, out, ts) = (&self.opts, cx.out, &cx.plan.ts);
+        let (opts, out, ts) = (&self.opts, cx.out, cx.store.manifest());
         let lay = ts.layout;
         let manifest_path = cx.store.manifest_path();
         let tile_bytes = (cx.plan.s * cx.plan.s * 4) as u64;
