@@ -399,3 +399,57 @@ fn a_toy_stage_runs_through_the_graph_and_the_store() {
     );
     assert!(!dir.join("toy").exists(), "stale toy files kept");
 }
+
+/// An unlisted product's entry may claim only plain folders of its own: any other claim (a
+/// listed product's folder, a path, the state folder, not a list) is refused when the manifest
+/// is read (exit 2, the field named, nothing touched), because a later writer removes what it
+/// claims.
+#[test]
+fn unlisted_products_claiming_other_folders_are_refused() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path().join("t");
+    base(&dir);
+    let p = dir.to_str().unwrap();
+    let path = dir.join("tileset.json");
+    let good = std::fs::read_to_string(&path).unwrap();
+    let with = |entry: serde_json::Value| {
+        let mut m: serde_json::Value = serde_json::from_str(&good).unwrap();
+        m["products"]["toy"] = entry;
+        std::fs::write(&path, serde_json::to_string_pretty(&m).unwrap()).unwrap();
+    };
+    // Accepted: a plain folder of its own, and a key without folders (read past).
+    for ok_entry in [
+        serde_json::json!({"run_key": "k", "dirs": ["toy"], "reads": ["height"]}),
+        serde_json::json!({"anything": [1, 2]}),
+        serde_json::json!(7),
+    ] {
+        with(ok_entry.clone());
+        ok(&["info", p]);
+    }
+    for (bad, field) in [
+        (serde_json::json!({"dirs": ["height"]}), "products.toy.dirs"),
+        (serde_json::json!({"dirs": ["../x"]}), "products.toy.dirs"),
+        (
+            serde_json::json!({"dirs": [".penumbra"]}),
+            "products.toy.dirs",
+        ),
+        (serde_json::json!({"dirs": ["a/b"]}), "products.toy.dirs"),
+        (serde_json::json!({"dirs": "toy"}), "products.toy.dirs"),
+        (serde_json::json!({"dirs": [7]}), "products.toy.dirs"),
+        (
+            serde_json::json!({"dirs": ["toy"], "reads": ["../h"]}),
+            "products.toy.reads",
+        ),
+    ] {
+        with(bad.clone());
+        let before = snapshot(&dir);
+        let o = run(&["info", p]);
+        assert_eq!(o.status.code(), Some(2), "{bad}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(field), "{bad}: {err}");
+        // A writer refuses too, and touches nothing.
+        let o = run(&["mip", p, "--precision", "f16"]);
+        assert_eq!(o.status.code(), Some(2), "{bad}");
+        assert_eq!(snapshot(&dir), before, "{bad}");
+    }
+}
