@@ -13,7 +13,7 @@ use std::path::Path;
 
 use crate::error::Result;
 use crate::format::height::HeightTile;
-use crate::format::horizon::HorizonLevelDistance;
+use crate::format::horizon::{HorizonError, HorizonLevelDistance};
 use crate::layout::TileId;
 use crate::manifest::Tileset;
 use crate::tileset::Product;
@@ -34,6 +34,8 @@ pub struct HorizonSource {
     pub azimuths: usize,
     pub method: String,
     pub near_px: Option<f64>,
+    /// The method's measured error against the reference (the sweep method).
+    pub error: Option<HorizonError>,
     pub terrain_min_m: f64,
     pub terrain_max_m: f64,
     pub distances: Vec<HorizonLevelDistance>,

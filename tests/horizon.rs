@@ -423,11 +423,58 @@ fn cli_horizon_and_query_horizon() {
         assert!((s - e).abs() <= 0.05, "stored {s} computed {e}");
     }
 
+    // The sweep method records its measured error beside the maps, and the query reports it.
+    let r = bake_level1(&[], &["--method", "sweep"]);
+    assert_eq!(r["tiles_written"], 24);
+    let ts = penumbra::manifest::Tileset::load(&out).unwrap();
+    let hp = ts.products.horizon.as_ref().unwrap();
+    assert_eq!((hp.method.as_str(), hp.near_px), ("sweep", None));
+    let err = hp
+        .error
+        .as_ref()
+        .expect("the sweep method's error is recorded");
+    assert_eq!(err.against, "reference");
+    assert_eq!(err.pixels, 24 * 16);
+    assert!(
+        err.samples > 0 && err.rms_deg < 0.3 && err.max_above_deg < 0.1,
+        "{err:?}"
+    );
+    let stored = q("sweep");
+    assert_eq!(stored["source"], "stored");
+    assert_eq!(stored["error"]["samples"], err.samples);
+    let es: Vec<f64> = serde_json::from_value(stored["elevation_deg"].clone()).unwrap();
+    let worst = es
+        .iter()
+        .zip(&ee)
+        .map(|(s, e)| (s - e).abs())
+        .fold(0.0, f64::max);
+    assert!(
+        worst <= err.max_deg + 0.05,
+        "stored sweep {worst}° off exact"
+    );
+    let before = crate::util::snapshot(&out.join("horizon"));
+    let manifest = std::fs::read(out.join("tileset.json")).unwrap();
+
     // Bad requests: exit 2, a reason, nothing written.
     for (args, says) in [
         (
             vec!["horizon", o, "--method", "exactly"],
-            "fast, exact, reference",
+            "fast, sweep, exact, reference",
+        ),
+        (
+            vec!["horizon", o, "--method", "sweep", "--near-px", "8"],
+            "--near-px",
+        ),
+        (
+            vec![
+                "horizon",
+                o,
+                "--method",
+                "sweep",
+                "--fine-margin-px",
+                "1024",
+            ],
+            "--fine-margin-px",
         ),
         (vec!["horizon", o, "--azimuths", "2"], "outside 4..=4096"),
         (vec!["horizon", o, "--near-px=-1"], "outside 0..=1024"),
@@ -460,6 +507,8 @@ fn cli_horizon_and_query_horizon() {
         let err = String::from_utf8_lossy(&e.stderr);
         assert!(err.contains(says), "{args:?}: {err}");
     }
+    assert!(before == crate::util::snapshot(&out.join("horizon")));
+    assert_eq!(manifest, std::fs::read(out.join("tileset.json")).unwrap());
     let e = run(&["horizon", dir.path().join("nothing").to_str().unwrap()]);
     assert_eq!(e.status.code(), Some(2));
 }

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use half::f16;
 use serde::{Deserialize, Serialize};
 
-use super::horizon::HorizonLevelDistance;
+use super::horizon::{HorizonError, HorizonLevelDistance};
 use crate::error::{Error, IoContext, Result};
 use crate::fsio::{read_capped, write_staged};
 use crate::layout::TileId;
@@ -574,6 +574,9 @@ pub struct FourierProduct {
     pub horizon_method: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub horizon_near_px: Option<f64>,
+    /// The horizon method's measured error against the reference (the sweep method).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub horizon_error: Option<HorizonError>,
     pub terrain_min_m: f64,
     pub terrain_max_m: f64,
     pub distances: Vec<HorizonLevelDistance>,

@@ -18,6 +18,7 @@ use crate::format::fourier::{
 
 use crate::error::{Error, Result};
 use crate::format::height::HeightTile;
+use crate::format::horizon::HorizonError;
 use crate::layout::TileId;
 use crate::manifest::{self, FourierProduct, HorizonLevelDistance, Tileset};
 use crate::progress::Progress;
@@ -412,6 +413,7 @@ pub struct Source<'a> {
     pub kind: &'static str,
     pub method: &'a str,
     pub near_px: Option<f64>,
+    pub error: Option<HorizonError>,
     pub terrain: (f64, f64),
     pub distances: Vec<HorizonLevelDistance>,
 }
@@ -451,6 +453,7 @@ pub fn product(
         source: source.kind.into(),
         horizon_method: source.method.into(),
         horizon_near_px: source.near_px,
+        horizon_error: source.error,
         terrain_min_m: source.terrain.0,
         terrain_max_m: source.terrain.1,
         distances: source.distances,
@@ -666,6 +669,7 @@ impl Stage for FourierStage {
                 kind: "raw",
                 method: &h.method,
                 near_px: h.near_px,
+                error: h.error.clone(),
                 terrain: (h.terrain_min_m, h.terrain_max_m),
                 distances: h.distances.clone(),
             },

@@ -135,6 +135,7 @@ impl SinkRun for FourierRun {
                 kind: "streamed",
                 method: &source.method,
                 near_px: source.near_px,
+                error: source.error.clone(),
                 terrain: (source.terrain_min_m, source.terrain_max_m),
                 distances: source.distances.clone(),
             },

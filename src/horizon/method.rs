@@ -6,6 +6,7 @@ use rayon::prelude::*;
 
 use super::far::{FarPass, FarRing};
 use super::geometry::{pixel_geometry, plane_azimuth, Azimuth, Context, PixelGeo, Ray, Rect};
+use super::linesweep;
 use super::near;
 use super::pyramid;
 use super::reference::reference;
@@ -47,6 +48,7 @@ pub fn horizons_with(
             })
         }
         Method::Fast => return horizons_far(ctx, rect, a, near_px, &[]),
+        Method::Sweep => return linesweep::horizons_sweep(ctx, rect, a),
         Method::Reference => {
             let hmax = ctx.max_height();
             let geo = pixel_geometry(ctx, rect);

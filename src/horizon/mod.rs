@@ -8,8 +8,10 @@
 //! `near` field, per-azimuth upper-hull `sweep` beyond). `stage` builds those rasters from
 //! a tileset and stores the raw maps (the point query is `crate::query::horizon`).
 
+mod budget;
 mod far;
 mod geometry;
+mod linesweep;
 mod method;
 mod near;
 mod pyramid;

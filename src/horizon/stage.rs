@@ -2,6 +2,7 @@
 //! the neighbouring faces as far as any terrain could rise above the horizon), the horizons of
 //! its pixels, and the raw maps on disk; plus the on-demand query of one point.
 
+use super::budget::Tally;
 use std::borrow::Cow;
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
@@ -684,6 +685,9 @@ pub struct TileDone {
     pixel_azimuths: u64,
     horizon_s: f64,
     sink_s: f64,
+    /// The sweep method's differences against the reference on the tile's checked pixels.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    budget: Option<Tally>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -882,6 +886,7 @@ impl Stage for HorizonStage<'_> {
         });
         let t0 = std::time::Instant::now();
         let mut pixaz = 0;
+        let mut budget = None;
         let elev = if let Some((_, reach)) = reach {
             let (ctx, rect, rings) = tile_rasters(
                 store,
@@ -892,7 +897,7 @@ impl Stage for HorizonStage<'_> {
                 &mut scratch.covers,
             )?;
             pixaz = (n * n * opts.azimuths) as u64;
-            horizons_seeing_rings(
+            let elev = horizons_seeing_rings(
                 store,
                 &ctx,
                 rect,
@@ -900,7 +905,11 @@ impl Stage for HorizonStage<'_> {
                 opts.azimuths,
                 opts.method,
                 opts.near_px,
-            )?
+            )?;
+            if opts.method == Method::Sweep {
+                budget = Some(Tally::measure(&ctx, rect, id, opts.azimuths, &elev));
+            }
+            elev
         } else {
             vec![f32::NAN; n * n * opts.azimuths]
         };
@@ -950,6 +959,7 @@ impl Stage for HorizonStage<'_> {
             pixel_azimuths: pixaz,
             horizon_s,
             sink_s: t1.elapsed().as_secs_f64(),
+            budget,
         })
     }
 
@@ -979,8 +989,12 @@ impl Stage for HorizonStage<'_> {
         report.tiles_kept = 0;
         let mut records: Vec<Vec<(TileId, serde_json::Value, bool)>> =
             plan.sinks.iter().map(|_| Vec::new()).collect();
+        let mut budget = Tally::default();
         for f in done {
             let id = f.unit.tile;
+            if let Some(b) = &f.done.budget {
+                budget.add(b);
+            }
             if let Some(r) = &f.done.reach {
                 let d = dist.iter_mut().find(|d| d.level == id.level).unwrap();
                 let rad = f64::from_bits(r.rad);
@@ -1001,11 +1015,13 @@ impl Stage for HorizonStage<'_> {
                 rec.push((id, v, f.here));
             }
         }
+        let error = budget.error();
         let source = HorizonSource {
             levels: plan.levels.clone(),
             azimuths: opts.azimuths,
             method: opts.method.name().into(),
             near_px: (opts.method == Method::Fast).then_some(opts.near_px),
+            error: error.clone(),
             terrain_min_m: tmin,
             terrain_max_m: tmax,
             distances: dist.clone(),
@@ -1025,6 +1041,7 @@ impl Stage for HorizonStage<'_> {
                 layout: LAYOUT.into(),
                 method: opts.method.name().into(),
                 near_px: (opts.method == Method::Fast).then_some(opts.near_px),
+                error,
                 levels: plan.levels.clone(),
                 terrain_min_m: tmin,
                 terrain_max_m: tmax,

@@ -54,7 +54,7 @@ pub(super) fn ground_slope(
 /// from the one the libm arc tangent gives (the degrees within 1e-13, relatively, of a
 /// midpoint between two f32s), or the slope is not finite, libm's is taken. NaN slopes give
 /// `f32::NAN`.
-fn degrees(slope: &[f64], dst: &mut [f32]) {
+pub(super) fn degrees(slope: &[f64], dst: &mut [f32]) {
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx512f") {
@@ -334,18 +334,18 @@ fn up_hor(o: Pt, q: Pt) -> (f64, f64) {
 }
 
 /// Raster access in (major, minor) = (p, q) coordinates of one sweep.
-struct Grid<'a> {
-    h: &'a [f32],
+pub(super) struct Grid<'a> {
+    pub(super) h: &'a [f32],
     /// Index steps for +1 in p and in q.
-    sp: usize,
-    sq: usize,
-    np: i64,
-    nq: i64,
+    pub(super) sp: usize,
+    pub(super) sq: usize,
+    pub(super) np: i64,
+    pub(super) nq: i64,
 }
 
 impl Grid<'_> {
     #[inline(always)]
-    fn at(&self, p: i64, q: i64) -> f32 {
+    pub(super) fn at(&self, p: i64, q: i64) -> f32 {
         self.h[p as usize * self.sp + q as usize * self.sq]
     }
 
@@ -364,7 +364,7 @@ impl Grid<'_> {
     /// (Looser than [`Context::on_complete_cell`], which decides what is reported: a ray
     /// along a grid line is only guided here, then searched exactly around the candidate.)
     #[inline(always)]
-    fn sample(&self, p: f64, q: f64) -> (f32, bool) {
+    pub(super) fn sample(&self, p: f64, q: f64) -> (f32, bool) {
         let (p0, q0) = (p as i64, q as i64);
         let (fp, fq) = (p - p0 as f64, q - q0 as f64);
         let i = p0 as usize * self.sp + q0 as usize * self.sq;
@@ -420,36 +420,36 @@ impl Grid<'_> {
     }
 
     #[inline(always)]
-    fn inside(&self, p: f64, q: f64) -> bool {
+    pub(super) fn inside(&self, p: f64, q: f64) -> bool {
         p >= 0.0 && q >= 0.0 && p <= (self.np - 1) as f64 && q <= (self.nq - 1) as f64
     }
 }
 
 /// One plane azimuth's family of parallel lines q = m + t·p over a raster ((p, q) = (major,
 /// minor) axes), one pixel apart along the minor axis, integer m: what both sweeps share.
-struct Lines<'a> {
-    ctx: &'a Context,
-    g: Grid<'a>,
-    xmajor: bool,
+pub(super) struct Lines<'a> {
+    pub(super) ctx: &'a Context,
+    pub(super) g: Grid<'a>,
+    pub(super) xmajor: bool,
     /// The look direction's major component, and dq/dp.
-    dp: f64,
-    t: f64,
+    pub(super) dp: f64,
+    pub(super) t: f64,
     /// −1 or +1: the sweep's direction along p (against the look direction).
-    step: i64,
+    pub(super) step: i64,
     /// The observers' rect in (p, q), and an observer's index steps for +1 in p and in q.
-    rp0: i64,
-    rp1: i64,
-    rq0: i64,
-    rq1: i64,
-    si: usize,
-    sj: usize,
+    pub(super) rp0: i64,
+    pub(super) rp1: i64,
+    pub(super) rq0: i64,
+    pub(super) rq1: i64,
+    pub(super) si: usize,
+    pub(super) sj: usize,
     /// The lines that bracket an observer.
-    m_lo: i64,
-    m_hi: i64,
+    pub(super) m_lo: i64,
+    pub(super) m_hi: i64,
 }
 
 impl<'a> Lines<'a> {
-    fn new(ctx: &'a Context, rect: Rect, phi: f64) -> Lines<'a> {
+    pub(super) fn new(ctx: &'a Context, rect: Rect, phi: f64) -> Lines<'a> {
         let (dx, dy) = (phi.cos(), -phi.sin());
         let xmajor = dx.abs() >= dy.abs();
         let (dp, dq) = if xmajor { (dx, dy) } else { (dy, dx) };
@@ -540,7 +540,7 @@ impl<'a> Lines<'a> {
 
     /// Where line `mf` runs within a pixel of the raster inside [lo, hi] along p, as (start,
     /// stop) in sweep order; None where nowhere.
-    fn span(&self, mf: f64, lo: i64, hi: i64) -> Option<(i64, i64)> {
+    pub(super) fn span(&self, mf: f64, lo: i64, hi: i64) -> Option<(i64, i64)> {
         let (t, nq) = (self.t, self.g.nq);
         let (mut pa, mut pb) = (lo, hi);
         if t != 0.0 {
@@ -560,7 +560,7 @@ impl<'a> Lines<'a> {
     /// Line `mf`'s frame between `start` and `stop`: A + p·B spans a plane through the body
     /// centre; e1 = up at the middle of the swept range, e2 = the sweep direction. Returns
     /// (A·e1, B·e1, A·e2, B·e2).
-    fn frame(&self, mf: f64, start: i64, stop: i64) -> (f64, f64, f64, f64) {
+    pub(super) fn frame(&self, mf: f64, start: i64, stop: i64) -> (f64, f64, f64, f64) {
         let (t, step) = (self.t, self.step);
         let a_pt = self.plane(0.0, mf);
         let b_pt = self.plane(1.0, mf + t);
@@ -581,7 +581,7 @@ impl<'a> Lines<'a> {
     /// columns and rows (exact bilinear values), appended to `ps` (line parameter) and `hs`;
     /// `at_col(index, p, y, inside)` at each observer column p (y: the line's minor
     /// coordinate there), before its own sample, which is there where `inside`.
-    fn samples(
+    pub(super) fn samples(
         &self,
         mf: f64,
         start: i64,

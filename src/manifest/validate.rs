@@ -71,6 +71,42 @@ fn within(path: &Path, field: &str, v: f64, lo: f64, hi: f64) -> Result<()> {
     }
 }
 
+/// A recorded horizon error budget: against the reference, degrees within 0..=180 (a
+/// difference of two elevations), p99 and RMS no larger than the largest error, mean and
+/// excess within ±max, samples no fewer than pixels.
+fn horizon_error(path: &Path, field: &str, e: &crate::format::horizon::HorizonError) -> Result<()> {
+    if e.against != "reference" {
+        return Err(bad(
+            path,
+            &format!("{field}.against"),
+            format!("'{}' is not reference", e.against),
+        ));
+    }
+    within(path, &format!("{field}.max_deg"), e.max_deg, 0.0, 180.0)?;
+    let m = e.max_deg * (1.0 + 1e-9);
+    within(path, &format!("{field}.rms_deg"), e.rms_deg, 0.0, m)?;
+    within(path, &format!("{field}.p99_deg"), e.p99_deg, 0.0, m)?;
+    within(path, &format!("{field}.mean_deg"), e.mean_deg, -m, m)?;
+    within(
+        path,
+        &format!("{field}.max_above_deg"),
+        e.max_above_deg,
+        0.0,
+        m,
+    )?;
+    if e.samples > e.pixels.saturating_mul(4096) || e.pixels > e.samples.max(1) * 4096 {
+        return Err(bad(
+            path,
+            &format!("{field}.samples"),
+            format!(
+                "{} samples cannot come from {} pixels of 4..=4096 azimuths",
+                e.samples, e.pixels
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// A product path pattern: relative, inside one of the product's folders, no `..`, only the
 /// placeholders `placeholders` (each required), ending in `ext`.
 fn pattern(
@@ -351,11 +387,14 @@ pub fn check(ts: &Tileset, path: &Path) -> Result<()> {
             return Err(bad(
                 path,
                 "products.horizon.method",
-                format!("'{}' is not fast, exact or reference", h.method),
+                format!("'{}' is not fast, sweep, exact or reference", h.method),
             ));
         }
         if let Some(n) = h.near_px {
             within(path, "products.horizon.near_px", n, 0.0, 1024.0)?;
+        }
+        if let Some(e) = &h.error {
+            horizon_error(path, "products.horizon.error", e)?;
         }
         if let Some(&l) = h.levels.iter().find(|&&l| l >= lay.levels) {
             return Err(bad(
@@ -546,11 +585,17 @@ fn fourier(path: &Path, ts: &Tileset, f: &crate::manifest::FourierProduct) -> Re
         return Err(bad(
             path,
             "products.fourier.horizon_method",
-            format!("'{}' is not fast, exact or reference", f.horizon_method),
+            format!(
+                "'{}' is not fast, sweep, exact or reference",
+                f.horizon_method
+            ),
         ));
     }
     if let Some(n) = f.horizon_near_px {
         within(path, "products.fourier.horizon_near_px", n, 0.0, 1024.0)?;
+    }
+    if let Some(e) = &f.horizon_error {
+        horizon_error(path, "products.fourier.horizon_error", e)?;
     }
     within(
         path,

@@ -1,6 +1,7 @@
 //! The horizon of the pixel over a point: read from the stored raw maps, reconstructed from the
 //! Fourier pyramids, or computed on demand; and the sun's visibility there.
 
+use crate::format::horizon::HorizonError;
 use std::path::Path;
 
 use serde::Serialize;
@@ -76,6 +77,11 @@ pub struct HorizonAnswer {
     /// Context searched around the pixel's tile when computed (pixels; 0 otherwise).
     pub margin_px: u64,
     pub needed_margin_px: u64,
+    /// The method's error against the reference as the run that stored these horizons
+    /// measured it (the sweep method's error budget); absent for the other methods and for
+    /// horizons computed on demand.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<HorizonError>,
 }
 
 /// A pixel's horizon as a function of plane azimuth.
@@ -147,13 +153,24 @@ fn locate_pixel(store: &Store, dir: &Path, lat: f64, lon: f64, level: Option<u8>
 
 /// The pixel's horizon from `from`: its profile, source name, the samples' count and, when
 /// computed, the context margins.
+/// A pixel's profile, where it came from, the method, the margin searched and needed (px),
+/// and the recorded error of the method.
+type ProfileFound = (
+    Profile,
+    &'static str,
+    Method,
+    u64,
+    u64,
+    Option<HorizonError>,
+);
+
 fn profile(
     store: &Store,
     dir: &Path,
     px: &Pixel,
     from: HorizonFrom,
     opts: &HorizonOptions,
-) -> Result<(Profile, &'static str, Method, u64, u64)> {
+) -> Result<ProfileFound> {
     let ts = store.manifest();
     let n = ts.layout.tile_size as usize;
     let (i, j, level) = (px.i, px.j, px.level);
@@ -186,7 +203,8 @@ fn profile(
         let mut c = Vec::new();
         p.coefficients_at(i as f64 + 0.5, j as f64 + 0.5, &mut c);
         let method = f.horizon_method.parse().unwrap_or(Method::Fast);
-        return Ok((Profile::Series(c), "fourier", method, 0, 0));
+        let err = f.horizon_error.clone();
+        return Ok((Profile::Series(c), "fourier", method, 0, 0, err));
     }
     let (method, azimuths) = match from {
         HorizonFrom::Reference => (Method::Reference, opts.azimuths),
@@ -223,7 +241,7 @@ fn profile(
             .map(|k| planes[k * n * n + j * n + i])
             .collect();
         let m = h.method.parse().unwrap_or(Method::Fast);
-        return Ok((Profile::Samples(e), "stored", m, 0, 0));
+        return Ok((Profile::Samples(e), "stored", m, 0, 0, h.error.clone()));
     }
     let (tmin, tmax) = terrain_range(ts).ok_or_else(|| {
         Error::invalid(
@@ -259,6 +277,7 @@ fn profile(
         method,
         reach.margin_px,
         reach.needed_px,
+        None,
     ))
 }
 
@@ -273,7 +292,7 @@ pub fn horizon(
     check_options(opts)?;
     let store = Store::open(dir)?;
     let px = locate_pixel(&store, dir, lat, lon, level)?;
-    let (prof, source, method, margin, needed) = profile(&store, dir, &px, from, opts)?;
+    let (prof, source, method, margin, needed, error) = profile(&store, dir, &px, from, opts)?;
     let ts = store.manifest();
     let lay = ts.layout;
     let (s, tt) = px.st;
@@ -318,6 +337,7 @@ pub fn horizon(
         plane_azimuth_deg: rows.iter().map(|r| r.2).collect(),
         margin_px: margin,
         needed_margin_px: needed,
+        error,
     })
 }
 
@@ -480,7 +500,7 @@ pub fn shadow(
             }
         }
     }
-    let (mut prof, source, method, _, _) = profile(&store, dir, &px, from, opts)?;
+    let (mut prof, source, method, _, _, _) = profile(&store, dir, &px, from, opts)?;
     // Raw and computed horizons are floored as the pyramids are: below the tangent to the
     // sphere of the lowest terrain lies the body, mapped or not (−90° means no mapped terrain).
     if let (Profile::Samples(e), Some((tmin, _))) = (&mut prof, terrain_range(ts)) {

@@ -138,6 +138,60 @@ pub(crate) fn random_pixels(w: usize, h: usize, n: usize) -> Vec<(usize, usize)>
     out
 }
 
+/// A little-endian float32, C-order, 2-D .npy file: (height, width, values).
+pub(crate) fn read_npy_f32(path: &Path) -> Result<(usize, usize, Vec<f32>)> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let bad = |what: &str| anyhow::anyhow!("{}: not a 2-D float32 .npy ({what})", path.display());
+    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
+        return Err(bad("no .npy magic"));
+    }
+    let (hlen, start) = match bytes[6] {
+        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
+        2 | 3 if bytes.len() >= 12 => (
+            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
+            12,
+        ),
+        v => return Err(bad(&format!("format version {v}"))),
+    };
+    let header = bytes
+        .get(start..start + hlen)
+        .and_then(|h| std::str::from_utf8(h).ok())
+        .ok_or_else(|| bad("truncated header"))?;
+    let header: String = header.chars().filter(|c| !c.is_whitespace()).collect();
+    if !header.contains("'descr':'<f4'") {
+        return Err(bad("descr is not '<f4'"));
+    }
+    if header.contains("'fortran_order':True") {
+        return Err(bad("Fortran order"));
+    }
+    let shape = header
+        .split("'shape':(")
+        .nth(1)
+        .and_then(|s| s.split(')').next())
+        .ok_or_else(|| bad("no shape"))?;
+    let dims = shape
+        .split(',')
+        .filter(|d| !d.is_empty())
+        .map(|d| d.parse::<usize>())
+        .collect::<std::result::Result<Vec<_>, _>>()
+        .map_err(|_| bad(&format!("shape ({shape})")))?;
+    let &[h, w] = dims.as_slice() else {
+        return Err(bad(&format!("shape ({shape}) is not 2-D")));
+    };
+    let data = &bytes[start + hlen..];
+    if data.len() != h * w * 4 {
+        return Err(bad(&format!(
+            "{} data bytes for shape ({h}, {w})",
+            data.len()
+        )));
+    }
+    let v = data
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    Ok((h, w, v))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -19,6 +19,7 @@ mod horizon;
 mod mip;
 mod mip_memory;
 mod shadows;
+mod sweep;
 mod tiling;
 
 use std::path::PathBuf;
@@ -208,6 +209,38 @@ pub enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// The sweep horizon method (issue 34): its error against the reference (or another
+    /// method) on a block of each shared real DEM, and its time beside the fast method's.
+    Sweep {
+        /// Folder holding the shared DEMs.
+        #[arg(long, default_value = "../shared/data")]
+        data: PathBuf,
+        /// Block side (pixels) of each case.
+        #[arg(long, default_value_t = 256)]
+        block: usize,
+        /// Azimuths per pixel.
+        #[arg(long, default_value_t = 36)]
+        azimuths: usize,
+        /// What the error is measured against: reference, exact or fast.
+        #[arg(long, default_value = "reference")]
+        truth: penumbra::horizon::Method,
+        /// The peers' work folder (its data/dem1024.npy is timed whole; skipped when absent).
+        #[arg(long, default_value = "../peers-work")]
+        peers: PathBuf,
+        /// Runs of each whole-map timing (the fastest is reported).
+        #[arg(long, default_value_t = 1)]
+        repeat: usize,
+        /// Leave the fast method out (quicker runs).
+        #[arg(long)]
+        skip_fast: bool,
+        /// Azimuths of the whole-map timing.
+        #[arg(long, default_value_t = 360)]
+        whole_azimuths: usize,
+        #[arg(long)]
+        markdown: bool,
+        #[arg(long)]
+        json: bool,
+    },
     /// Shadow methods side by side (issue 11): reference, uniform stepping, DP over max
     /// mipmaps (and its canonical-DDA variant), extrema, horizon lookups; error against the
     /// reference and time per megapixel on 1 and 2 threads, on the embedded scene and a block
@@ -383,6 +416,30 @@ fn dispatch(cmd: BenchCommand, quiet: bool) -> Result<()> {
             size,
             ref_pixels,
             repeat as usize,
+            markdown,
+            json,
+            quiet,
+        ),
+        BenchCommand::Sweep {
+            data,
+            block,
+            azimuths,
+            truth,
+            peers,
+            repeat,
+            skip_fast,
+            whole_azimuths,
+            markdown,
+            json,
+        } => crate::sweep::run(
+            &data,
+            &peers,
+            repeat,
+            skip_fast,
+            whole_azimuths,
+            block,
+            azimuths,
+            truth,
             markdown,
             json,
             quiet,

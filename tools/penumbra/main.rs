@@ -414,9 +414,11 @@ struct HorizonFlags {
     /// Azimuth samples per pixel (plane azimuths 360·k/A from the face's +U axis).
     #[arg(long, default_value_t = 360)]
     azimuths: usize,
-    /// fast (exact within --near-px, upper-hull sweep beyond), exact (the reference's answer:
-    /// every ray walked over a maximum pyramid that skips what cannot win; ≈ 2–4× slower than
-    /// fast) or reference (brute-force cell-by-cell search of every ray; ≈ 35× slower).
+    /// fast (exact within --near-px, upper-hull sweep beyond), sweep (Timonen & Westerholm's
+    /// line sweep: each line's hull read as it passes, evaluated on each pixel's own ray; its
+    /// error is measured as it runs and recorded), exact (the reference's answer: every ray
+    /// walked over a maximum pyramid that skips what cannot win; ≈ 2–4× slower than fast) or
+    /// reference (brute-force cell-by-cell search of every ray; ≈ 35× slower).
     #[arg(long, default_value = "fast")]
     method: Method,
     /// Largest context margin around a tile, in pixels of its level.
@@ -425,8 +427,9 @@ struct HorizonFlags {
     /// How far (pixels) the fast method searches each pixel's own ray exactly before its sweep
     /// takes over: larger is slower and more accurate (0..=1024; `penumbra-bench horizon`
     /// measures the trade).
-    #[arg(long, default_value_t = penumbra::horizon::DEFAULT_NEAR_PX)]
-    near_px: f64,
+    /// [default: 24]
+    #[arg(long)]
+    near_px: Option<f64>,
     /// How far (pixels) around a tile the fast method reads its level's terrain; beyond that,
     /// out to the whole reach, it sees far rings of coarser levels, each ring pixel no wider
     /// seen from the tile than a pixel at this distance (16..=65536; larger is slower, closer
@@ -436,14 +439,45 @@ struct HorizonFlags {
 }
 
 impl HorizonFlags {
-    fn options(&self) -> HorizonOptions {
-        HorizonOptions {
+    fn options(&self) -> penumbra::Result<HorizonOptions> {
+        Ok(HorizonOptions {
             azimuths: self.azimuths,
             method: self.method,
             max_margin_px: self.max_margin_px,
-            near_px: self.near_px,
-            fine_margin_px: self.fine_margin_px,
+            near_px: self.near_px()?,
+            fine_margin_px: self.fine_margin_px()?,
             ..Default::default()
+        })
+    }
+
+    /// `--near-px`, which only the fast method takes (the others would silently ignore it).
+    fn near_px(&self) -> penumbra::Result<f64> {
+        match self.near_px {
+            Some(_) if self.method != Method::Fast => Err(penumbra::Error::param(
+                "near-px",
+                format!(
+                    "is the fast method's only: --method {} has no near field (drop \
+                     --near-px, or use --method fast)",
+                    self.method.name()
+                ),
+            )),
+            v => Ok(v.unwrap_or(penumbra::horizon::DEFAULT_NEAR_PX)),
+        }
+    }
+
+    /// `--fine-margin-px`, which only the fast method takes (the others see the whole reach
+    /// at full resolution, up to --max-margin-px).
+    fn fine_margin_px(&self) -> penumbra::Result<Option<u64>> {
+        match self.fine_margin_px {
+            Some(_) if self.method != Method::Fast => Err(penumbra::Error::param(
+                "fine-margin-px",
+                format!(
+                    "is the fast method's only: --method {} sees the whole reach at full \
+                     resolution (drop --fine-margin-px, or use --method fast)",
+                    self.method.name()
+                ),
+            )),
+            v => Ok(v),
         }
     }
 }
@@ -742,8 +776,8 @@ fn run(cli: Cli) -> Result<()> {
                 compression,
                 max_margin_px: flags.max_margin_px,
                 max_output_gib,
-                near_px: flags.near_px,
-                fine_margin_px: flags.fine_margin_px,
+                near_px: flags.near_px()?,
+                fine_margin_px: flags.fine_margin_px()?,
             };
             let fourier = fourier
                 .then(|| fourier_flags.options(None, penumbra::runner::DEFAULT_MAX_OUTPUT_GIB));
@@ -902,7 +936,7 @@ fn run(cli: Cli) -> Result<()> {
             from,
             json,
         }) => {
-            let opts = flags.options();
+            let opts = flags.options()?;
             let ans = penumbra::query::horizon(&dir, lat, lon, level, &opts, from)?;
             output::print_horizon_answer(&ans, json)?;
         }

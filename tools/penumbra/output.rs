@@ -413,6 +413,20 @@ pub fn print_horizon_answer(a: &HorizonAnswer, json: bool) -> Result<()> {
     if step > 1 {
         writeln!(out, "(every {step}th of {}; --json prints all)", a.azimuths)?;
     }
+    if let Some(e) = &a.error {
+        writeln!(
+            out,
+            "{} method's error against the {} (measured by the run on {} pixel·azimuths): \
+             RMS {:.4}°, p99 ≤ {:.3}°, max {:.3}° ({:.3}° above at most)",
+            a.method.name(),
+            e.against,
+            e.samples,
+            e.rms_deg,
+            e.p99_deg,
+            e.max_deg,
+            e.max_above_deg
+        )?;
+    }
     Ok(())
 }
 

@@ -1,0 +1,305 @@
+//! `penumbra-bench sweep` (issue 34): the sweep method's error against the reference on a
+//! block of each shared real DEM, with its time and the fast and exact methods' in the same
+//! run.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::Result;
+use serde::Serialize;
+
+use penumbra::horizon::{horizons, Method, Rect};
+
+use crate::cases::real_cases;
+use crate::common::{in_pool, random_pixels, read_npy_f32, EARTH_RADIUS_M};
+
+/// Error of one method against a truth, over every finite pixel·azimuth.
+#[derive(Serialize, Clone)]
+pub(crate) struct Error {
+    pub(crate) samples: usize,
+    pub(crate) rms_deg: f64,
+    pub(crate) mean_deg: f64,
+    pub(crate) p99_deg: f64,
+    pub(crate) max_deg: f64,
+    /// Share of samples more than 0.1° above the truth.
+    pub(crate) share_above_0_1: f64,
+}
+
+pub(crate) fn error(got: &[f32], truth: &[f32]) -> Error {
+    let mut d: Vec<f64> = got
+        .iter()
+        .zip(truth)
+        .filter(|(g, t)| g.is_finite() && t.is_finite())
+        .map(|(g, t)| *g as f64 - *t as f64)
+        .collect();
+    let n = d.len().max(1) as f64;
+    let mean = d.iter().sum::<f64>() / n;
+    let rms = (d.iter().map(|v| v * v).sum::<f64>() / n).sqrt();
+    let above = d.iter().filter(|v| **v > 0.1).count() as f64 / n;
+    for v in d.iter_mut() {
+        *v = v.abs();
+    }
+    d.sort_unstable_by(f64::total_cmp);
+    let p99 = d.get(((d.len() as f64 * 0.99) as usize).min(d.len().saturating_sub(1)));
+    Error {
+        samples: d.len(),
+        rms_deg: rms,
+        mean_deg: mean,
+        p99_deg: p99.copied().unwrap_or(0.0),
+        max_deg: d.last().copied().unwrap_or(0.0),
+        share_above_0_1: above,
+    }
+}
+
+#[derive(Serialize)]
+struct Row {
+    case: String,
+    truth: &'static str,
+    method: &'static str,
+    pixels: usize,
+    azimuths: usize,
+    wall_s: f64,
+    core_ns_per_px_az: f64,
+    error: Error,
+}
+
+/// `f()`, or what an earlier run stored under `key` in `$PENUMBRA_BENCH_CACHE` (a folder;
+/// development runs only: the truth takes minutes and does not change with the method).
+fn cached(key: &str, f: impl FnOnce() -> Result<Vec<f32>>) -> Result<Vec<f32>> {
+    let Some(dir) = std::env::var_os("PENUMBRA_BENCH_CACHE") else {
+        return f();
+    };
+    let name: String = key
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect();
+    let path = Path::new(&dir).join(format!("{name}.f32"));
+    if let Ok(b) = std::fs::read(&path) {
+        return Ok(b
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect());
+    }
+    let v = f()?;
+    std::fs::create_dir_all(&dir)?;
+    let bytes: Vec<u8> = v.iter().flat_map(|x| x.to_le_bytes()).collect();
+    std::fs::write(&path, bytes)?;
+    Ok(v)
+}
+
+/// The peers' synthetic 30 m DEM as a patch at the centre of face +X (as `bench horizon`).
+fn synthetic(peers: &Path) -> Result<Option<penumbra::horizon::Context>> {
+    let npy = peers.join("data/dem1024.npy");
+    if !npy.exists() {
+        return Ok(None);
+    }
+    let (h, w, heights) = read_npy_f32(&npy)?;
+    let s = (2.0 * EARTH_RADIUS_M / 30.0).round();
+    let si = s as i64;
+    Ok(Some(penumbra::horizon::Context {
+        face: penumbra::cube::Face::Px,
+        face_pixels: s,
+        origin: ((si - w as i64) / 2, (si - h as i64) / 2),
+        width: w,
+        height: h,
+        heights,
+        radius_m: EARTH_RADIUS_M,
+    }))
+}
+
+/// Whole-map timing of `m` on `threads`, best of `repeat`, and the values at `pix`.
+fn whole_map(
+    ctx: &penumbra::horizon::Context,
+    a: usize,
+    m: Method,
+    threads: usize,
+    repeat: usize,
+    pix: &[(usize, usize)],
+) -> Result<(f64, Vec<f32>)> {
+    let full = Rect {
+        x0: 0,
+        y0: 0,
+        w: ctx.width,
+        h: ctx.height,
+    };
+    let plane = ctx.width * ctx.height;
+    let mut best = f64::INFINITY;
+    let mut at = Vec::new();
+    for _ in 0..repeat {
+        let (t, out) = in_pool(threads, || {
+            let t0 = Instant::now();
+            let out = horizons(ctx, full, a, m);
+            (t0.elapsed().as_secs_f64(), out)
+        })?;
+        best = best.min(t);
+        at = pix
+            .iter()
+            .flat_map(|&(x, y)| (0..a).map(move |k| (k, x, y)))
+            .map(|(k, x, y)| out[k * plane + y * ctx.width + x])
+            .collect();
+    }
+    Ok((best, at))
+}
+
+/// The reference at `pix` only, 360 azimuths, pixel-major as [`whole_map`] gathers.
+fn reference_at(ctx: &penumbra::horizon::Context, a: usize, pix: &[(usize, usize)]) -> Vec<f32> {
+    use rayon::prelude::*;
+    pix.par_iter()
+        .flat_map_iter(|&(x, y)| {
+            let r = Rect {
+                x0: x,
+                y0: y,
+                w: 1,
+                h: 1,
+            };
+            horizons(ctx, r, a, Method::Reference)
+        })
+        .collect()
+}
+
+#[allow(clippy::too_many_arguments)]
+pub fn run(
+    data: &Path,
+    peers: &Path,
+    repeat: usize,
+    skip_fast: bool,
+    whole_azimuths: usize,
+    block: usize,
+    a: usize,
+    truth: Method,
+    markdown: bool,
+    json: bool,
+    quiet: bool,
+) -> Result<()> {
+    let say = |m: String| {
+        if !quiet {
+            eprintln!("bench sweep: {m}");
+        }
+    };
+    let threads = rayon::current_num_threads();
+    let (cases, notes) = if block == 0 {
+        (Vec::new(), Vec::new())
+    } else {
+        real_cases(data, block, &say)?
+    };
+    let mut rows = Vec::new();
+    if let Some(ctx) = synthetic(peers)? {
+        let a = whole_azimuths;
+        let pix = random_pixels(ctx.width, ctx.height, 1024);
+        say("synthetic 1024²: reference at 1024 pixels".into());
+        let t0 = Instant::now();
+        let want = cached(&format!("synthetic-reference-{a}"), || {
+            in_pool(threads, || reference_at(&ctx, a, &pix))
+        })?;
+        let t_ref = t0.elapsed().as_secs_f64();
+        let plane = ctx.width * ctx.height;
+        let ns = |t: f64, thr: usize, n: usize| t * thr as f64 / (n * a) as f64 * 1e9;
+        rows.push(Row {
+            case: "synthetic 1024² (30 m)".into(),
+            truth: "reference",
+            method: "reference (1024 px)",
+            pixels: pix.len(),
+            azimuths: a,
+            wall_s: t_ref,
+            core_ns_per_px_az: ns(t_ref, threads, pix.len()),
+            error: error(&want, &want),
+        });
+        for (m, thr) in [
+            (Method::Sweep, threads),
+            (Method::Sweep, 1),
+            (Method::Fast, threads),
+        ] {
+            if skip_fast && m == Method::Fast {
+                continue;
+            }
+            say(format!(
+                "synthetic 1024²: {} whole map, {thr} thread(s)",
+                m.name()
+            ));
+            let (t, got) = whole_map(&ctx, a, m, thr, repeat, &pix)?;
+            rows.push(Row {
+                case: format!("synthetic 1024² (30 m), {thr} thr"),
+                truth: "reference",
+                method: m.name(),
+                pixels: plane,
+                azimuths: a,
+                wall_s: t,
+                core_ns_per_px_az: ns(t, thr, plane),
+                error: error(&got, &want),
+            });
+        }
+    }
+    for case in &cases {
+        let plane = case.rect.w * case.rect.h;
+        say(format!(
+            "{}: {} truth, {a} azimuths",
+            case.name,
+            truth.name()
+        ));
+        let t0 = Instant::now();
+        let want = cached(&format!("{}-{}-{a}", case.name, truth.name()), || {
+            in_pool(threads, || horizons(&case.ctx, case.rect, a, truth))
+        })?;
+        let t_truth = t0.elapsed().as_secs_f64();
+        let mut methods = vec![(Method::Sweep, Vec::new(), 0.0)];
+        if truth != Method::Fast && !skip_fast {
+            methods.push((Method::Fast, Vec::new(), 0.0));
+        }
+        for (m, out, t) in methods.iter_mut() {
+            say(format!("{}: {}", case.name, m.name()));
+            let t0 = Instant::now();
+            *out = in_pool(threads, || horizons(&case.ctx, case.rect, a, *m))?;
+            *t = t0.elapsed().as_secs_f64();
+        }
+        let ns = |t: f64| t * threads as f64 / (plane * a) as f64 * 1e9;
+        rows.push(Row {
+            case: case.name.clone(),
+            truth: truth.name(),
+            method: truth.name(),
+            pixels: plane,
+            azimuths: a,
+            wall_s: t_truth,
+            core_ns_per_px_az: ns(t_truth),
+            error: error(&want, &want),
+        });
+        for (m, out, t) in methods {
+            rows.push(Row {
+                case: case.name.clone(),
+                truth: truth.name(),
+                method: m.name(),
+                pixels: plane,
+                azimuths: a,
+                wall_s: t,
+                core_ns_per_px_az: ns(t),
+                error: error(&out, &want),
+            });
+        }
+    }
+    if json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+        return Ok(());
+    }
+    let _ = markdown;
+    println!(
+        "| case | method | wall s | core-ns/px·az | RMS ° | mean ° | p99 ° | max ° | > +0.1° |"
+    );
+    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|");
+    for r in &rows {
+        println!(
+            "| {} | {} | {:.2} | {:.1} | {:.4} | {:+.4} | {:.3} | {:.3} | {:.3} % |",
+            r.case,
+            r.method,
+            r.wall_s,
+            r.core_ns_per_px_az,
+            r.error.rms_deg,
+            r.error.mean_deg,
+            r.error.p99_deg,
+            r.error.max_deg,
+            100.0 * r.error.share_above_0_1
+        );
+    }
+    for n in notes {
+        println!("\n{n}");
+    }
+    Ok(())
+}
