@@ -399,7 +399,7 @@ fn retile_with_other_parameters_leaves_no_stale_product() {
         new["products"]["mip"]["run_key"],
         old["products"]["mip"]["run_key"]
     );
-    let index: Vec<(String, u64)> =
+    let index: Vec<(String, u64, String)> =
         serde_json::from_slice(&std::fs::read(out.join(".penumbra/index/mip.json")).unwrap())
             .unwrap();
     let on_disk: Vec<&String> = after
