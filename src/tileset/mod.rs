@@ -11,6 +11,7 @@
 //!   manifest's limits.
 
 pub mod cache;
+pub mod index;
 pub use crate::fsio;
 
 pub mod lock;
@@ -27,6 +28,7 @@ use crate::layout::TileId;
 use crate::manifest::{Tileset, MANIFEST};
 
 pub use cache::TileCache;
+pub use index::{Index, IndexEntry};
 pub use lock::STATE_DIR;
 
 /// The products a tileset can hold.
@@ -184,50 +186,6 @@ pub struct Store {
     _reader: Option<lock::CommitLock>,
 }
 
-/// A product's index as a reader uses it: each file's size and blake3, by relative path.
-pub struct Index {
-    /// The index file it was read from.
-    pub path: PathBuf,
-    pub files: std::collections::HashMap<String, (u64, [u8; 32])>,
-}
-
-/// Largest index read (a 24-level global tileset's mipmaps: some 10⁸ files would need more;
-/// the manifest's own limits keep real ones far below).
-pub const MAX_INDEX_BYTES: u64 = 4 << 30;
-
-impl Index {
-    /// The index of `product` in the tileset at `dir`, or None when it has none (a product
-    /// never committed).
-    pub fn load(dir: &Path, product: Product) -> Result<Option<Index>> {
-        let path = dir
-            .join(STATE_DIR)
-            .join("index")
-            .join(format!("{}.json", product.name()));
-        if std::fs::symlink_metadata(&path).is_err() {
-            return Ok(None);
-        }
-        let bytes = fsio::read_capped(&path, MAX_INDEX_BYTES, "an index of a product's files")?;
-        let damaged = |what: String| {
-            Error::invalid(
-                &path,
-                format!(
-                    "damaged index ({what}); rerun the stage that makes {} to rebuild it",
-                    product.name()
-                ),
-            )
-        };
-        let entries: Vec<writer::IndexEntry> =
-            serde_json::from_slice(&bytes).map_err(|e| damaged(e.to_string()))?;
-        let mut files = std::collections::HashMap::with_capacity(entries.len());
-        for writer::IndexEntry(rel, len, hex) in entries {
-            let hash = blake3::Hash::from_hex(&hex)
-                .map_err(|_| damaged(format!("`{rel}` has no blake3 hash")))?;
-            files.insert(rel, (len, *hash.as_bytes()));
-        }
-        Ok(Some(Index { path, files }))
-    }
-}
-
 impl Store {
     /// Open the tileset in `dir` for reading: waits while a writer commits, validates the
     /// manifest (exit-2 errors name the file and the field).
@@ -286,7 +244,7 @@ impl Store {
         if let Some(ix) = m.get(product.name()) {
             return Ok(ix.clone());
         }
-        let ix = Index::load(&self.dir, product)?.map(Arc::new);
+        let ix = Index::load(&self.dir, product.name())?.map(Arc::new);
         m.insert(product.name(), ix.clone());
         Ok(ix)
     }

@@ -10,7 +10,8 @@ use std::path::Path;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::{fsio, Index, Product, Store};
+use super::index::Index;
+use super::{fsio, Product, Store};
 use crate::cube::Face;
 use crate::error::Result;
 use crate::format::{self, Identity};

@@ -21,6 +21,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::fsio::{self, list_files, remove_tree, sync_dir, write_atomic_bytes};
+use super::index::IndexEntry;
 use super::lock::{CommitLock, WriteLock, STATE_DIR};
 use super::Product;
 use crate::error::{Error, IoContext, Result};
@@ -470,12 +471,6 @@ impl Drop for Writer {
         }
     }
 }
-
-/// One file of a product's index (`.penumbra/index/<product>.json`): its path relative to the
-/// tileset (with `/`), its size in bytes and the blake3 of its bytes (hex), stored as a JSON
-/// array `[path, bytes, blake3]`.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct IndexEntry(pub String, pub u64, pub String);
 
 /// The index entries of staged files (`rel`, size): each file's blake3, hashed in parallel.
 fn hash_files(root: &Path, files: Vec<(String, u64)>) -> Result<Vec<IndexEntry>> {
