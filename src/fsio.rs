@@ -133,21 +133,178 @@ pub fn sync_dir(dir: &Path) -> Result<()> {
 }
 
 /// Read a small file, refusing one larger than `cap` bytes (a manifest linked to /dev/zero or a
-/// multi-gigabyte file is not a manifest). Reads at most `cap + 1` bytes whatever the file is.
+/// multi-gigabyte file is not a manifest). The file must be a regular file: it is opened without
+/// blocking, so a FIFO cannot hang the open, and refused (as are devices and folders) before a
+/// byte is read. Reads at most `cap + 1` bytes whatever the file is.
 pub fn read_capped(path: &Path, cap: u64, what: &str) -> Result<Vec<u8>> {
-    let f = std::fs::File::open(path).at(path)?;
+    let (f, _) = open_regular(path, what)?;
     let mut buf = Vec::new();
     f.take(cap + 1).read_to_end(&mut buf).at(path)?;
     if buf.len() as u64 > cap {
         return Err(Error::invalid(
             path,
             format!(
-                "larger than {} MiB: too large to be {what}; point at the folder made by penumbra",
-                cap >> 20
+                "larger than {}: too large to be {what}; point at the folder made by penumbra",
+                human_bytes(cap)
             ),
         ));
     }
     Ok(buf)
+}
+
+/// `n` bytes for a message: KiB, MiB or GiB when round enough.
+fn human_bytes(n: u64) -> String {
+    if n >= 1 << 30 && n % (1 << 30) == 0 {
+        format!("{} GiB", n >> 30)
+    } else if n >= 1 << 20 && n % (1 << 20) == 0 {
+        format!("{} MiB", n >> 20)
+    } else if n >= 1 << 10 && n % (1 << 10) == 0 {
+        format!("{} KiB", n >> 10)
+    } else {
+        format!("{n} bytes")
+    }
+}
+
+/// Open `path` for reading as a regular file and return it with its size. The open does not
+/// block (`O_NONBLOCK`: a FIFO with no writer would otherwise hang it forever); a FIFO, a
+/// device, a socket or a folder is refused naming the file and what it is. `what` says what
+/// the file should have been.
+pub fn open_regular(path: &Path, what: &str) -> Result<(std::fs::File, u64)> {
+    let mut o = std::fs::OpenOptions::new();
+    o.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        o.custom_flags(libc::O_NONBLOCK);
+    }
+    let f = o.open(path).at(path)?;
+    let m = f.metadata().at(path)?;
+    if !m.is_file() {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "is {}, not a regular file: it cannot be {what}; replace it with the file                  penumbra wrote (or rerun the stage that makes it)",
+                file_kind(&m)
+            ),
+        ));
+    }
+    Ok((f, m.len()))
+}
+
+/// What a non-regular file is, for messages.
+fn file_kind(m: &std::fs::Metadata) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let t = m.file_type();
+        if t.is_fifo() {
+            return "a FIFO (named pipe)";
+        }
+        if t.is_char_device() {
+            return "a character device";
+        }
+        if t.is_block_device() {
+            return "a block device";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if m.is_dir() {
+        "a folder"
+    } else {
+        "not a regular file"
+    }
+}
+
+/// How large a file of a tileset may be before it is read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Expect {
+    /// The size the tileset's index recorded for it: any other size is refused.
+    Exactly(u64),
+    /// A file the index does not know: at most this many bytes.
+    AtMost(u64),
+}
+
+/// Read a product file of the tileset at `root` whole, bounded before the read starts: it must
+/// be a regular file (see [`open_regular`]), a symbolic link on its way may point only inside
+/// `root`, and its size must be the one `expect` says. Never reads more than that size, even
+/// from a file that grows meanwhile.
+pub fn read_product_file(root: &Path, path: &Path, expect: Expect, what: &str) -> Result<Vec<u8>> {
+    check_inside(root, path)?;
+    let (f, len) = open_regular(path, what)?;
+    let limit = match expect {
+        Expect::Exactly(n) if n != len => {
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "is {len} bytes but the tileset's index recorded {n}: it is not the file                      penumbra wrote (padded, truncated or replaced); delete it and rerun the                      stage that makes it"
+                ),
+            ));
+        }
+        Expect::Exactly(n) => n,
+        Expect::AtMost(cap) if len > cap => {
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "is {len} bytes, more than the {} a file of {what} can be: it is not a                      file penumbra wrote; delete it and rerun the stage that makes it",
+                    human_bytes(cap)
+                ),
+            ));
+        }
+        Expect::AtMost(_) => len,
+    };
+    let mut buf = Vec::with_capacity(usize::try_from(limit).unwrap_or(0));
+    f.take(limit + 1).read_to_end(&mut buf).at(path)?;
+    if buf.len() as u64 != len {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "changed size while it was read ({len} bytes, then {}); is another program                  writing it?",
+                buf.len()
+            ),
+        ));
+    }
+    Ok(buf)
+}
+
+/// Refuse a path below `root` that a symbolic link takes outside `root` (a tile linked to
+/// /dev/zero or to another tileset's file). Links that stay inside the tileset are followed.
+pub fn check_inside(root: &Path, path: &Path) -> Result<()> {
+    // Only a path that is (or passes through) a link can leave the root: most reads are of
+    // plain files, checked with one lstat of the file itself.
+    let rel = match path.strip_prefix(root) {
+        Ok(r) => r,
+        Err(_) => return Ok(()),
+    };
+    let mut cur = root.to_path_buf();
+    let mut linked = false;
+    for c in rel.components() {
+        cur.push(c);
+        match std::fs::symlink_metadata(&cur) {
+            Ok(m) if m.file_type().is_symlink() => {
+                linked = true;
+                break;
+            }
+            Ok(_) => {}
+            Err(_) => break,
+        }
+    }
+    if !linked {
+        return Ok(());
+    }
+    let real_root = std::fs::canonicalize(root).at(root)?;
+    let real = std::fs::canonicalize(path).at(path)?;
+    if !real.starts_with(&real_root) {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "is a symbolic link to {}, outside the tileset: a tileset's files are read only                  from inside it; replace the link with the file itself",
+                real.display()
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Remove the temp files ([`TEMP_MARK`]) of writers that are gone from `dir` and everything

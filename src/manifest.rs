@@ -25,7 +25,9 @@ pub use crate::format::SourceFile;
 
 pub const MANIFEST: &str = "tileset.json";
 pub const FORMAT: &str = "penumbra-tileset";
-pub const FORMAT_VERSION: u32 = 1;
+/// 2: every product file carries its identity (`format::Identity`) and every index its files'
+/// blake3; a v1 tileset is refused with what to rerun (docs/tileset.md).
+pub const FORMAT_VERSION: u32 = 2;
 
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct Tool {

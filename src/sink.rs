@@ -21,6 +21,8 @@ use crate::tileset::Product;
 /// One finished tile of horizon maps.
 pub struct HorizonTile<'a> {
     pub id: TileId,
+    /// The run key of the horizon run (a streamed product's run key: its files' identity).
+    pub run_key: &'a str,
     /// `A` planes of n² elevations (degrees), plane k at plane azimuth 360·k/A.
     pub planes: &'a [f32],
     /// The tile's heights (halo included).

@@ -323,6 +323,7 @@ pub fn tile_dem(
         albedo: albedo.as_ref(),
         out: &stage_out,
         resume,
+        run_key: &run_key,
     };
     let units = plan_units(&candidates, finest, group_depth(&layout, opts.prefilter));
     let mut results: std::collections::BTreeMap<TileId, Result<Option<TileStats>>> = units
@@ -1155,6 +1156,8 @@ struct TileSink<'a> {
     albedo: Option<&'a AlbedoSource>,
     out: &'a Path,
     resume: bool,
+    /// The run key: the height tiles' identity (`format::Identity`).
+    run_key: &'a str,
 }
 
 impl TileSink<'_> {
@@ -1181,7 +1184,8 @@ impl TileSink<'_> {
             return Ok(None);
         };
         let hpath = crate::tileset::tile_path(self.out, manifest::HEIGHT_PATTERN, id);
-        height::write_height_tile(&hpath, &tile, self.opts.compression)?;
+        let identity = crate::format::Identity::tile(height::ID, id, self.run_key);
+        height::write_height_tile(&hpath, &tile, self.opts.compression, Some(&identity))?;
         if let Some(a) = self.albedo {
             let apath = crate::tileset::tile_path(self.out, manifest::ALBEDO_PATTERN, id);
             write_albedo_tile(&apath, &render_albedo_tile(a, self.layout, id))?;

@@ -650,6 +650,8 @@ const IO_NAMES: &[&str] = &[
     "write_atomic",
     "write_atomic_bytes",
     "read_capped",
+    "read_product_file",
+    "open_regular",
 ];
 
 #[test]

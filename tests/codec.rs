@@ -195,7 +195,7 @@ fn openexr_reads_height_and_mip_tiles_bit_for_bit() {
                 .collect(),
             ..tile
         };
-        tileio::write_height_tile(&noisy, &tile, TileCompression::Zip).unwrap();
+        tileio::write_height_tile(&noisy, &tile, TileCompression::Zip, None).unwrap();
         let len = std::fs::metadata(&noisy).unwrap().len() as usize;
         assert!(
             len > 4 * n * n * 3 / 4 && len < 6 * n * n * 9 / 10,
@@ -237,6 +237,7 @@ fn openexr_reads_height_and_mip_tiles_bit_for_bit() {
                 Precision::F32,
                 TileCompression::Zip,
                 "noisy",
+                None,
             )
             .unwrap();
             let raw: usize = sizes.iter().map(|s| 8 * s * s).sum();

@@ -46,3 +46,8 @@ mod architecture;
 // The stage graph: shards in separate processes give one run's bytes; a toy stage defined in
 // the test alone runs through the graph and the store.
 mod graph;
+
+// Damaged tilesets, generated: every product file swapped, replaced by a FIFO, linked to
+// /dev/zero or sparse-padded is refused by its readers (exit 2, named, fast, small) and flagged
+// by `penumbra verify`; non-file manifests; format-1 tilesets.
+mod integrity;

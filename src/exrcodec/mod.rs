@@ -34,8 +34,8 @@ use exr::block::UncompressedBlock;
 use exr::compression::Compression;
 use exr::math::{RoundingMode, Vec2};
 use exr::meta::attribute::{
-    ChannelDescription, ChannelList, IntegerBounds, LevelMode, LineOrder, SampleType,
-    TileDescription,
+    AttributeValue, ChannelDescription, ChannelList, IntegerBounds, LevelMode, LineOrder,
+    SampleType, TileDescription,
 };
 use exr::meta::header::{Header, ImageAttributes, LayerAttributes};
 use exr::meta::{compute_level_count, compute_level_size, BlockDescription};
@@ -199,7 +199,14 @@ pub struct Channel<'a> {
 
 /// The header a file of this size, channel list and encoding gets: the same attributes the
 /// `exr` crate's `Image::from_layer(Layer::new(…, LayerAttributes::named(name), …))` wrote.
-fn header(name: &str, size: (usize, usize), channels: ChannelList, enc: &Encoding) -> Header {
+/// With `identity`, the layer also gets a text attribute [`IDENTITY_ATTRIBUTE`] holding it.
+fn header(
+    name: &str,
+    identity: Option<&str>,
+    size: (usize, usize),
+    channels: ChannelList,
+    enc: &Encoding,
+) -> Header {
     let compression = match enc.compression {
         TileCompression::Zip => Compression::ZIP16,
         TileCompression::None => Compression::Uncompressed,
@@ -212,11 +219,43 @@ fn header(name: &str, size: (usize, usize), channels: ChannelList, enc: &Encodin
             rounding_mode: RoundingMode::Up,
         }),
     };
+    let mut attributes = LayerAttributes::named(name);
+    if let Some(id) = identity {
+        attributes
+            .other
+            .insert(IDENTITY_ATTRIBUTE.into(), AttributeValue::Text(id.into()));
+    }
     Header::new(name.into(), size, channels.list)
         .with_encoding(compression, blocks, LineOrder::Increasing)
-        .with_attributes(LayerAttributes::named(name))
+        .with_attributes(attributes)
         .with_shared_attributes(ImageAttributes::new(IntegerBounds::from_dimensions(size)))
 }
+
+/// The text of an EXR file's [`IDENTITY_ATTRIBUTE`] (None: it has none), from its header
+/// alone: no pixel is decoded.
+pub fn read_identity(bytes: &[u8]) -> Result<Option<String>, String> {
+    let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false)
+        .map_err(|e| e.to_string())?;
+    let header = meta
+        .headers
+        .first()
+        .ok_or_else(|| "no image layer".to_string())?;
+    Ok(
+        match header
+            .own_attributes
+            .other
+            .get(&exr::meta::attribute::Text::from(IDENTITY_ATTRIBUTE))
+        {
+            Some(AttributeValue::Text(t)) => Some(t.to_string()),
+            Some(_) => Some(String::new()),
+            None => None,
+        },
+    )
+}
+
+/// Name of the text attribute that holds a file's identity (`crate::format::Identity`): which
+/// product, tile and run it belongs to.
+pub const IDENTITY_ATTRIBUTE: &str = "penumbraIdentity";
 
 /// The pixel size of each level of a header (one for scanline and single-level tiled files).
 fn level_sizes(h: &Header) -> Result<Vec<(usize, usize)>, String> {
@@ -349,6 +388,17 @@ pub fn encode(
     channels: &[Channel<'_>],
     enc: &Encoding,
 ) -> Result<Vec<u8>, String> {
+    encode_identified(name, None, size, channels, enc)
+}
+
+/// [`encode`] with the file's identity in the header (attribute [`IDENTITY_ATTRIBUTE`]).
+pub fn encode_identified(
+    name: &str,
+    identity: Option<&str>,
+    size: (usize, usize),
+    channels: &[Channel<'_>],
+    enc: &Encoding,
+) -> Result<Vec<u8>, String> {
     let mut channels: Vec<&Channel> = channels.iter().collect();
     channels.sort_by(|a, b| a.name.cmp(b.name));
     let list = ChannelList::new(
@@ -363,7 +413,7 @@ pub fn encode(
             })
             .collect(),
     );
-    let header = header(name, size, list, enc);
+    let header = header(name, identity, size, list, enc);
     let sizes = level_sizes(&header)?;
     for c in &channels {
         if c.levels.len() != sizes.len()
@@ -498,6 +548,8 @@ fn chunk_len(c: &Chunk) -> usize {
 pub struct Decoded {
     /// The layer name stored in the header, if any.
     pub layer_name: Option<String>,
+    /// The text of the header's [`IDENTITY_ATTRIBUTE`], if it has one.
+    pub identity: Option<String>,
     /// The file's compression.
     pub compression: Compression,
     /// Whether the file is tiled with mip levels (even when it has a single one, 1×1).
@@ -733,7 +785,17 @@ pub fn decode(bytes: &[u8], largest_only: bool) -> Result<Decoded, String> {
         .zip(out)
         .map(|((c, t), levels)| (c.name.to_string(), t, levels))
         .collect();
+    let identity = match header
+        .own_attributes
+        .other
+        .get(&exr::meta::attribute::Text::from(IDENTITY_ATTRIBUTE))
+    {
+        Some(AttributeValue::Text(t)) => Some(t.to_string()),
+        Some(_) => Some(String::new()),
+        None => None,
+    };
     Ok(Decoded {
+        identity,
         layer_name: header
             .own_attributes
             .layer_name

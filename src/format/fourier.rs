@@ -12,6 +12,8 @@ use half::f16;
 use serde::{Deserialize, Serialize};
 
 use super::horizon::{HorizonError, HorizonLevelDistance};
+use super::Identity;
+use crate::cube::Face;
 use crate::error::{Error, IoContext, Result};
 use crate::fsio::{read_capped, write_staged};
 use crate::layout::TileId;
@@ -56,10 +58,19 @@ impl std::str::FromStr for Sigma {
 pub const GROUP: usize = 4;
 /// Magic bytes that open a pyramid file.
 pub const MAGIC: &[u8; 8] = b"PNBRFHM\0";
-/// Version of the file layout.
-pub const VERSION: u32 = 1;
+/// Version of the file layout. 2: the header holds the file's identity (level, face, y, x and
+/// the run key, bytes 48..128).
+pub const VERSION: u32 = 2;
 /// Bytes of the fixed header, then 16 per group.
-pub const HEADER_BYTES: usize = 64;
+pub const HEADER_BYTES: usize = 128;
+/// Where the identity sits in the header: level (u8), face (u8, in `Face::ALL` order), two
+/// zero bytes, y (u32), x (u32), four zero bytes, then the run key in ASCII, zero-padded to 64
+/// bytes. All zero: a file written without an identity.
+const IDENTITY_AT: usize = 48;
+const RUN_KEY_AT: usize = 64;
+const RUN_KEY_BYTES: usize = 64;
+/// The product name of the pyramids' identities.
+pub const ID: &str = "fourier";
 const GROUP_BYTES: usize = 16;
 const CHECKSUM_BYTES: usize = 32;
 /// Bytes of one texel of a group: four coefficients × (re, im) × 16 bits, in two RGBA planes.
@@ -270,8 +281,14 @@ impl Pyramid {
         }
     }
 
-    /// The file's bytes.
+    /// The file's bytes, without an identity.
     pub fn encode(&self) -> Vec<u8> {
+        self.encode_identified(None)
+    }
+
+    /// The file's bytes with `identity` in its header (what [`write`] stores). A run key
+    /// longer than 64 bytes is cut (run keys are 64 hex digits).
+    pub fn encode_identified(&self, identity: Option<&Identity>) -> Vec<u8> {
         let g = self.groups.len();
         let header = HEADER_BYTES + g * GROUP_BYTES;
         let payload: usize = self
@@ -297,6 +314,15 @@ impl Pyramid {
         b.extend_from_slice(&(header as u32).to_le_bytes());
         b.extend_from_slice(&(payload as u64).to_le_bytes());
         b.resize(HEADER_BYTES, 0);
+        if let Some(id) = identity {
+            b[IDENTITY_AT] = id.level;
+            b[IDENTITY_AT + 1] = id.face.index() as u8;
+            b[IDENTITY_AT + 4..IDENTITY_AT + 8].copy_from_slice(&id.y.to_le_bytes());
+            b[IDENTITY_AT + 8..IDENTITY_AT + 12].copy_from_slice(&id.x.to_le_bytes());
+            let key = id.run_key.as_bytes();
+            let k = key.len().min(RUN_KEY_BYTES);
+            b[RUN_KEY_AT..RUN_KEY_AT + k].copy_from_slice(&key[..k]);
+        }
         for (i, gr) in self.groups.iter().enumerate() {
             b.extend_from_slice(&(gr.res as u32).to_le_bytes());
             b.extend_from_slice(&((i * GROUP) as u32).to_le_bytes());
@@ -327,6 +353,30 @@ impl Pyramid {
     /// Read a file's bytes back, checking everything against `expect` (tile size, azimuths)
     /// and the checksum; errors name `path`.
     pub fn decode(bytes: &[u8], path: &Path, n: usize, azimuths: usize) -> Result<Pyramid> {
+        Self::decode_identified(bytes, path, n, azimuths).map(|(p, _)| p)
+    }
+
+    /// [`Pyramid::decode`] of a file that must be `expected` (its identity is checked).
+    pub fn decode_as(
+        bytes: &[u8],
+        path: &Path,
+        n: usize,
+        azimuths: usize,
+        expected: &Identity,
+    ) -> Result<Pyramid> {
+        let (p, found) = Self::decode_identified(bytes, path, n, azimuths)?;
+        Identity::check(expected, found).map_err(|m| Error::invalid(path, m))?;
+        Ok(p)
+    }
+
+    /// Decode and return the identity the header holds (None: all zero).
+    #[allow(clippy::type_complexity)]
+    fn decode_identified(
+        bytes: &[u8],
+        path: &Path,
+        n: usize,
+        azimuths: usize,
+    ) -> Result<(Pyramid, Option<std::result::Result<Identity, String>>)> {
         let bad = |msg: String| {
             Error::invalid(
                 path,
@@ -452,7 +502,7 @@ impl Pyramid {
             }
             out.push(Group { res, scale, coef });
         }
-        Ok(Pyramid {
+        let pyramid = Pyramid {
             n,
             azimuths,
             k,
@@ -462,7 +512,8 @@ impl Pyramid {
             max_horizon_deg,
             fully_lit,
             groups: out,
-        })
+        };
+        Ok((pyramid, identity_of(body)))
     }
 
     /// Bytes of this pyramid's file.
@@ -475,9 +526,46 @@ impl Pyramid {
     }
 }
 
+/// The identity in a pyramid file's header, read from the header alone (verify checks the
+/// file's hash against the index first): None when it has none, `Err` when the file is too
+/// short to hold one or not a pyramid file.
+pub fn read_identity(
+    bytes: &[u8],
+) -> std::result::Result<Option<std::result::Result<Identity, String>>, String> {
+    if bytes.len() < HEADER_BYTES + CHECKSUM_BYTES || &bytes[..8] != MAGIC {
+        return Err("not a Penumbra Fourier pyramid (bad magic or too short)".into());
+    }
+    Ok(identity_of(bytes))
+}
+
+/// The identity a file's header holds (the checksum has been verified): None when the field
+/// is all zero, `Err` (its bytes, for the message) when it is not one.
+fn identity_of(body: &[u8]) -> Option<std::result::Result<Identity, String>> {
+    let f = &body[IDENTITY_AT..HEADER_BYTES];
+    if f.iter().all(|&b| b == 0) {
+        return None;
+    }
+    let u32_at = |o: usize| u32::from_le_bytes(body[o..o + 4].try_into().expect("4 bytes"));
+    let key = &body[RUN_KEY_AT..RUN_KEY_AT + RUN_KEY_BYTES];
+    let key_len = key.iter().position(|&b| b == 0).unwrap_or(RUN_KEY_BYTES);
+    let face = Face::ALL.get(body[IDENTITY_AT + 1] as usize).copied();
+    match (face, std::str::from_utf8(&key[..key_len])) {
+        (Some(face), Ok(key)) if key.bytes().all(|b| b.is_ascii_graphic()) => Some(Ok(Identity {
+            product: ID.to_string(),
+            level: body[IDENTITY_AT],
+            face,
+            y: u32_at(IDENTITY_AT + 4),
+            x: u32_at(IDENTITY_AT + 8),
+            run_key: key.to_string(),
+        })),
+        _ => Some(Err(format!("header bytes 48..128 = {:02x?}", f))),
+    }
+}
+
 pub const PATTERN: &str = "fourier/{level}/{face}/{y}/{x}.fhm";
-/// Name and version of the pyramid files (part of the run key).
-pub const FORMAT: &str = "penumbra-fourier-1";
+/// Name and version of the pyramid files (part of the run key). 2: the header holds the
+/// file's identity.
+pub const FORMAT: &str = "penumbra-fourier-2";
 pub const FLOOR: &str = "horizons below the tangent to the sphere of the lowest terrain \
      (radius + terrain_min_m) are raised to it, −90° (no terrain) included";
 
@@ -486,9 +574,10 @@ pub fn tile_path(dir: &Path, id: TileId) -> PathBuf {
     super::tile_path(dir, PATTERN, id)
 }
 
-/// Write a pyramid's file (staged: made durable by the run's commit); its size in bytes.
-pub fn write(path: &Path, p: &Pyramid) -> Result<u64> {
-    let bytes = p.encode();
+/// Write a pyramid's file with its identity (staged: made durable by the run's commit); its
+/// size in bytes.
+pub fn write(path: &Path, p: &Pyramid, identity: &Identity) -> Result<u64> {
+    let bytes = p.encode_identified(Some(identity));
     write_staged(path, |f| f.write_all(&bytes).at(path))?;
     Ok(bytes.len() as u64)
 }
@@ -496,12 +585,17 @@ pub fn write(path: &Path, p: &Pyramid) -> Result<u64> {
 /// Read and check a tile's pyramid of `n`² pixels and `azimuths` samples (no larger than the
 /// largest such file may be); the pyramid and its file's size.
 pub fn read(path: &Path, n: usize, azimuths: usize) -> Result<(Pyramid, u64)> {
-    let cap = file_bytes(n, max_coefficients(azimuths), Layout::Full) as u64;
-    let bytes = read_capped(path, cap, "a Fourier pyramid")?;
+    let bytes = read_capped(path, max_file_bytes(n, azimuths), "a Fourier pyramid")?;
     Ok((
         Pyramid::decode(&bytes, path, n, azimuths)?,
         bytes.len() as u64,
     ))
+}
+
+/// The largest pyramid file of `n`-pixel tiles of `azimuths` samples (every coefficient, every
+/// group at full resolution): a file the index does not know is refused above it.
+pub fn max_file_bytes(n: usize, azimuths: usize) -> u64 {
+    file_bytes(n, max_coefficients(azimuths), Layout::Full) as u64
 }
 
 /// The groups of a pyramid holding `k` coefficients, for the manifest.

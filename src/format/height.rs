@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, IoContext, Result};
 use crate::exrcodec::{self, Channel, Samples};
 
+use crate::format::{exr_identity, Identity};
 use crate::fsio::write_staged;
 
 /// A square height tile including its halo.
@@ -62,26 +63,40 @@ impl HeightTile {
 pub use crate::exrcodec::TileCompression;
 
 /// Write a height tile as a single-part scanline EXR, channels `height` (f32) and `mask`
-/// (f16 holding 0, 1 or 2), ZIP blocks of 16 lines (see [`crate::exrcodec`]).
+/// (f16 holding 0, 1 or 2), ZIP blocks of 16 lines (see [`crate::exrcodec`]), with its
+/// identity in the header when given (the tiling stage always gives it).
 pub fn write_height_tile(
     path: &Path,
     tile: &HeightTile,
     compression: TileCompression,
+    identity: Option<&Identity>,
 ) -> Result<()> {
-    let bytes = encode_height_tile(tile, compression, exrcodec::ZipLevel::HEIGHT_TILE)
-        .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
+    let bytes =
+        encode_height_tile_identified(tile, compression, exrcodec::ZipLevel::HEIGHT_TILE, identity)
+            .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
     write_staged(path, |f| f.write_all(&bytes).at(path))
 }
 
-/// The bytes of a height tile file (what [`write_height_tile`] stores), at a given deflate level.
+/// The bytes of a height tile file without an identity, at a given deflate level.
 pub fn encode_height_tile(
     tile: &HeightTile,
     compression: TileCompression,
     level: exrcodec::ZipLevel,
 ) -> std::result::Result<Vec<u8>, String> {
+    encode_height_tile_identified(tile, compression, level, None)
+}
+
+/// The bytes of a height tile file (what [`write_height_tile`] stores), at a given deflate level.
+pub fn encode_height_tile_identified(
+    tile: &HeightTile,
+    compression: TileCompression,
+    level: exrcodec::ZipLevel,
+    identity: Option<&Identity>,
+) -> std::result::Result<Vec<u8>, String> {
     let mask: Vec<f16> = tile.mask.iter().map(|&m| f16::from_f32(m as f32)).collect();
-    exrcodec::encode(
+    exrcodec::encode_identified(
         "penumbra-height",
+        identity.map(Identity::text).as_deref(),
         (tile.size, tile.size),
         &[
             Channel {
@@ -134,14 +149,49 @@ pub fn encode_height_tile_exr_crate(
 }
 
 /// Read a height tile written by [`write_height_tile`] (or by the `exr` crate's writer before
-/// it, or by any OpenEXR writer: blocks in other compressions are decoded by `exr`).
+/// it, or by any OpenEXR writer: blocks in other compressions are decoded by `exr`), whatever
+/// its identity; no larger than [`max_file_bytes`] of its own size. The store reads tiles with
+/// [`decode_height_tile_as`], checked against the index and their identity.
 pub fn read_height_tile(path: &Path) -> Result<HeightTile> {
-    let bytes = std::fs::read(path).at(path)?;
+    let root = path.parent().unwrap_or(Path::new("."));
+    let bytes = crate::fsio::read_product_file(
+        root,
+        path,
+        crate::fsio::Expect::AtMost(max_file_bytes(LARGEST_STORED)),
+        "a height tile",
+    )?;
     decode_height_tile(&bytes).map_err(|e| Error::invalid(path, e))
 }
 
-/// Decode the bytes of a height tile file; the error says what is wrong (without the path).
+/// The largest stored tile side a tileset may have (tile size 8192, halo below half a tile).
+const LARGEST_STORED: usize = 2 * 8192;
+
+/// The largest height tile file of `stored` pixels per side: every sample stored raw (6 bytes
+/// a pixel), its offset table and a header of at most 64 KiB. A file the index does not know is
+/// refused above it before it is read.
+pub fn max_file_bytes(stored: usize) -> u64 {
+    let n = stored as u64;
+    n * n * 6 + n * 8 + (64 << 10)
+}
+
+/// Decode the bytes of a height tile file, whatever its identity; the error says what is wrong
+/// (without the path).
 pub fn decode_height_tile(bytes: &[u8]) -> std::result::Result<HeightTile, String> {
+    decode(bytes).map(|(t, _)| t)
+}
+
+/// Decode the bytes of a height tile file that must be `expected` (its identity attribute is
+/// checked; [`Identity::check`] says what is wrong otherwise).
+pub fn decode_height_tile_as(
+    bytes: &[u8],
+    expected: &Identity,
+) -> std::result::Result<HeightTile, String> {
+    let (t, id) = decode(bytes)?;
+    Identity::check(expected, exr_identity(id))?;
+    Ok(t)
+}
+
+fn decode(bytes: &[u8]) -> std::result::Result<(HeightTile, Option<String>), String> {
     let mut image = exrcodec::decode(bytes, true).map_err(|e| {
         format!("not a readable EXR height tile ({e}); delete it and rerun the stage")
     })?;
@@ -157,12 +207,18 @@ pub fn decode_height_tile(bytes: &[u8]) -> std::result::Result<HeightTile, Strin
         Some(m) => m.iter().map(|m| m.clamp(0.0, 255.0) as u8).collect(),
         None => vec![0; height.len()],
     };
-    Ok(HeightTile {
-        size: w,
-        height,
-        mask,
-    })
+    Ok((
+        HeightTile {
+            size: w,
+            height,
+            mask,
+        },
+        image.identity,
+    ))
 }
+
+/// The product name of the height tiles' identities.
+pub const ID: &str = "height";
 
 /// Path pattern of the height tiles below a tileset.
 pub const HEIGHT_PATTERN: &str = "height/{level}/{face}/{y}/{x}.exr";
@@ -205,7 +261,7 @@ mod tests {
                 .collect(),
         };
         for c in [TileCompression::Zip, TileCompression::None] {
-            write_height_tile(&p, &tile, c).unwrap();
+            write_height_tile(&p, &tile, c, None).unwrap();
             let back = read_height_tile(&p).unwrap();
             assert_eq!(back.size, n);
             assert_eq!(back.mask, tile.mask);

@@ -12,6 +12,7 @@ use exr::prelude::f16;
 use crate::error::{Error, IoContext, Result};
 use crate::exrcodec::TileCompression;
 use crate::exrcodec::{self, Channel, Samples, ZipLevel};
+use crate::format::{exr_identity, Identity};
 use crate::fsio::write_staged;
 use crate::layout::TileId;
 use serde::{Deserialize, Serialize};
@@ -46,7 +47,8 @@ impl HorizonPrecision {
     }
 }
 
-/// Write one tile's raw maps: `a` planes of `n²` elevations (degrees) stacked vertically.
+/// Write one tile's raw maps: `a` planes of `n²` elevations (degrees) stacked vertically, with
+/// the file's identity in the header when given (the horizon stage always gives it).
 pub fn write_horizon_exr(
     path: &Path,
     n: usize,
@@ -54,13 +56,22 @@ pub fn write_horizon_exr(
     elev: &[f32],
     precision: HorizonPrecision,
     compression: TileCompression,
+    identity: Option<&Identity>,
 ) -> Result<()> {
-    let bytes = encode_horizon_exr(n, a, elev, precision, compression, ZipLevel::DEFAULT)
-        .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
+    let bytes = encode_horizon_exr_identified(
+        n,
+        a,
+        elev,
+        precision,
+        compression,
+        ZipLevel::DEFAULT,
+        identity,
+    )
+    .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
     write_staged(path, |f| f.write_all(&bytes).at(path))
 }
 
-/// The bytes of a horizon file (what [`write_horizon_exr`] stores) at a given deflate level.
+/// The bytes of a horizon file without an identity, at a given deflate level.
 pub fn encode_horizon_exr(
     n: usize,
     a: usize,
@@ -69,6 +80,19 @@ pub fn encode_horizon_exr(
     compression: TileCompression,
     level: ZipLevel,
 ) -> std::result::Result<Vec<u8>, String> {
+    encode_horizon_exr_identified(n, a, elev, precision, compression, level, None)
+}
+
+/// The bytes of a horizon file (what [`write_horizon_exr`] stores) at a given deflate level.
+pub fn encode_horizon_exr_identified(
+    n: usize,
+    a: usize,
+    elev: &[f32],
+    precision: HorizonPrecision,
+    compression: TileCompression,
+    level: ZipLevel,
+    identity: Option<&Identity>,
+) -> std::result::Result<Vec<u8>, String> {
     assert_eq!(elev.len(), n * n * a);
     let samples = match precision {
         HorizonPrecision::F32 => Samples::F32(Cow::Borrowed(elev)),
@@ -76,8 +100,9 @@ pub fn encode_horizon_exr(
             Samples::F16(Cow::Owned(elev.iter().map(|&v| f16::from_f32(v)).collect()))
         }
     };
-    exrcodec::encode(
+    exrcodec::encode_identified(
         "penumbra-horizon",
+        identity.map(Identity::text).as_deref(),
         (n, n * a),
         &[Channel {
             name: "elevation",
@@ -126,9 +151,17 @@ pub fn encode_horizon_exr_exr_crate(
     Ok(buf.into_inner())
 }
 
-/// Read a file of [`write_horizon_exr`] for tiles of `n` pixels: the `a` planes as f32.
+/// Read a file of [`write_horizon_exr`] for tiles of `n` pixels: the `a` planes as f32, whatever
+/// its identity, no larger than [`max_file_bytes`] allows (the store reads with
+/// [`decode_horizon_exr_as`], checked against the index and the file's identity).
 pub fn read_horizon_exr(path: &Path, n: usize) -> Result<(usize, Vec<f32>)> {
-    let bytes = std::fs::read(path).at(path)?;
+    let root = path.parent().unwrap_or(Path::new("."));
+    let bytes = crate::fsio::read_product_file(
+        root,
+        path,
+        crate::fsio::Expect::AtMost(max_file_bytes(n, MAX_AZIMUTHS)),
+        "a horizon map",
+    )?;
     decode_horizon_exr(&bytes, n).map_err(|msg| {
         Error::invalid(
             path,
@@ -137,11 +170,40 @@ pub fn read_horizon_exr(path: &Path, n: usize) -> Result<(usize, Vec<f32>)> {
     })
 }
 
-/// Decode the bytes of a horizon file; the error says what is wrong (without the path).
+/// The most azimuths a tileset's horizon maps may have (the manifest's limit).
+pub const MAX_AZIMUTHS: usize = 4096;
+
+/// The largest horizon file of `a` planes of `n`² f32 elevations: every sample stored raw, its
+/// offset table and a header of at most 64 KiB. A file the index does not know is refused
+/// above it before it is read.
+pub fn max_file_bytes(n: usize, a: usize) -> u64 {
+    let (n, a) = (n as u64, a as u64);
+    n * n * a * 4 + n * a * 8 + (64 << 10)
+}
+
+/// Decode the bytes of a horizon file, whatever its identity; the error says what is wrong
+/// (without the path).
 pub fn decode_horizon_exr(
     bytes: &[u8],
     n: usize,
 ) -> std::result::Result<(usize, Vec<f32>), String> {
+    decode(bytes, n).map(|(a, e, _)| (a, e))
+}
+
+/// Decode the bytes of a horizon file that must be `expected` (its identity is checked).
+pub fn decode_horizon_exr_as(
+    bytes: &[u8],
+    n: usize,
+    expected: &Identity,
+) -> std::result::Result<(usize, Vec<f32>), String> {
+    let (a, e, id) = decode(bytes, n)?;
+    Identity::check(expected, exr_identity(id))?;
+    Ok((a, e))
+}
+
+type Decoded = (usize, Vec<f32>, Option<String>);
+
+fn decode(bytes: &[u8], n: usize) -> std::result::Result<Decoded, String> {
     let mut image =
         exrcodec::decode(bytes, true).map_err(|e| format!("not a readable horizon EXR ({e})"))?;
     let (w, h) = image.size();
@@ -154,11 +216,14 @@ pub fn decode_horizon_exr(
         .take("elevation")
         .and_then(|mut l| l.drain(..).next())
         .ok_or_else(|| "no 'elevation' channel".to_string())?;
-    Ok((h / n, elev))
+    Ok((h / n, elev, image.identity))
 }
 pub const PATTERN: &str = "horizon/{level}/{face}/{y}/{x}.exr";
 /// Version of the horizon products' layout and convention (part of the run key).
-pub const FORMAT: &str = "penumbra-horizon-1";
+/// 2: every file carries its identity (`format::Identity`).
+pub const FORMAT: &str = "penumbra-horizon-2";
+/// The product name of the raw maps' identities.
+pub const ID: &str = "horizon";
 pub const AZIMUTH_CONVENTION: &str = "plane azimuth on the tile's cube face: counter-clockwise \
      from the face's +U axis towards +V, degrees; plane k = 360*k/A; compass azimuth differs per \
      pixel (docs/horizons.md)";

@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 use crate::cube::Face;
 use crate::error::{Error, IoContext, Result};
 use crate::exrcodec::TileCompression;
+use crate::format::{exr_identity, Identity};
 use crate::fsio::write_staged;
 use crate::layout::TileId;
 
@@ -44,6 +45,21 @@ pub fn encode_mip_exr(
     level: ZipLevel,
     name: &str,
 ) -> std::result::Result<Vec<u8>, String> {
+    encode_mip_exr_identified(size, min, max, precision, compression, level, name, None)
+}
+
+/// [`encode_mip_exr`] with the file's identity in the header.
+#[allow(clippy::too_many_arguments)]
+pub fn encode_mip_exr_identified(
+    size: usize,
+    min: Option<&[Vec<f32>]>,
+    max: &[Vec<f32>],
+    precision: Precision,
+    compression: TileCompression,
+    level: ZipLevel,
+    name: &str,
+    identity: Option<&Identity>,
+) -> std::result::Result<Vec<u8>, String> {
     let mut list = vec![Channel {
         name: "max",
         levels: samples(max, precision, true),
@@ -54,8 +70,9 @@ pub fn encode_mip_exr(
             levels: samples(m, precision, false),
         });
     }
-    exrcodec::encode(
+    exrcodec::encode_identified(
         name,
+        identity.map(Identity::text).as_deref(),
         (size, size),
         &list,
         &exrcodec::Encoding {
@@ -66,7 +83,9 @@ pub fn encode_mip_exr(
     )
 }
 
-/// Write a mip-mapped EXR with channel `max` and, when `min` is given, channel `min`.
+/// Write a mip-mapped EXR with channel `max` and, when `min` is given, channel `min`, and its
+/// identity in the header when given (the mip stage always gives it).
+#[allow(clippy::too_many_arguments)]
 pub fn write_mip_exr(
     path: &Path,
     size: usize,
@@ -75,8 +94,9 @@ pub fn write_mip_exr(
     precision: Precision,
     compression: TileCompression,
     name: &str,
+    identity: Option<&Identity>,
 ) -> Result<()> {
-    let bytes = encode_mip_exr(
+    let bytes = encode_mip_exr_identified(
         size,
         min,
         max,
@@ -84,6 +104,7 @@ pub fn write_mip_exr(
         compression,
         ZipLevel::DEFAULT,
         name,
+        identity,
     )
     .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
     write_staged(path, |f| f.write_all(&bytes).at(path))
@@ -165,15 +186,46 @@ impl MipFile {
     }
 }
 
-/// Read a file written by [`write_mip_exr`].
+/// Read a file written by [`write_mip_exr`], whatever its identity, no larger than
+/// [`max_file_bytes`] of the largest tile (the store and the queries read with
+/// [`decode_mip_exr_as`], checked against the index and the file's identity).
 pub fn read_mip_exr(path: &Path) -> Result<MipFile> {
-    let bytes = std::fs::read(path).at(path)?;
+    let root = path.parent().unwrap_or(Path::new("."));
+    let bytes = crate::fsio::read_product_file(
+        root,
+        path,
+        crate::fsio::Expect::AtMost(max_file_bytes(8192, 2)),
+        "a mipmap file",
+    )?;
     decode_mip_exr(&bytes)
         .map_err(|msg| Error::invalid(path, format!("{msg}; delete it and rerun `penumbra mip`")))
 }
 
-/// Decode the bytes of a mip file; the error says what is wrong (without the path).
+/// The largest mip file whose level 0 is `n`² texels of `channels` f32 channels: every level
+/// stored raw (at most 4/3 of level 0, plus a tile's rounding), its offset table and a header
+/// of at most 64 KiB. A file the index does not know is refused above it before it is read.
+pub fn max_file_bytes(n: usize, channels: usize) -> u64 {
+    let n = n as u64 + 64;
+    n * n * 4 * channels as u64 * 4 / 3 + n * n / 64 + (64 << 10)
+}
+
+/// Decode the bytes of a mip file, whatever its identity; the error says what is wrong
+/// (without the path).
 pub fn decode_mip_exr(bytes: &[u8]) -> std::result::Result<MipFile, String> {
+    decode(bytes).map(|(f, _)| f)
+}
+
+/// Decode the bytes of a mip file that must be `expected` (its identity is checked).
+pub fn decode_mip_exr_as(
+    bytes: &[u8],
+    expected: &Identity,
+) -> std::result::Result<MipFile, String> {
+    let (f, id) = decode(bytes)?;
+    Identity::check(expected, exr_identity(id))?;
+    Ok(f)
+}
+
+fn decode(bytes: &[u8]) -> std::result::Result<(MipFile, Option<String>), String> {
     let image =
         exrcodec::decode(bytes, false).map_err(|e| format!("not a readable mipmap EXR ({e})"))?;
     let (w, h) = image.size();
@@ -182,6 +234,7 @@ pub fn decode_mip_exr(bytes: &[u8]) -> std::result::Result<MipFile, String> {
     }
     let sizes = level_sizes(w);
     let mut channels = BTreeMap::new();
+    let identity = image.identity;
     for (name, _, levels) in image.channels {
         if levels.len() != sizes.len() || levels.iter().zip(&sizes).any(|(l, &s)| l.len() != s * s)
         {
@@ -192,7 +245,7 @@ pub fn decode_mip_exr(bytes: &[u8]) -> std::result::Result<MipFile, String> {
         }
         channels.insert(name, levels);
     }
-    Ok(MipFile { sizes, channels })
+    Ok((MipFile { sizes, channels }, identity))
 }
 pub const MAX_PATTERN: &str = "maxmip/{level}/{face}/{y}/{x}.exr";
 pub const MINMAX_PATTERN: &str = "minmax/{level}/{face}/{y}/{x}.exr";
@@ -203,8 +256,15 @@ pub const FACE_CHUNK_PATTERN: &str = "minmax/{level}/{face}/face/{cy}/{cx}.exr";
 /// the fine levels of its pyramid in chunks of this many tiles squared, so that building one
 /// never holds more than a chunk (docs/mipmaps.md).
 pub const FACE_CHUNK_TILES: u32 = 1024;
-/// Version of the mip products' layout and convention (part of the run key).
-pub const MIP_FORMAT: &str = "penumbra-mip-1";
+/// Version of the mip products' layout and convention (part of the run key). 2: every file
+/// carries its identity (`format::Identity`).
+pub const MIP_FORMAT: &str = "penumbra-mip-2";
+/// The product names of the mip files' identities: a tile's maximum and (min, max) pyramids,
+/// a face pyramid (x = y = 0) and a chunk of one (x, y: the chunk).
+pub const MAX_ID: &str = "maxmip";
+pub const MINMAX_ID: &str = "minmax";
+pub const FACE_ID: &str = "minmax-face";
+pub const FACE_CHUNK_ID: &str = "minmax-face-chunk";
 /// One-line statement of the texel convention, recorded in the manifest.
 pub const TEXEL_CONVENTION: &str =
     "level-0 texel (i,j) = interior pixel (i,j), bounds the bilinear \

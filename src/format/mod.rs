@@ -85,3 +85,144 @@ pub fn face_chunk_file_path(
             .replace("{cy}", &cy.to_string()),
     )
 }
+
+/// What a product file is: the product, the tile (or face-pyramid chunk) and the run that made
+/// it, written into the file itself (an EXR header attribute, the `.fhm` header) and checked on
+/// every read, so that a file moved, copied or swapped from elsewhere — another tile, another
+/// level, another tileset — is refused instead of read as the file expected (docs/formats.md,
+/// "File identity").
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Identity {
+    /// The file's kind: `height`, `maxmip`, `minmax`, `minmax-face` (x = y = 0) or
+    /// `minmax-face-chunk` (x, y: the chunk), `horizon`, `fourier`.
+    pub product: String,
+    pub level: u8,
+    pub face: Face,
+    pub y: u32,
+    pub x: u32,
+    /// The run key of the product's manifest entry (`run_key`; the tileset's for heights).
+    pub run_key: String,
+}
+
+/// The version tag that opens an identity's text.
+const IDENTITY_TAG: &str = "penumbra-identity-1";
+
+impl Identity {
+    /// The identity of tile `id`'s file of `product` made by the run `run_key`.
+    pub fn tile(product: &str, id: TileId, run_key: &str) -> Identity {
+        Identity {
+            product: product.to_string(),
+            level: id.level,
+            face: id.face,
+            y: id.y,
+            x: id.x,
+            run_key: run_key.to_string(),
+        }
+    }
+
+    /// The identity of a per-(level, face) file (`x`, `y`: its chunk, 0 for a whole face).
+    pub fn face(product: &str, level: u8, face: Face, x: u32, y: u32, run_key: &str) -> Identity {
+        Identity {
+            product: product.to_string(),
+            level,
+            face,
+            y,
+            x,
+            run_key: run_key.to_string(),
+        }
+    }
+
+    /// The text stored in an EXR header: `penumbra-identity-1 product=height level=3 face=px
+    /// y=1 x=2 run=<run key>`.
+    pub fn text(&self) -> String {
+        format!(
+            "{IDENTITY_TAG} product={} level={} face={} y={} x={} run={}",
+            self.product,
+            self.level,
+            self.face.name(),
+            self.y,
+            self.x,
+            self.run_key
+        )
+    }
+
+    /// Parse [`Identity::text`]; None for anything else.
+    pub fn parse(text: &str) -> Option<Identity> {
+        let mut it = text.split(' ');
+        if it.next()? != IDENTITY_TAG {
+            return None;
+        }
+        let mut field = |key: &str| -> Option<String> {
+            it.next()?
+                .strip_prefix(key)?
+                .strip_prefix('=')
+                .map(str::to_string)
+        };
+        let product = field("product")?;
+        let level = field("level")?.parse().ok()?;
+        let face = field("face")?;
+        let face = *Face::ALL.iter().find(|f| f.name() == face)?;
+        let y = field("y")?.parse().ok()?;
+        let x = field("x")?.parse().ok()?;
+        let run_key = field("run")?;
+        if it.next().is_some() {
+            return None;
+        }
+        Some(Identity {
+            product,
+            level,
+            face,
+            y,
+            x,
+            run_key,
+        })
+    }
+
+    /// Compare what a file claims to be (`found`: its parsed identity, None when it has none,
+    /// `Some(Err(text))` when it cannot be read) with what was expected where it was found;
+    /// the error says both and what to do (without the path).
+    pub fn check(
+        expected: &Identity,
+        found: Option<std::result::Result<Identity, String>>,
+    ) -> std::result::Result<(), String> {
+        match found {
+            Some(Ok(f)) if f == *expected => Ok(()),
+            Some(Ok(f)) => Err(format!(
+                "claims to be {f} but {expected} was expected here: the file was moved, copied \
+                 or swapped from elsewhere; {REBUILD}"
+            )),
+            Some(Err(t)) => Err(format!(
+                "carries a damaged identity ({t:?}) where {expected} was expected; {REBUILD}"
+            )),
+            None => Err(format!(
+                "carries no identity where {expected} was expected: it was written by a penumbra \
+                 older than tileset format 2, or by another program; {REBUILD}"
+            )),
+        }
+    }
+}
+
+/// What to do about a file that is not what the tileset says it is.
+const REBUILD: &str = "delete it and rerun the stage that makes it (`penumbra verify DIR` lists \
+                       every such file)";
+
+impl std::fmt::Display for Identity {
+    /// `height 3/px/y1/x2 (run 1a2b3c4d5e6f)`: the run key shortened to 12 digits.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let key: String = self.run_key.chars().take(12).collect();
+        write!(
+            f,
+            "{} {}/{}/y{}/x{} (run {key})",
+            self.product,
+            self.level,
+            self.face.name(),
+            self.y,
+            self.x
+        )
+    }
+}
+
+/// Parse an EXR file's identity attribute text for [`Identity::check`].
+pub(crate) fn exr_identity(text: Option<String>) -> Option<std::result::Result<Identity, String>> {
+    text.map(|t| Identity::parse(&t).ok_or(t))
+}

@@ -632,7 +632,8 @@ impl Stage for FourierStage {
         let tile = cx.store.height(id)?.expect("listed tiles exist");
         let elev = cx.store.horizon(id)?;
         let (p, stats) = cx.plan.encoder.encode(&elev, &tile);
-        pyramid::write(&tile_path(cx.out, id), &p)?;
+        let identity = crate::format::Identity::tile(pyramid::ID, id, cx.key);
+        pyramid::write(&tile_path(cx.out, id), &p, &identity)?;
         Ok(stats)
     }
 

@@ -102,7 +102,8 @@ impl FourierRun {
 impl SinkRun for FourierRun {
     fn accept(&self, out: &Path, tile: HorizonTile) -> Result<serde_json::Value> {
         let (p, stats) = self.encoder.encode(tile.planes, tile.height);
-        pyramid::write(&tile_path(out, tile.id), &p)?;
+        let identity = crate::format::Identity::tile(pyramid::ID, tile.id, tile.run_key);
+        pyramid::write(&tile_path(out, tile.id), &p, &identity)?;
         Ok(serde_json::to_value(stats).expect("stats serialise"))
     }
 

@@ -18,9 +18,11 @@ use super::near::{DEFAULT_NEAR_PX, MAX_NEAR_PX};
 use crate::cube::{Face, Projection};
 use crate::error::{Error, Result};
 use crate::format::height::HeightTile;
+use crate::format::horizon::ID as HORIZON_ID;
 use crate::format::horizon::{
     tile_path, write_horizon_exr, HorizonPrecision, AZIMUTH_CONVENTION, FORMAT, LAYOUT, PATTERN,
 };
+use crate::format::Identity;
 use crate::format::TileCompression;
 use crate::layout::TileId;
 use crate::manifest::{self, HorizonLevelDistance, HorizonProduct, Tileset};
@@ -922,6 +924,7 @@ impl Stage for HorizonStage<'_> {
                 &elev,
                 opts.precision,
                 opts.compression,
+                Some(&Identity::tile(HORIZON_ID, id, cx.key)),
             )?;
         }
         let t1 = std::time::Instant::now();
@@ -933,6 +936,7 @@ impl Stage for HorizonStage<'_> {
                     cx.out,
                     HorizonTile {
                         id,
+                        run_key: cx.key,
                         planes: &elev,
                         height: &tile,
                     },

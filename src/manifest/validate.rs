@@ -40,6 +40,18 @@ impl Tileset {
                 ),
             ));
         }
+        if t.format_version < FORMAT_VERSION {
+            return Err(Error::unsupported(
+                &path,
+                format!(
+                    "tileset format v{} was written by a penumbra whose files carry no identity \
+                     or hash (v{FORMAT_VERSION} checks every file it reads against both); \
+                     rebuild it: rerun `penumbra tile`/`bake` with the same DEM and options into \
+                     a fresh folder, then the stages it had (`mip`, `horizon`, `fourier`)",
+                    t.format_version
+                ),
+            ));
+        }
         check(&t, &path)?;
         Ok(t)
     }

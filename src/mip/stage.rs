@@ -17,7 +17,8 @@ use crate::format::mip::{
     face_chunk_path, face_path, tile_paths, write_mip_exr, Precision, FACE_CHUNK_PATTERN,
     FACE_CHUNK_TILES, FACE_PATTERN, MAX_PATTERN, MINMAX_PATTERN, MIP_FORMAT, TEXEL_CONVENTION,
 };
-use crate::format::TileCompression;
+use crate::format::mip::{FACE_CHUNK_ID, FACE_ID, MAX_ID, MINMAX_ID};
+use crate::format::{Identity, TileCompression};
 use crate::layout::TileId;
 use crate::manifest::{self, MipLevelRange, MipProduct, Tileset};
 use crate::progress::Progress;
@@ -225,7 +226,7 @@ impl Stage for MipStage {
     }
 
     fn run_unit(&self, cx: &Cx<MipPlan>, unit: &Unit, p: &mut MinMaxPyramid) -> Result<TileTop> {
-        let (lo, hi) = mip_tile(cx.store, cx.out, unit.tile, cx.plan, &self.opts, p)?;
+        let (lo, hi) = mip_tile(cx.store, cx.out, unit.tile, cx.plan, &self.opts, p, cx.key)?;
         Ok(TileTop {
             lo: lo.to_bits(),
             hi: hi.to_bits(),
@@ -238,6 +239,7 @@ impl Stage for MipStage {
         done: Vec<Finished<TileTop>>,
     ) -> Result<(Tileset, MipReport)> {
         let (opts, out, ts) = (&self.opts, cx.out, cx.store.manifest());
+        let cx_key = cx.key;
         let lay = ts.layout;
         let manifest_path = cx.store.manifest_path();
         let tile_bytes = (cx.plan.s * cx.plan.s * 4) as u64;
@@ -294,7 +296,14 @@ impl Stage for MipStage {
                     if !any {
                         continue;
                     }
-                    write_face_pyramid(&face_path(out, level, face), g, lo, hi, opts)?
+                    write_face_pyramid(
+                        &face_path(out, level, face),
+                        &Identity::face(FACE_ID, level, face, 0, 0, cx_key),
+                        g,
+                        lo,
+                        hi,
+                        opts,
+                    )?
                 } else {
                     let mut chunks: BTreeMap<(usize, usize), Vec<ChunkTile>> = BTreeMap::new();
                     for (id, &(a, b)) in on_face {
@@ -319,13 +328,28 @@ impl Stage for MipStage {
                             hi[k] = b;
                         }
                         let path = face_chunk_path(out, level, face, cx as u32, cy as u32);
-                        let (a, b) = write_face_pyramid(&path, chunk, lo, hi, opts)?;
+                        let id = Identity::face(
+                            FACE_CHUNK_ID,
+                            level,
+                            face,
+                            cx as u32,
+                            cy as u32,
+                            cx_key,
+                        );
+                        let (a, b) = write_face_pyramid(&path, &id, chunk, lo, hi, opts)?;
                         clo[cy * nc + cx] = a;
                         chi[cy * nc + cx] = b;
                         face_chunks += 1;
                     }
                     chunked = true;
-                    write_face_pyramid(&face_path(out, level, face), nc, clo, chi, opts)?
+                    write_face_pyramid(
+                        &face_path(out, level, face),
+                        &Identity::face(FACE_ID, level, face, 0, 0, cx_key),
+                        nc,
+                        clo,
+                        chi,
+                        opts,
+                    )?
                 };
                 lmin = fmin(lmin, top.0);
                 lmax = fmax(lmax, top.1);
@@ -408,6 +432,7 @@ type ChunkTile = (usize, f32, f32);
 /// the pyramid's 1×1 (min, max).
 fn write_face_pyramid(
     path: &Path,
+    identity: &Identity,
     g: usize,
     lo: Vec<f32>,
     hi: Vec<f32>,
@@ -422,6 +447,7 @@ fn write_face_pyramid(
         Precision::F32,
         opts.compression,
         "penumbra-face-minmax",
+        Some(identity),
     )?;
     Ok(p.top())
 }
@@ -434,6 +460,7 @@ fn mip_tile(
     plan: &MipPlan,
     opts: &MipOptions,
     p: &mut MinMaxPyramid,
+    key: &str,
 ) -> Result<(f32, f32)> {
     let (n, s, halo) = (plan.n, plan.s, plan.halo);
     let (pmax, pmm) = tile_paths(out, id);
@@ -447,6 +474,7 @@ fn mip_tile(
         opts.precision,
         opts.compression,
         "penumbra-maxmip",
+        Some(&Identity::tile(MAX_ID, id, key)),
     )?;
     write_mip_exr(
         &pmm,
@@ -456,6 +484,7 @@ fn mip_tile(
         opts.precision,
         opts.compression,
         "penumbra-minmax",
+        Some(&Identity::tile(MINMAX_ID, id, key)),
     )?;
     let (lo, hi) = p.top();
     // f16 files hold rounded bounds: the face pyramid uses the same rounded values.

@@ -6,8 +6,7 @@ use serde::Serialize;
 
 use crate::cube::Face;
 use crate::error::{Error, Result};
-use crate::manifest::Tileset;
-use crate::mip::{level_sizes, read_mip_exr};
+use crate::mip::level_sizes;
 use crate::tileset::{self, Store};
 
 fn nan_to_none(v: f32) -> Option<f64> {
@@ -100,7 +99,7 @@ pub fn mip(
         file = path;
     } else {
         let fl = level - (m - 1);
-        let t = face_texel(dir, ts, tl, tile.face, fl, tile.x, tile.y)?;
+        let t = face_texel(&store, tl, tile.face, fl, tile.x, tile.y)?;
         scope = "face";
         texel = [tile.x >> fl, tile.y >> fl];
         texels = t.texels;
@@ -143,14 +142,14 @@ pub struct FaceTexel {
 /// `tl` (level 0: one texel per tile), for tile (tx, ty): from the face file, or, at the
 /// levels inside a chunk of a chunked face, from the chunk's file (docs/mipmaps.md).
 pub fn face_texel(
-    dir: &Path,
-    ts: &Tileset,
+    store: &Store,
     tl: u8,
     face: Face,
     fl: u32,
     tx: u32,
     ty: u32,
 ) -> Result<FaceTexel> {
+    let (dir, ts) = (store.dir(), store.manifest());
     let mp = ts
         .products
         .mip
@@ -168,8 +167,8 @@ pub fn face_texel(
             "no tile of face {face} at level {tl} has data: no face pyramid there"
         )));
     }
-    // (file, its level-0 size, level in it, texel x, y in it).
-    let (path, size, k, x, y) = match (&mp.face_chunk_path, mp.face_chunk_tiles) {
+    // (file, its chunk if it is one, its level-0 size, level in it, texel x, y in it).
+    let (path, chunk, size, k, x, y) = match (&mp.face_chunk_path, mp.face_chunk_tiles) {
         (Some(pattern), Some(c)) if g > c => {
             let kc = c.trailing_zeros();
             if fl < kc {
@@ -184,14 +183,14 @@ pub fn face_texel(
                         file: face_file,
                     });
                 }
-                (p, c, fl, (tx % c) >> fl, (ty % c) >> fl)
+                (p, Some((cx, cy)), c, fl, (tx % c) >> fl, (ty % c) >> fl)
             } else {
-                (face_file, g / c, fl - kc, tx >> fl, ty >> fl)
+                (face_file, None, g / c, fl - kc, tx >> fl, ty >> fl)
             }
         }
-        _ => (face_file, g, fl, tx >> fl, ty >> fl),
+        _ => (face_file, None, g, fl, tx >> fl, ty >> fl),
     };
-    let f = read_mip_exr(&path)?;
+    let f = store.face_mip(&path, tl, face, chunk)?;
     if f.sizes[0] != size as usize {
         return Err(Error::invalid(
             &path,

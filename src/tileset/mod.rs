@@ -11,21 +11,24 @@
 //!   manifest's limits.
 
 pub mod cache;
+pub mod index;
 pub use crate::fsio;
 
 pub mod lock;
 
+pub mod verify;
 pub mod writer;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use crate::error::{Error, Result};
+use crate::error::{Error, IoContext, Result};
 use crate::format::{self, height::HeightTile};
 use crate::layout::TileId;
 use crate::manifest::{Tileset, MANIFEST};
 
 pub use cache::TileCache;
+pub use index::{Index, IndexEntry};
 pub use lock::STATE_DIR;
 
 /// The products a tileset can hold.
@@ -178,6 +181,8 @@ pub struct Store {
     dir: PathBuf,
     ts: Tileset,
     cache: TileCache,
+    /// Each product's index, read on the first read of one of its files.
+    indexes: std::sync::Mutex<std::collections::HashMap<&'static str, Option<Arc<Index>>>>,
     _reader: Option<lock::CommitLock>,
 }
 
@@ -200,6 +205,7 @@ impl Store {
             dir: dir.to_path_buf(),
             ts,
             cache,
+            indexes: Default::default(),
             _reader: None,
         })
     }
@@ -232,11 +238,86 @@ impl Store {
         Ok(tile_path(&self.dir, &h.path, id))
     }
 
-    /// Read a height tile (uncached), checking its size against the manifest.
+    /// The index of `product`, read once (None: the product has none).
+    pub fn index(&self, product: Product) -> Result<Option<Arc<Index>>> {
+        let mut m = self.indexes.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(ix) = m.get(product.name()) {
+            return Ok(ix.clone());
+        }
+        let ix = Index::load(&self.dir, product.name())?.map(Arc::new);
+        m.insert(product.name(), ix.clone());
+        Ok(ix)
+    }
+
+    /// Read a file of `product` whole, bounded before the read starts: a regular file, inside
+    /// the tileset, of the size its index recorded (or at most `cap` bytes when the product has
+    /// no index), and then of the blake3 the index recorded. `what` names the file's kind.
+    pub fn read_product_file(
+        &self,
+        product: Product,
+        path: &Path,
+        cap: u64,
+        what: &str,
+    ) -> Result<Vec<u8>> {
+        let index = self.index(product)?;
+        let rel = path
+            .strip_prefix(&self.dir)
+            .map(|r| r.to_string_lossy().replace('\\', "/"))
+            .unwrap_or_default();
+        let entry = match &index {
+            Some(ix) => match ix.files.get(&rel) {
+                Some(e) => Some(*e),
+                None => {
+                    // Absent altogether: the error the open gives (not found).
+                    std::fs::symlink_metadata(path).at(path)?;
+                    return Err(Error::invalid(
+                        path,
+                        format!(
+                            "is not listed in the tileset's index {}: it is not a file the \
+                             stage wrote; delete it (or rerun the stage that makes {})",
+                            ix.path.display(),
+                            product.name()
+                        ),
+                    ));
+                }
+            },
+            None => None,
+        };
+        let expect = match entry {
+            Some((len, _)) => fsio::Expect::Exactly(len),
+            None => fsio::Expect::AtMost(cap),
+        };
+        let bytes = fsio::read_product_file(&self.dir, path, expect, what)?;
+        if let Some((_, hash)) = entry {
+            if blake3::hash(&bytes).as_bytes() != &hash {
+                return Err(Error::invalid(
+                    path,
+                    format!(
+                        "its bytes differ from the blake3 the tileset's index recorded: the \
+                         file is damaged or was replaced; delete it and rerun the stage that \
+                         makes {} (`penumbra verify DIR` checks every file)",
+                        product.name()
+                    ),
+                ));
+            }
+        }
+        Ok(bytes)
+    }
+
+    /// Read a height tile (uncached), checking it against the index (size, hash), its identity
+    /// and its size against the manifest.
     pub fn read_height(&self, id: TileId) -> Result<HeightTile> {
         let p = self.height_path(id)?;
-        let t = format::height::read_height_tile(&p)?;
         let s = self.ts.layout.stored_size();
+        let bytes = self.read_product_file(
+            Product::Height,
+            &p,
+            format::height::max_file_bytes(s),
+            "a height tile",
+        )?;
+        let expected = format::Identity::tile(format::height::ID, id, &self.ts.run_key);
+        let t = format::height::decode_height_tile_as(&bytes, &expected)
+            .map_err(|e| Error::invalid(&p, e))?;
         if t.size != s {
             return Err(Error::invalid(
                 &p,
@@ -269,8 +350,22 @@ impl Store {
             if max { &m.max_path } else { &m.minmax_path },
             id,
         );
-        let f = format::mip::read_mip_exr(&p)?;
         let n = self.ts.layout.tile_size as usize;
+        let bytes = self.read_product_file(
+            Product::Mip,
+            &p,
+            format::mip::max_file_bytes(n, if max { 1 } else { 2 }),
+            "a mipmap file",
+        )?;
+        let name = if max {
+            format::mip::MAX_ID
+        } else {
+            format::mip::MINMAX_ID
+        };
+        let expected = format::Identity::tile(name, id, &m.run_key);
+        let f = format::mip::decode_mip_exr_as(&bytes, &expected).map_err(|msg| {
+            Error::invalid(&p, format!("{msg}; delete it and rerun `penumbra mip`"))
+        })?;
         if f.sizes.first() != Some(&n) {
             return Err(Error::invalid(
                 &p,
@@ -278,6 +373,39 @@ impl Store {
             ));
         }
         Ok(f)
+    }
+
+    /// The face pyramid file `path` of tile level `level` and `face` (`chunk`: the chunk
+    /// (cx, cy) it is), checked against the index and its identity.
+    pub fn face_mip(
+        &self,
+        path: &Path,
+        level: u8,
+        face: crate::cube::Face,
+        chunk: Option<(u32, u32)>,
+    ) -> Result<format::mip::MipFile> {
+        let m =
+            self.ts.products.mip.as_ref().ok_or_else(|| {
+                self.missing("tileset has no mipmaps: build them with the mip stage")
+            })?;
+        let (name, (x, y)) = match chunk {
+            Some(c) => (format::mip::FACE_CHUNK_ID, c),
+            None => (format::mip::FACE_ID, (0, 0)),
+        };
+        let side = match chunk {
+            Some(_) => m.face_chunk_tiles.unwrap_or(1024) as usize,
+            None => self.ts.layout.tiles_per_side(level) as usize,
+        };
+        let bytes = self.read_product_file(
+            Product::Mip,
+            path,
+            format::mip::max_file_bytes(side, 2),
+            "a face pyramid",
+        )?;
+        let expected = format::Identity::face(name, level, face, x, y, &m.run_key);
+        format::mip::decode_mip_exr_as(&bytes, &expected).map_err(|msg| {
+            Error::invalid(path, format!("{msg}; delete it and rerun `penumbra mip`"))
+        })
     }
 
     /// A tile's Fourier pyramid, checked against the manifest (tile size, azimuths) and its
@@ -290,7 +418,15 @@ impl Store {
             )
         })?;
         let p = tile_path(&self.dir, &f.path, id);
-        Ok(format::fourier::read(&p, self.ts.layout.tile_size as usize, f.azimuths)?.0)
+        let n = self.ts.layout.tile_size as usize;
+        let bytes = self.read_product_file(
+            Product::Fourier,
+            &p,
+            format::fourier::max_file_bytes(n, f.azimuths),
+            "a Fourier pyramid",
+        )?;
+        let expected = format::Identity::tile(format::fourier::ID, id, &f.run_key);
+        format::fourier::Pyramid::decode_as(&bytes, &p, n, f.azimuths, &expected)
     }
 
     /// A tile's raw horizon maps (`A` planes of n² elevations, degrees), checked against the
@@ -300,7 +436,18 @@ impl Store {
             self.missing("tileset has no horizon maps: compute them with the horizon stage")
         })?;
         let p = tile_path(&self.dir, &h.path, id);
-        let (a, planes) = format::horizon::read_horizon_exr(&p, self.ts.layout.tile_size as usize)?;
+        let n = self.ts.layout.tile_size as usize;
+        let bytes = self.read_product_file(
+            Product::Horizon,
+            &p,
+            format::horizon::max_file_bytes(n, h.azimuths),
+            "a horizon map",
+        )?;
+        let expected = format::Identity::tile(format::horizon::ID, id, &h.run_key);
+        let (a, planes) =
+            format::horizon::decode_horizon_exr_as(&bytes, n, &expected).map_err(|msg| {
+                Error::invalid(&p, format!("{msg}; delete it and rerun `penumbra horizon`"))
+            })?;
         if a != h.azimuths {
             return Err(Error::invalid(
                 &p,

@@ -9,8 +9,10 @@
 //!   same key resumes), the product folders as they will appear in the tileset, then
 //!   `tileset.json` and `index/<product>.json` once the run is complete;
 //! - `commit.json`: the plan of a commit under way (present only during one);
-//! - `index/<product>.json`: every file of a committed product with its size, so that an
-//!   up-to-date check can verify that the files it vouches for are there;
+//! - `index/<product>.json`: every file of a committed product with its size and blake3
+//!   ([`IndexEntry`]), so that an up-to-date check can verify that the files it vouches for are
+//!   there, readers can bound a read by the recorded size and check what they read, and
+//!   `penumbra verify` can check every file;
 //! - `trash/`: folders replaced by a commit, removed right after it.
 
 use std::io::Write as _;
@@ -19,6 +21,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::fsio::{self, list_files, remove_tree, sync_dir, write_atomic_bytes};
+use super::index::IndexEntry;
 use super::lock::{CommitLock, WriteLock, STATE_DIR};
 use super::Product;
 use crate::error::{Error, IoContext, Result};
@@ -215,10 +218,10 @@ impl Writer {
         let Ok(bytes) = fsio::read_capped(&path, 1 << 30, "an index") else {
             return false;
         };
-        let Ok(files) = serde_json::from_slice::<Vec<(String, u64)>>(&bytes) else {
+        let Ok(files) = serde_json::from_slice::<Vec<IndexEntry>>(&bytes) else {
             return false;
         };
-        files.iter().all(|(rel, len)| {
+        files.iter().all(|IndexEntry(rel, len, _)| {
             std::fs::metadata(self.dir.join(rel)).is_ok_and(|m| m.is_file() && m.len() == *len)
         })
     }
@@ -348,6 +351,7 @@ impl Writer {
                     removes.push(d.to_string());
                 }
             }
+            let files = hash_files(&staging.root, files)?;
             let json = serde_json::to_vec(&files).expect("index serialises");
             write_atomic_bytes(&index_dir.join(format!("{}.json", p.name())), &json)?;
             indexes.push(p.name().to_string());
@@ -466,6 +470,21 @@ impl Drop for Writer {
             let _ = std::fs::remove_dir_all(self.state());
         }
     }
+}
+
+/// The index entries of staged files (`rel`, size): each file's blake3, hashed in parallel.
+fn hash_files(root: &Path, files: Vec<(String, u64)>) -> Result<Vec<IndexEntry>> {
+    use rayon::prelude::*;
+    files
+        .into_par_iter()
+        .map(|(rel, len)| {
+            let p = root.join(&rel);
+            let f = std::fs::File::open(&p).at(&p)?;
+            let mut h = blake3::Hasher::new();
+            h.update_reader(f).at(&p)?;
+            Ok(IndexEntry(rel, len, h.finalize().to_hex().to_string()))
+        })
+        .collect()
 }
 
 /// A list of plain names in an unlisted product's manifest entry (`dirs`, `reads`); the

@@ -4,7 +4,7 @@
 //! no benchmark drivers.
 //!
 //! One module per benchmark: [`tiling`], [`mip`], [`codec`] (also `exr-crate-rewrite`),
-//! [`mip_memory`], [`far`] (`far-field`), [`horizon`], [`shadows`], [`fourier`]. What they
+//! [`mip_memory`], [`far`] (`far-field`), [`horizon`], [`shadows`], [`fourier`], [`integrity`]. What they
 //! share is below them: [`common`] (scratch folder, the `penumbra` binary and GNU time, best-of
 //! timing, thread pools, pseudo-random pixels, radii) and [`cases`] (the DEM blocks fourier and
 //! shadows measure on); neither imports a benchmark, and no benchmark imports another. This file
@@ -16,6 +16,7 @@ mod common;
 mod far;
 mod fourier;
 mod horizon;
+mod integrity;
 mod mip;
 mod mip_memory;
 mod shadows;
@@ -56,6 +57,23 @@ pub enum BenchCommand {
         /// Scratch folder for outputs (removed afterwards).
         #[arg(long)]
         work: Option<PathBuf>,
+        #[arg(long)]
+        markdown: bool,
+        #[arg(long)]
+        json: bool,
+    },
+    /// What the files' identities, index hashes and bounded reads cost (issue 41): `verify` on
+    /// the LDEM_4 4-level tileset, and the checks' share of the mip and horizon stages.
+    Integrity {
+        /// Folder holding the shared DEMs.
+        #[arg(long, default_value = "../shared/data")]
+        data: PathBuf,
+        /// Scratch folder for the LDEM_4 tileset (removed afterwards).
+        #[arg(long)]
+        work: Option<PathBuf>,
+        /// Repetitions per measurement (the best is reported).
+        #[arg(long, default_value_t = 5)]
+        reps: usize,
         #[arg(long)]
         markdown: bool,
         #[arg(long)]
@@ -321,6 +339,13 @@ fn dispatch(cmd: BenchCommand, quiet: bool) -> Result<()> {
             markdown,
             json,
         } => crate::tiling::run_tiling(data, work, markdown, json, quiet),
+        BenchCommand::Integrity {
+            data,
+            work,
+            reps,
+            markdown,
+            json,
+        } => crate::integrity::run(&data, work, reps.max(1), markdown, json, quiet),
         BenchCommand::Mip {
             data,
             work,

@@ -172,6 +172,16 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Check every file of a tileset against its index (present, a regular file inside the
+    /// tileset, the recorded size and blake3) and its identity (the product, tile and run it
+    /// says it is). Exit 0: every file sound; 1: a table (or `--json`) of the files that are
+    /// not; 2: the tileset cannot be opened.
+    Verify {
+        /// Tileset folder.
+        dir: PathBuf,
+        #[arg(long)]
+        json: bool,
+    },
     /// Ask a tileset about one point.
     #[command(subcommand)]
     Query(QueryCommand),
@@ -906,6 +916,13 @@ fn run(cli: Cli) -> Result<()> {
             }
         }
         Command::Info { dir, json } => output::print_info(&dir, json)?,
+        Command::Verify { dir, json } => {
+            let r = penumbra::tileset::verify::verify(&dir)?;
+            output::print_verify(&r, json)?;
+            if !r.clean() {
+                std::process::exit(1);
+            }
+        }
         Command::Query(QueryCommand::Height {
             dir,
             lat,

@@ -493,6 +493,51 @@ pub fn print_mip_answer(a: &MipAnswer, json: bool) -> Result<()> {
     Ok(())
 }
 
+/// `penumbra verify`: per product what was checked, then one line per problem found.
+pub fn print_verify(r: &penumbra::tileset::verify::VerifyReport, json: bool) -> Result<()> {
+    if json {
+        return print_json(r);
+    }
+    let mut o = std::io::stdout().lock();
+    writeln!(
+        o,
+        "{:<10} {:>8} {:>12} {:>10} {:>8}",
+        "product", "files", "bytes", "identities", "problems"
+    )?;
+    for (name, s) in &r.products {
+        writeln!(
+            o,
+            "{:<10} {:>8} {:>12} {:>10} {:>8}",
+            name, s.files, s.bytes, s.identities, s.problems
+        )?;
+    }
+    writeln!(
+        o,
+        "{} files, {} bytes checked in {:.2} s: {}",
+        r.files,
+        r.bytes,
+        r.seconds,
+        if r.clean() {
+            "every file is what the tileset says it is".to_string()
+        } else {
+            format!("{} problems", r.findings.len())
+        }
+    )?;
+    if !r.clean() {
+        writeln!(o)?;
+        writeln!(o, "{:<12} {:<8} file: what is wrong", "problem", "product")?;
+        for f in &r.findings {
+            writeln!(
+                o,
+                "{:<12} {:<8} {}: {}",
+                f.problem, f.product, f.path, f.detail
+            )?;
+        }
+    }
+    o.flush()?;
+    Ok(())
+}
+
 pub fn print_info(dir: &Path, json: bool) -> Result<()> {
     let ts = Tileset::load(dir)?;
     if json {
