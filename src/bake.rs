@@ -92,6 +92,10 @@ pub struct BakeReport {
 /// Run the plan's stages on the tileset in `out` as a walk of the stage graph: each stage
 /// after the stages whose products it reads.
 pub fn bake(input: &Input, out: &Path, plan: &Plan, progress: &dyn Progress) -> Result<BakeReport> {
+    // Options alone are checked before any file is read or folder made.
+    if plan.stages.contains(&Stage::Tile) {
+        plan.tile.validate()?;
+    }
     // One writer for the whole bake: no other process can slip in between two stages. (A
     // folder this makes is removed again if the bake fails before its first commit.)
     let _writer = crate::tileset::writer::Writer::begin(out)?;
