@@ -606,6 +606,10 @@ struct BakeArgs {
     /// Write raw horizon maps beside the Fourier pyramids.
     #[arg(long, conflicts_with = "no_fourier")]
     keep_raw: bool,
+    /// When a later stage fails in a folder this bake created, keep what the earlier stages
+    /// committed (a valid tileset) instead of removing the folder.
+    #[arg(long)]
+    keep_partial: bool,
     #[command(flatten)]
     fourier: FourierFlags,
 }
@@ -681,6 +685,7 @@ fn run(cli: Cli) -> Result<()> {
                 fourier: None,
                 keep_raw: false,
                 horizon_level_at_most: None,
+                keep_partial: false,
             };
             let input = Input::Dem {
                 path: a.dem.clone(),
@@ -694,6 +699,7 @@ fn run(cli: Cli) -> Result<()> {
             let mut plan = Plan {
                 tile: a.flags.options()?,
                 mip: a.mip.options(a.flags.compression, a.flags.max_output_gib),
+                keep_partial: a.keep_partial,
                 ..Plan::default()
             };
             let levels = match (&a.horizon_levels, &a.dem) {
