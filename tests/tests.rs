@@ -27,6 +27,9 @@ mod mip;
 // Horizon maps: fast sweep against brute force, analytic terrains, stiff cases, the CLI.
 mod horizon;
 
+// tileset.json consistency: every field the docs call validated, refused by name (a table).
+mod manifest;
+
 // The tileset store and stage runner: one writer, kill -9 and resume, stale products, damaged
 // manifests.
 mod store;
