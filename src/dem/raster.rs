@@ -572,11 +572,27 @@ impl Dem {
     pub(crate) fn height_extremes(&self, shift: f64) -> HeightExtremes {
         let (scale, offset, nodata) = (self.p.scale, self.p.offset, self.p.nodata);
         let of_row = |r: usize| -> HeightExtremes {
-            let mut e = HeightExtremes::default();
+            // Plain locals in the loop (an Option per extreme cost 3× the pass); strict
+            // comparisons keep the first sample of the row on ties.
+            let (mut lo, mut hi, mut far) = (f64::INFINITY, f64::NEG_INFINITY, -1.0f64);
+            let (mut lc, mut hc, mut fc) = (usize::MAX, usize::MAX, usize::MAX);
             let mut see = |c: usize, v: f64| {
                 if v.is_finite() && nodata != Some(v) {
                     let h = v * scale + offset + shift;
-                    e.see(h, c, r);
+                    let a = if h.is_finite() {
+                        h.abs()
+                    } else {
+                        f64::INFINITY
+                    };
+                    if a > far {
+                        (far, fc) = (a, c);
+                    }
+                    if h < lo {
+                        (lo, lc) = (h, c);
+                    }
+                    if h > hi {
+                        (hi, hc) = (h, c);
+                    }
                 }
             };
             match &self.p.samples {
@@ -597,7 +613,25 @@ impl Dem {
                     for_each_dn(&map[at..at + self.p.width * ty.size()], *ty, *order, see);
                 }
             }
-            e
+            let at = |h: f64, col: usize| {
+                (col != usize::MAX).then_some(HeightAt {
+                    height_m: h,
+                    col,
+                    row: r,
+                })
+            };
+            // A non-finite farthest height is reported as the height it is.
+            let far_h = if fc == usize::MAX {
+                0.0
+            } else {
+                let v = self.dn(fc, r);
+                v * scale + offset + shift
+            };
+            HeightExtremes {
+                lowest: at(lo, lc),
+                highest: at(hi, hc),
+                farthest: at(far_h, fc),
+            }
         };
         use rayon::prelude::*;
         (0..self.p.height)
@@ -947,34 +981,6 @@ pub struct HeightExtremes {
 }
 
 impl HeightExtremes {
-    #[inline]
-    fn see(&mut self, h: f64, col: usize, row: usize) {
-        let at = HeightAt {
-            height_m: h,
-            col,
-            row,
-        };
-        // Within a row, samples come in file order: strict comparisons keep the first.
-        let far = |a: f64| {
-            if a.is_finite() {
-                a.abs()
-            } else {
-                f64::INFINITY
-            }
-        };
-        if self.farthest.is_none_or(|w| far(h) > far(w.height_m)) {
-            self.farthest = Some(at);
-        }
-        if h.is_finite() {
-            if self.lowest.is_none_or(|w| h < w.height_m) {
-                self.lowest = Some(at);
-            }
-            if self.highest.is_none_or(|w| h > w.height_m) {
-                self.highest = Some(at);
-            }
-        }
-    }
-
     /// Combine the extremes of two sets of rows, keeping the first in file order on ties.
     fn merge(a: Self, b: Self) -> Self {
         fn pick(

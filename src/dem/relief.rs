@@ -152,6 +152,11 @@ impl Dem {
         let shift = self.datum_radius_m().map_or(String::new(), |r0| {
             format!(", datum shift {} m", show(r0 - body.radius_m))
         });
+        let name = if data.as_os_str().is_empty() {
+            format!("the DEM ({})", self.format())
+        } else {
+            data.display().to_string()
+        };
         let also = if first != data {
             format!(" in {}", first.display())
         } else {
@@ -164,7 +169,7 @@ impl Dem {
                  column {}, row {} (DN {}{shift}), beyond {whose}. Check {}{also}, and that the \
                  DEM is of {} (radius {} m); if the terrain really reaches that far, allow the \
                  relief it covers (MIN,MAX in metres)",
-                data.display(),
+                name,
                 body.name,
                 if low { "lowest" } else { "highest" },
                 show(a.height_m),
@@ -196,4 +201,54 @@ pub fn check_allowed(body: &Body, lo: f64, hi: f64) -> Result<()> {
         ));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testutil::{global_georef as global, synthetic_dem as synthetic};
+
+    /// The extremes, with ties to the first sample in the file, and the relief refused or
+    /// allowed around them.
+    #[test]
+    fn extremes_and_relief() {
+        let (w, h) = (64, 32);
+        // 30 km peaks at (5, 3) and again at (40, 20); a −25 km pit at (7, 30) and (8, 30).
+        let dem = synthetic(w, h, global(w, h), |c, r| match (c, r) {
+            (5, 3) | (40, 20) => 30_000.0,
+            (7, 30) | (8, 30) => -25_000.0,
+            (1, 1) => f32::NAN,
+            _ => (c as f32) - (r as f32),
+        });
+        let e = dem.height_extremes(0.0);
+        let at = |a: Option<HeightAt>| a.map(|a| (a.height_m, a.col, a.row));
+        assert_eq!(at(e.highest), Some((30_000.0, 5, 3)));
+        assert_eq!(at(e.lowest), Some((-25_000.0, 7, 30)));
+        assert_eq!(at(e.farthest), Some((30_000.0, 5, 3)));
+        // The same answer on one thread (rows are reduced in no fixed order on many).
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        assert_eq!(one.install(|| dem.height_extremes(0.0)), e);
+
+        let moon = Body::preset("moon").unwrap();
+        let err = dem.check_for_body(&moon, None).unwrap_err().to_string();
+        assert!(
+            err.contains("allow_relief") && err.contains("-25000"),
+            "{err}"
+        );
+        dem.check_for_body(&moon, Some((-26_000.0, 31_000.0)))
+            .unwrap();
+        assert!(dem
+            .check_for_body(&moon, Some((-20_000.0, 31_000.0)))
+            .is_err());
+        // Ranges that are no relief.
+        for (lo, hi) in [(1.0, 0.0), (f64::NAN, 1.0), (-2e6, 0.0)] {
+            assert!(dem.check_for_body(&moon, Some((lo, hi))).is_err());
+        }
+        // Vesta (−44..44 km accepted) takes this terrain as it is.
+        dem.check_for_body(&Body::preset("vesta").unwrap(), None)
+            .unwrap();
+    }
 }
