@@ -64,6 +64,9 @@ pub struct Plan {
     /// Horizons at this level, or the finest when the tileset has fewer (the embedded scene's
     /// default), instead of `horizon.levels`.
     pub horizon_level_at_most: Option<u8>,
+    /// When a stage fails after earlier stages committed in a folder this bake created, keep
+    /// the folder (a valid tileset of the committed stages) instead of removing it.
+    pub keep_partial: bool,
 }
 
 impl Default for Plan {
@@ -76,6 +79,7 @@ impl Default for Plan {
             fourier: None,
             keep_raw: false,
             horizon_level_at_most: None,
+            keep_partial: false,
         }
     }
 }
@@ -91,9 +95,20 @@ pub struct BakeReport {
 
 /// Run the plan's stages on the tileset in `out` as a walk of the stage graph: each stage
 /// after the stages whose products it reads.
+///
+/// A stage that fails leaves the tileset as the stages before it committed it. When none had
+/// committed, the error is the stage's own (and a folder this bake made is gone). When some
+/// had, the error is [`Error::AfterCommit`], naming the failed stage, the committed ones and
+/// what became of the folder: removed when this bake created it (unless
+/// [`Plan::keep_partial`]), else kept, valid, with the committed stages' products.
 pub fn bake(input: &Input, out: &Path, plan: &Plan, progress: &dyn Progress) -> Result<BakeReport> {
+    // Options alone are checked before any file is read or folder made.
+    if plan.stages.contains(&Stage::Tile) {
+        plan.tile.validate()?;
+    }
     // One writer for the whole bake: no other process can slip in between two stages. (A
     // folder this makes is removed again if the bake fails before its first commit.)
+    let created = !out.exists();
     let _writer = crate::tileset::writer::Writer::begin(out)?;
     let tile = TileNode {
         input,
@@ -122,7 +137,23 @@ pub fn bake(input: &Input, out: &Path, plan: &Plan, progress: &dyn Progress) -> 
         mip: None,
         horizon: None,
     };
-    for ran in graph::walk(out, &nodes, progress)? {
+    let mut committed: Vec<&'static str> = Vec::new();
+    for i in graph::order(&nodes)? {
+        let ran = match nodes[i].run(out, &Select::All, progress) {
+            Ok(r) => r,
+            Err(e) if committed.is_empty() => return Err(e),
+            Err(e) => {
+                return Err(after_commit(
+                    out,
+                    created,
+                    plan.keep_partial,
+                    nodes[i],
+                    &committed,
+                    e,
+                ))
+            }
+        };
+        committed.push(nodes[i].name());
         match ran {
             Ran::Tile(r) => report.tile = Some(r),
             Ran::Mip(r) => report.mip = Some(r),
@@ -131,6 +162,47 @@ pub fn bake(input: &Input, out: &Path, plan: &Plan, progress: &dyn Progress) -> 
         }
     }
     Ok(report)
+}
+
+/// The error of stage `failed` after the stages `committed` had committed in `out`; removes
+/// `out` when this bake `created` it and the caller did not ask to `keep_partial`.
+fn after_commit(
+    out: &Path,
+    created: bool,
+    keep_partial: bool,
+    failed: &dyn Node,
+    committed: &[&'static str],
+    source: Error,
+) -> Error {
+    let done = committed.join(", ");
+    let outcome =
+        if created && !keep_partial {
+            match crate::fsio::remove_tree(out) {
+                Ok(()) => format!(
+                    "removed {}, which this bake created (keep_partial keeps what the committed \
+                 stages wrote)",
+                    out.display()
+                ),
+                Err(e) => format!(
+                    "could not remove {}, which this bake created ({e}): remove it by hand",
+                    out.display()
+                ),
+            }
+        } else {
+            format!(
+            "kept {}{} as {done} left it: a valid tileset, whose {} products (if any) are those \
+             from before this bake; a rerun resumes from there",
+            out.display(),
+            if created { ", which this bake created," } else { "" },
+            failed.name()
+        )
+        };
+    Error::AfterCommit {
+        stage: failed.name(),
+        committed: done,
+        outcome,
+        source: Box::new(source),
+    }
 }
 
 /// The tiling stage as a node of the graph: it makes the tileset from a DEM or the embedded

@@ -80,7 +80,24 @@ const PRESETS: &[Preset] = &[
     },
 ];
 
+/// Margin added on each side of a body's known relief ([`Body::relief_m`]) before a DEM's
+/// heights are refused as implausible, as a fraction of the relief's span (bottom to top): half
+/// the span, so that the Moon's −9.2..10.8 km accepts −19.2..20.8 km, Mars's −8.3..21.3 km
+/// accepts −23.1..36.1 km and Earth's −11..8.9 km accepts −20.95..18.85 km. Wide enough for heights
+/// given on another reference (Mars's poles lie 20 km below its equatorial sphere) and far below
+/// the audit's nonsense (+62 km lunar peaks from a tripled scale, ±32.7 km from int16 garbage,
+/// −1667 km from a lunar datum on Mars). docs/formats.md, "Relief of the body".
+pub const RELIEF_MARGIN: f64 = 0.5;
+
 impl Body {
+    /// The heights (m above the sphere) a DEM of this body may reach without being asked for:
+    /// [`Body::relief_m`] widened by [`RELIEF_MARGIN`] of its span on each side.
+    pub fn relief_accepted_m(&self) -> (f64, f64) {
+        let (lo, hi) = self.relief_m;
+        let m = RELIEF_MARGIN * (hi - lo).abs();
+        (lo - m, hi + m)
+    }
+
     /// Names accepted by [`Body::preset`].
     pub fn preset_names() -> Vec<&'static str> {
         PRESETS.iter().map(|p| p.name).collect()
@@ -164,5 +181,17 @@ mod tests {
         );
         assert!(Body::custom("x", -1.0).is_err());
         assert!(Body::resolve(None, None).is_err());
+    }
+
+    /// The accepted ranges quoted in the docs (docs/formats.md, "Relief of the body").
+    #[test]
+    fn accepted_relief() {
+        let r = |n: &str| Body::preset(n).unwrap().relief_accepted_m();
+        assert_eq!(r("moon"), (-19_200.0, 20_800.0));
+        assert_eq!(r("mars"), (-23_100.0, 36_100.0));
+        assert_eq!(r("earth"), (-20_950.0, 18_850.0));
+        // A custom body: ±10 % of the radius, widened to ±20 %.
+        let c = Body::custom("x", 10_000.0).unwrap().relief_accepted_m();
+        assert_eq!(c, (-2_000.0, 2_000.0));
     }
 }

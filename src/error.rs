@@ -28,6 +28,18 @@ pub enum Error {
     /// the library (`near_px`, `tile_size`); a front end shows it as its own flag.
     #[error("{param} {msg}")]
     Param { param: &'static str, msg: String },
+    /// A run of several stages (`bake`) failed after some of them committed: the stage that
+    /// failed, those that had committed, and what became of the tileset (kept as the committed
+    /// stages left it, or removed because the run created it); `source` says why the stage
+    /// failed.
+    #[error("the {stage} stage failed after {committed} committed; {outcome}")]
+    AfterCommit {
+        stage: &'static str,
+        committed: String,
+        outcome: String,
+        #[source]
+        source: Box<Error>,
+    },
 }
 
 impl Error {

@@ -31,7 +31,27 @@ pub fn write_staged(
     path: &Path,
     write: impl FnOnce(&mut std::fs::File) -> Result<()>,
 ) -> Result<()> {
+    if let Some(e) = injected_disk_full(path) {
+        return Err(Error::io(path, e));
+    }
     write_renamed(path, boot_id().is_none(), write)
+}
+
+/// Test hook for the failure paths of multi-stage runs (`tests/cli.rs`, disk full during
+/// `bake`): with `PENUMBRA_TEST_DISK_FULL=<stage>` in the environment, every file staged below
+/// `staging/<stage>/` fails as a full disk does (ENOSPC), before anything is written. Read once
+/// per process; unset, it costs one comparison per staged file.
+fn injected_disk_full(path: &Path) -> Option<std::io::Error> {
+    static STAGE: std::sync::OnceLock<Option<String>> = std::sync::OnceLock::new();
+    let stage = STAGE.get_or_init(|| std::env::var("PENUMBRA_TEST_DISK_FULL").ok());
+    let stage = stage.as_deref()?;
+    let mut parts = path.components().map(|c| c.as_os_str());
+    parts
+        .any(|c| c == "staging")
+        .then(|| parts.next())
+        .flatten()
+        .is_some_and(|s| s == stage)
+        .then(|| std::io::Error::from_raw_os_error(28))
 }
 
 fn write_renamed(

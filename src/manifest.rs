@@ -12,6 +12,7 @@ use crate::dem::{GeoRef, Resampling};
 use crate::error::{IoContext, Result};
 use crate::layout::{Layout, TileId};
 
+pub mod consistency;
 pub mod validate;
 
 // Each product's entry is defined with its file format (`crate::format`); the manifest gathers

@@ -40,18 +40,12 @@ pub struct StageSpec {
 /// The run key of a stage: the tool version, the stage's format, the run keys of the products
 /// it reads and its parameters. Equal keys mean identical output.
 pub fn run_key(spec: &StageSpec, inputs: &[&str], params: &[&[u8]]) -> String {
-    let mut h = blake3::Hasher::new();
-    h.update(env!("CARGO_PKG_VERSION").as_bytes());
-    for f in spec.format.iter() {
-        h.update(f.as_bytes());
-    }
-    for k in inputs {
-        h.update(k.as_bytes());
-    }
-    for p in params {
-        h.update(p);
-    }
-    h.finalize().to_hex().to_string()
+    crate::manifest::consistency::run_key_of(
+        env!("CARGO_PKG_VERSION"),
+        &spec.format,
+        inputs,
+        params,
+    )
 }
 
 /// A run under way.

@@ -92,6 +92,12 @@ pub struct TileOptions {
     /// the run's identity: it changes no byte of the output).
     #[serde(skip)]
     pub max_output_gib: f64,
+    /// Heights (m above the body's sphere, `(min, max)`) the caller says the terrain really
+    /// reaches, instead of the body's known relief with its margin
+    /// ([`crate::body::Body::relief_accepted_m`]): the plausibility check then refuses only
+    /// heights outside this range. Not part of the run's identity: it changes no byte.
+    #[serde(skip)]
+    pub allow_relief_m: Option<(f64, f64)>,
 }
 
 impl Default for TileOptions {
@@ -107,6 +113,7 @@ impl Default for TileOptions {
             max_fill_px: crate::dem::DEFAULT_MAX_FILL_PX,
             albedo: None,
             max_output_gib: runner::DEFAULT_MAX_OUTPUT_GIB,
+            allow_relief_m: None,
         }
     }
 }
@@ -132,6 +139,17 @@ impl TileOptions {
                     self.tile_size / 2 - 1
                 ),
             ));
+        }
+        if let Some((lo, hi)) = self.allow_relief_m {
+            if !(lo.is_finite() && hi.is_finite() && lo < hi && lo >= -1e9 && hi <= 1e9) {
+                return Err(Error::param(
+                    "allow_relief",
+                    format!(
+                        "{lo},{hi} is not a relief: give MIN,MAX in metres above the body's \
+                         sphere, finite, MIN < MAX, within ± the body's radius"
+                    ),
+                ));
+            }
         }
         if let Some(l) = self.levels {
             if l == 0 || l > MAX_LEVELS {
@@ -220,9 +238,9 @@ pub fn tile_dem(
         levels,
     };
     let height_shift = dem.datum_radius_m().map_or(0.0, |r0| r0 - radius);
-    // Implausible input (heights, pixel size, datum for this body) is refused before `out`
-    // is touched.
-    dem.check_plausible(radius)?;
+    // Implausible input (heights, relief, pixel size, datum for this body) is refused before
+    // `out` is touched.
+    dem.check_for_body(body, opts.allow_relief_m)?;
 
     // Identity of this run.
     let mut files = Vec::new();

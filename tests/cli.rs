@@ -185,3 +185,79 @@ fn bad_input_exits_2_and_writes_nothing() {
     assert_eq!(e.status.code(), Some(2));
     assert!(stderr(&e).contains("tileset.json"), "{}", stderr(&e));
 }
+
+/// A `bake` whose mip stage fails on a full disk after tiling committed (the failure injected
+/// by `PENUMBRA_TEST_DISK_FULL`, `fsio::write_staged`): exit 2, a message naming the failed
+/// stage, the committed one and what became of the folder. A folder the bake created is
+/// removed, or kept with `--keep-partial`; an existing tileset is kept, valid, with the stages
+/// that committed. Issue 41.
+#[test]
+fn bake_failing_after_a_commit_says_what_it_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let bake = |out: &Path, extra: &[&str], full: Option<&str>| {
+        let mut c = penumbra_bin();
+        c.args([
+            "--threads",
+            "1",
+            "bake",
+            "--scene-size",
+            "1024",
+            "--tile-size",
+            "64",
+        ])
+        .args(["--levels", "3", "--no-horizons", "--out"])
+        .arg(out)
+        .args(extra);
+        if let Some(stage) = full {
+            c.env("PENUMBRA_TEST_DISK_FULL", stage);
+        }
+        let o = c.output().unwrap();
+        (o.status.code(), stderr(&o))
+    };
+    let full = "No space left on device";
+
+    // A folder the bake made: removed.
+    let out = dir.path().join("new");
+    let (code, e) = bake(&out, &[], Some("mip"));
+    assert_eq!(code, Some(2), "{e}");
+    for w in [
+        "the mip stage failed after tile committed",
+        "removed",
+        "created",
+        full,
+    ] {
+        assert!(e.contains(w), "'{w}' not in {e}");
+    }
+    assert!(!e.contains("panicked"), "{e}");
+    assert!(!out.exists(), "{e}");
+
+    // The same with --keep-partial: the tiles stay, a valid tileset without mipmaps.
+    let (code, e) = bake(&out, &["--keep-partial"], Some("mip"));
+    assert_eq!(code, Some(2), "{e}");
+    assert!(e.contains("kept") && e.contains(full), "{e}");
+    let info = json(&run(&["info", out.to_str().unwrap(), "--json"]));
+    assert!(info.to_string().contains("height"), "{info}");
+    assert!(!out.join("maxmip").exists() && !out.join(".penumbra/staging/mip").exists());
+    // A rerun with room resumes: tiling is up to date, the mipmaps are made.
+    let (code, e) = bake(&out, &[], None);
+    assert_eq!(code, Some(0), "{e}");
+    assert!(out.join("maxmip").is_dir());
+
+    // An existing tileset: kept as the committed stages left it, whatever --keep-partial says.
+    let before = crate::util::snapshot(&out);
+    let (code, e) = bake(&out, &["--precision", "f16"], Some("mip"));
+    assert_eq!(code, Some(2), "{e}");
+    assert!(
+        e.contains("kept") && e.contains("the mip stage failed"),
+        "{e}"
+    );
+    assert!(out.join("tileset.json").is_file());
+    let after = crate::util::snapshot(&out);
+    let heights = |s: &std::collections::BTreeMap<String, Vec<u8>>| {
+        s.iter()
+            .filter(|(k, _)| k.starts_with("height/"))
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(heights(&before), heights(&after));
+}

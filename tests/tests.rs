@@ -15,6 +15,9 @@ mod cli;
 mod readers;
 // Real DEMs tiled and queried at landmarks (skipped without ../shared/data).
 mod realdata;
+// The audit's nonsense DEMs (relief beyond the body, contradictory labels): exit 2 by key, or
+// tiled only with --allow-relief (skipped without ../shared/data).
+mod relief;
 // Hundreds of damaged crops of the real DEMs through `penumbra tile`: exit 0 or 2, old tileset kept.
 mod corpus;
 // The EXR codec against independent readers (OpenEXR's Python bindings, the exr crate).
@@ -23,6 +26,9 @@ mod codec;
 mod mip;
 // Horizon maps: fast sweep against brute force, analytic terrains, stiff cases, the CLI.
 mod horizon;
+
+// tileset.json consistency: every field the docs call validated, refused by name (a table).
+mod manifest;
 
 // The tileset store and stage runner: one writer, kill -9 and resume, stale products, damaged
 // manifests.

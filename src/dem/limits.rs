@@ -38,6 +38,12 @@ pub const MAX_OFFSET_M: f64 = MAX_RADIUS_M;
 pub const MAX_POLAR_COLAT_DEG: f64 = 150.0;
 /// An equirectangular true-scale latitude must leave a usable longitude scale.
 pub const MAX_LAT_TS_DEG: f64 = 89.0;
+/// Pixels may be at most this many times longer than wide (or wider than long) on the ground;
+/// a geographic raster passes when either its spacing in degrees or its pixels at its latitude
+/// nearest the equator are within this ratio (rasters square in degrees near a pole, and
+/// rasters square on the ground at high latitude, both pass). Beyond it the spacing keys
+/// contradict each other (a 57:1 GeoTIFF pixel scale).
+pub const MAX_PIXEL_ASPECT: f64 = 10.0;
 /// Relative slack on comparisons of grid positions with the limits (rounding in the files).
 const SLACK: f64 = 1e-9;
 
@@ -171,6 +177,15 @@ pub fn scale_offset(
              1e-9 .. 1e9 m per DN (check the unit and the exponent)",
         ));
     }
+    if scale < 0.0 {
+        return Err(bad(
+            path,
+            scale_field,
+            scale,
+            "is negative: it would turn the terrain upside down (peaks into pits). Heights \
+             are DN × scale + offset metres, up positive; give a positive scale",
+        ));
+    }
     let top = scale.abs() * max_dn(ty.unwrap_or(SampleType::F32));
     if !top.is_finite() {
         return Err(bad(
@@ -251,6 +266,19 @@ pub fn check_georef(path: &Path, g: &GeoRef, w: usize, h: usize, keys: &str) -> 
             radius_m,
         } => {
             crs_params(path, radius_m, lon0_deg, lat_ts_deg, MAX_LAT_DEG)?;
+            if (north && lat_ts_deg < 0.0) || (!north && lat_ts_deg > 0.0) {
+                return Err(bad(
+                    path,
+                    "crs lat_ts_deg (GeoTIFF ProjStdParallel1 3078)",
+                    lat_ts_deg,
+                    &format!(
+                        "is a true-scale latitude in the other hemisphere from the projection's \
+                         {} pole (crs north = {north}; GeoTIFF: the origin latitude's sign): \
+                         one of the two is wrong",
+                        if north { "north" } else { "south" }
+                    ),
+                ));
+            }
             projected_pixels(path, g, radius_m, keys)?;
             // The farthest pixel centre from the pole is a corner of the grid.
             let pole = if north { 90.0 } else { -90.0 };
@@ -300,6 +328,29 @@ pub fn check_georef(path: &Path, g: &GeoRef, w: usize, h: usize, keys: &str) -> 
             )));
         }
     }
+    let ratio = |a: f64| if a >= 1.0 { a } else { 1.0 / a };
+    let deg_ratio = ratio(g.dx.abs() / g.dy.abs());
+    let ground_ratio = match (&g.crs, cyl) {
+        (Crs::Geographic, Some((lat_a, lat_b, _, _))) => {
+            let (a, b) = (lat_a.clamp(-90.0, 90.0), lat_b.clamp(-90.0, 90.0));
+            let nearest = if a.signum() != b.signum() {
+                0.0
+            } else {
+                a.abs().min(b.abs())
+            };
+            ratio(g.dx.abs() * nearest.to_radians().cos() / g.dy.abs())
+        }
+        _ => deg_ratio,
+    };
+    if deg_ratio.min(ground_ratio) > MAX_PIXEL_ASPECT {
+        return Err(placed(format!(
+            "has pixels {:.1} times longer one way than the other (dx {}, dy {}): more than \
+             {MAX_PIXEL_ASPECT}:1, so the spacing keys contradict each other",
+            deg_ratio.min(ground_ratio),
+            show(g.dx),
+            show(g.dy)
+        )));
+    }
     Ok(())
 }
 
@@ -341,6 +392,87 @@ mod tests {
             dx: d,
             dy: d,
         }
+    }
+
+    /// Pixels beyond [`MAX_PIXEL_ASPECT`]:1 are refused; square-in-degrees caps near a pole and
+    /// ground-square high-latitude rasters (dx = dy / cos φ) pass.
+    #[test]
+    fn pixel_aspect() {
+        let p = Path::new("x");
+        let g = |x0: f64, y0: f64, dx: f64, dy: f64, crs: Crs| GeoRef {
+            crs,
+            x0,
+            y0,
+            dx,
+            dy,
+        };
+        let ok = |g: GeoRef, w, h| check_georef(p, &g, w, h, "k").is_ok();
+        assert!(ok(g(0.0, 89.9, 0.1, 0.1, Crs::Geographic), 3600, 50));
+        // 85..90°N, 11.5:1 in degrees: square on the ground at 85°.
+        assert!(ok(g(0.0, 89.95, 1.15, 0.1, Crs::Geographic), 300, 50));
+        // The same spacing at the equator is 11.5:1 on the ground: refused.
+        assert!(!ok(g(0.0, 2.45, 1.15, 0.1, Crs::Geographic), 300, 50));
+        assert!(!ok(g(0.0, 10.0, 0.1, 5.7, Crs::Geographic), 10, 3));
+        let polar = Crs::PolarStereographic {
+            north: false,
+            lon0_deg: 0.0,
+            lat_ts_deg: -90.0,
+            radius_m: 1_737_400.0,
+        };
+        assert!(ok(g(-640.0, 640.0, 5.0, 5.0, polar.clone()), 256, 256));
+        assert!(ok(g(-640.0, 640.0, 50.0, 5.0, polar.clone()), 25, 256));
+        let e = check_georef(
+            p,
+            &g(-640.0, 640.0, 285.0, 5.0, polar),
+            4,
+            256,
+            "ModelPixelScale",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("ModelPixelScale") && e.contains("57.0 times"),
+            "{e}"
+        );
+    }
+
+    /// A polar stereographic true-scale latitude in the other hemisphere, and a negative
+    /// scale, are refused by name.
+    #[test]
+    fn hemisphere_and_sign() {
+        let p = Path::new("x");
+        for (north, lat_ts, ok) in [
+            (false, -90.0, true),
+            (false, -71.0, true),
+            (false, 0.0, true),
+            (false, 90.0, false),
+            (true, 90.0, true),
+            (true, -71.0, false),
+        ] {
+            let g = GeoRef {
+                crs: Crs::PolarStereographic {
+                    north,
+                    lon0_deg: 0.0,
+                    lat_ts_deg: lat_ts,
+                    radius_m: 1_737_400.0,
+                },
+                x0: -1000.0,
+                y0: 1000.0,
+                dx: 20.0,
+                dy: 20.0,
+            };
+            let r = check_georef(p, &g, 100, 100, "k");
+            assert_eq!(r.is_ok(), ok, "{north} {lat_ts}: {r:?}");
+            if let Err(e) = r {
+                assert!(e.to_string().contains("lat_ts_deg"), "{e}");
+            }
+        }
+        let e = scale_offset(p, ("SCALING_FACTOR", -1.0), ("OFFSET", 0.0), None).unwrap_err();
+        assert!(
+            e.to_string().contains("SCALING_FACTOR = -1 is negative"),
+            "{e}"
+        );
+        assert!(scale_offset(p, ("scale", 0.5), ("offset", -10.0), None).is_ok());
     }
 
     #[test]

@@ -18,12 +18,13 @@ pub mod limits;
 pub mod pds3;
 mod raster;
 pub mod raw;
+pub mod relief;
 pub mod sidecar;
 pub mod srtm;
 pub(crate) mod types;
 
 pub(crate) use self::raster::floor_fast;
-pub use self::raster::Dem;
+pub use self::raster::{Dem, HeightAt, HeightExtremes};
 pub use self::types::*;
 
 use std::path::Path;

@@ -877,7 +877,34 @@ fn interpret(label_path: &Path, given: &Path, root: &Node) -> Result<DemParts> {
         ));
     }
 
-    // Values.
+    // Trailing bytes: a file may carry other objects after the image, but not more than the
+    // image itself (a file 240 times its label's size is another file, or the label is wrong).
+    let image_bytes = need - data_offset as u128;
+    if file_len as u128 > need + image_bytes.max(1 << 20) {
+        return Err(Error::invalid(
+            &data_path,
+            format!(
+                "the file is {file_len} bytes but label {} says the image ends at byte {need} \
+                 (^IMAGE, LINES = {lines}, LINE_SAMPLES = {samples}, SAMPLE_BITS = {bits}): more \
+                 than the image's size again beyond it. The label's sizes or ^IMAGE are wrong, \
+                 or the label belongs to another file",
+                label_path.display()
+            ),
+        ));
+    }
+
+    // Values. A key present with an empty value is refused (it is not "absent").
+    for key in ["SCALING_FACTOR", "OFFSET"] {
+        if let Some(v) = image.get(key) {
+            if c.scalar(key, v)?.0.trim().is_empty() {
+                return Err(c.invalid(format!(
+                    "{key} = \"\" is empty: give its value, or remove the key for the default \
+                     ({})",
+                    if key == "OFFSET" { "0" } else { "1" }
+                )));
+            }
+        }
+    }
     let unit_factor = match c.text(image, "UNIT")? {
         None => 1.0,
         Some(u) => match length_factor(Some(&u), 1.0) {

@@ -446,8 +446,9 @@ impl Dem {
     /// * a measured sample whose height above the body's sphere — `DN · scale + offset`, plus
     ///   the datum shift `datum_radius − radius_m` — is not finite or beyond ±`radius_m`.
     ///
-    /// Reads every sample once (in parallel by rows); voids are skipped.
-    pub fn check_plausible(&self, radius_m: f64) -> Result<()> {
+    /// Reads every sample once (in parallel by rows); voids are skipped. Returns the extremes
+    /// of the heights it found (the datum shift included).
+    pub fn check_plausible(&self, radius_m: f64) -> Result<HeightExtremes> {
         let first = self.p.sources.first().cloned().unwrap_or_default();
         let data = self.p.sources.last().cloned().unwrap_or_default();
         let see = "see docs/formats.md, \"Plausibility limits\"";
@@ -529,60 +530,14 @@ impl Dem {
             }
         }
 
-        // One pass over the samples: the measured height farthest from the sphere.
-        let (scale, offset, nodata) = (self.p.scale, self.p.offset, self.p.nodata);
-        let worst_of_row = |r: usize| -> (f64, usize, usize) {
-            let (mut wm, mut wc) = (-1.0f64, 0usize);
-            let mut see = |c: usize, v: f64| {
-                if v.is_finite() && nodata != Some(v) {
-                    let h = v * scale + offset + shift;
-                    let m = if h.is_finite() {
-                        h.abs()
-                    } else {
-                        f64::INFINITY
-                    };
-                    if m > wm {
-                        (wm, wc) = (m, c);
-                    }
-                }
-            };
-            match &self.p.samples {
-                Samples::Owned(v) => {
-                    let row = &v[r * self.p.width..(r + 1) * self.p.width];
-                    for (c, &x) in row.iter().enumerate() {
-                        see(c, x as f64);
-                    }
-                }
-                Samples::Mapped {
-                    map,
-                    offset,
-                    row_stride,
-                    ty,
-                    order,
-                } => {
-                    let at = offset + r * row_stride;
-                    for_each_dn(&map[at..at + self.p.width * ty.size()], *ty, *order, see);
-                }
-            }
-            (wm, wc, r)
-        };
-        // The largest |height|; ties go to the first sample in the file (deterministic).
-        let pick = |a: (f64, usize, usize), b: (f64, usize, usize)| {
-            if b.0 > a.0 || (b.0 == a.0 && (b.2, b.1) < (a.2, a.1)) {
-                b
-            } else {
-                a
-            }
-        };
-        use rayon::prelude::*;
-        let (m, c, r) = (0..self.p.height)
-            .into_par_iter()
-            .map(worst_of_row)
-            .reduce(|| (-1.0, 0, 0), pick);
-        let worst = (m >= 0.0).then_some((m, c, r));
-        if let Some((m, c, r)) = worst {
-            if !(m.is_finite() && m <= radius_m) {
+        // One pass over the samples: the measured height farthest from the sphere, and the
+        // lowest and highest (for the relief check, [`Dem::check_for_body`]).
+        let ext = self.height_extremes(shift);
+        if let Some(w) = ext.farthest {
+            if !(w.height_m.is_finite() && w.height_m.abs() <= radius_m) {
+                let (c, r) = (w.col, w.row);
                 let dn = self.dn(c, r);
+                let (scale, offset) = (self.p.scale, self.p.offset);
                 let h = dn * scale + offset + shift;
                 let also = if first != data {
                     format!(" and the scale/offset in {}", first.display())
@@ -606,7 +561,88 @@ impl Dem {
                 ));
             }
         }
-        Ok(())
+        Ok(ext)
+    }
+
+    /// The measured (non-void) samples' heights above the sphere, `DN · scale + offset +
+    /// shift`: the lowest, the highest and the farthest from zero (a non-finite height counts
+    /// as infinitely far), each with its pixel; ties go to the first sample in the file, so the
+    /// answer does not depend on the thread count. One pass over the samples, by rows in
+    /// parallel.
+    pub(crate) fn height_extremes(&self, shift: f64) -> HeightExtremes {
+        let (scale, offset, nodata) = (self.p.scale, self.p.offset, self.p.nodata);
+        let of_row = |r: usize| -> HeightExtremes {
+            // Plain locals in the loop (an Option per extreme cost 3× the pass); strict
+            // comparisons keep the first sample of the row on ties.
+            let (mut lo, mut hi, mut far) = (f64::INFINITY, f64::NEG_INFINITY, -1.0f64);
+            let (mut lc, mut hc, mut fc) = (usize::MAX, usize::MAX, usize::MAX);
+            let mut see = |c: usize, v: f64| {
+                if v.is_finite() && nodata != Some(v) {
+                    let h = v * scale + offset + shift;
+                    let a = if h.is_finite() {
+                        h.abs()
+                    } else {
+                        f64::INFINITY
+                    };
+                    if a > far {
+                        (far, fc) = (a, c);
+                    }
+                    if h < lo {
+                        (lo, lc) = (h, c);
+                    }
+                    if h > hi {
+                        (hi, hc) = (h, c);
+                    }
+                }
+            };
+            match &self.p.samples {
+                Samples::Owned(v) => {
+                    let row = &v[r * self.p.width..(r + 1) * self.p.width];
+                    for (c, &x) in row.iter().enumerate() {
+                        see(c, x as f64);
+                    }
+                }
+                Samples::Mapped {
+                    map,
+                    offset,
+                    row_stride,
+                    ty,
+                    order,
+                } => {
+                    let at = offset + r * row_stride;
+                    for_each_dn(&map[at..at + self.p.width * ty.size()], *ty, *order, see);
+                }
+            }
+            let at = |h: f64, col: usize| {
+                (col != usize::MAX).then_some(HeightAt {
+                    height_m: h,
+                    col,
+                    row: r,
+                })
+            };
+            // A non-finite farthest height is reported as the height it is.
+            let far_h = if fc == usize::MAX {
+                0.0
+            } else {
+                let v = self.dn(fc, r);
+                v * scale + offset + shift
+            };
+            HeightExtremes {
+                lowest: at(lo, lc),
+                highest: at(hi, hc),
+                farthest: at(far_h, fc),
+            }
+        };
+        use rayon::prelude::*;
+        (0..self.p.height)
+            .into_par_iter()
+            .map(of_row)
+            .reduce(HeightExtremes::default, HeightExtremes::merge)
+    }
+
+    /// The DN of a sample as stored (before scaling).
+    pub(crate) fn dn_at(&self, col: usize, row: usize) -> f64 {
+        self.dn(col, row)
     }
 
     /// Resolve a possibly out-of-range integer pixel to one inside the raster: wrap in
@@ -922,5 +958,62 @@ fn for_each_dn(bytes: &[u8], ty: SampleType, order: ByteOrder, mut f: impl FnMut
         SampleType::U32 => go!(u32, 4),
         SampleType::F32 => go!(f32, 4),
         SampleType::F64 => go!(f64, 8),
+    }
+}
+
+/// One measured sample's height above the sphere and where it is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HeightAt {
+    /// Metres above the body's sphere (the datum shift included); may be non-finite.
+    pub height_m: f64,
+    pub col: usize,
+    pub row: usize,
+}
+
+/// The extremes of a DEM's measured heights ([`Dem::height_extremes`]); `None` when every
+/// sample is a void.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct HeightExtremes {
+    pub lowest: Option<HeightAt>,
+    pub highest: Option<HeightAt>,
+    /// The height farthest from the sphere (non-finite heights first).
+    pub farthest: Option<HeightAt>,
+}
+
+impl HeightExtremes {
+    /// Combine the extremes of two sets of rows, keeping the first in file order on ties.
+    fn merge(a: Self, b: Self) -> Self {
+        fn pick(
+            a: Option<HeightAt>,
+            b: Option<HeightAt>,
+            better: impl Fn(f64, f64) -> bool,
+        ) -> Option<HeightAt> {
+            match (a, b) {
+                (Some(x), Some(y)) => {
+                    let first = |p: &HeightAt, q: &HeightAt| (p.row, p.col) < (q.row, q.col);
+                    if better(y.height_m, x.height_m)
+                        || (!better(x.height_m, y.height_m) && first(&y, &x))
+                    {
+                        Some(y)
+                    } else {
+                        Some(x)
+                    }
+                }
+                (x, None) => x,
+                (None, y) => y,
+            }
+        }
+        let far = |a: f64| {
+            if a.is_finite() {
+                a.abs()
+            } else {
+                f64::INFINITY
+            }
+        };
+        HeightExtremes {
+            lowest: pick(a.lowest, b.lowest, |p, q| p < q),
+            highest: pick(a.highest, b.highest, |p, q| p > q),
+            farthest: pick(a.farthest, b.farthest, |p, q| far(p) > far(q)),
+        }
     }
 }

@@ -4,6 +4,7 @@
 
 use std::path::Path;
 
+use super::consistency::{bad, within};
 use crate::error::{Error, Result};
 use crate::layout::MAX_LEVELS;
 use crate::manifest::{Tileset, FORMAT, FORMAT_VERSION, MANIFEST};
@@ -60,26 +61,11 @@ impl Tileset {
 /// Largest manifest read (a 24-level global tileset's coverage is a few MiB).
 pub const MAX_MANIFEST_BYTES: u64 = 64 << 20;
 
-const FIX: &str = "the manifest is damaged: restore it, or rerun `penumbra tile`/`bake` into a \
-                   fresh folder";
-
-fn bad(path: &Path, field: &str, msg: String) -> Error {
-    Error::invalid(path, format!("field `{field}`: {msg}; {FIX}"))
-}
-
 fn finite(path: &Path, field: &str, v: f64) -> Result<()> {
     if v.is_finite() {
         Ok(())
     } else {
         Err(bad(path, field, format!("{v} is not a finite number")))
-    }
-}
-
-fn within(path: &Path, field: &str, v: f64, lo: f64, hi: f64) -> Result<()> {
-    if v.is_finite() && (lo..=hi).contains(&v) {
-        Ok(())
-    } else {
-        Err(bad(path, field, format!("{v} is outside {lo}..={hi}")))
     }
 }
 
@@ -263,6 +249,8 @@ pub fn check(ts: &Tileset, path: &Path) -> Result<()> {
     let src = &ts.source;
     finite(path, "source.pixel_size_m", src.pixel_size_m)?;
     finite(path, "source.height_shift_m", src.height_shift_m)?;
+    // What the manifest says twice agrees, run keys are hashes, terrain numbers are ordered.
+    super::consistency::check(ts, path)?;
 
     let p = &ts.products;
     if let Some(h) = &p.height {

@@ -41,8 +41,19 @@ pub fn exit_code(name: &str, result: Result<()>) -> ExitCode {
                 return ExitCode::SUCCESS;
             }
             // The library names an out-of-range option by its field; show the flag instead.
+            let flag = |p: &str| p.replace('_', "-");
             if let Some(penumbra::Error::Param { param, msg }) = e.downcast_ref() {
-                eprintln!("{name}: error: --{} {msg}", param.replace('_', "-"));
+                eprintln!("{name}: error: --{} {msg}", flag(param));
+            } else if let Some(outer @ penumbra::Error::AfterCommit { source, .. }) =
+                e.downcast_ref()
+            {
+                // A later stage of a bake refused an option after earlier stages committed.
+                match source.as_ref() {
+                    penumbra::Error::Param { param, msg } => {
+                        eprintln!("{name}: error: {outer}: --{} {msg}", flag(param))
+                    }
+                    _ => eprintln!("{name}: error: {e:#}"),
+                }
             } else {
                 eprintln!("{name}: error: {e:#}");
             }

@@ -559,14 +559,38 @@ struct TileFlags {
         allow_hyphen_values = true
     )]
     max_output_gib: f64,
+    /// Heights MIN,MAX in metres above the body's sphere that the terrain really reaches, when
+    /// they go beyond the body's known relief and its margin (e.g. -20000,70000); without it
+    /// such a DEM is refused (docs/formats.md, "Relief of the body").
+    #[arg(long, value_name = "MIN,MAX", allow_hyphen_values = true)]
+    allow_relief: Option<String>,
     /// Print the report as JSON.
     #[arg(long)]
     json: bool,
 }
 
+/// MIN,MAX in metres.
+fn parse_relief(s: &str) -> Result<(f64, f64)> {
+    let bad = || {
+        Error::param(
+            "allow_relief",
+            format!("'{s}' is not two numbers MIN,MAX (metres above the body's sphere)"),
+        )
+    };
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| bad())?;
+    match v[..] {
+        [lo, hi] => Ok((lo, hi)),
+        _ => Err(bad().into()),
+    }
+}
+
 impl TileFlags {
-    fn options(&self) -> TileOptions {
-        TileOptions {
+    fn options(&self) -> Result<TileOptions> {
+        Ok(TileOptions {
             tile_size: self.tile_size,
             halo: self.halo,
             projection: self.projection,
@@ -577,7 +601,8 @@ impl TileFlags {
             max_fill_px: self.void_fill_px,
             albedo: self.albedo.clone().map(|p| (p, self.albedo_west)),
             max_output_gib: self.max_output_gib,
-        }
+            allow_relief_m: self.allow_relief.as_deref().map(parse_relief).transpose()?,
+        })
     }
 }
 
@@ -625,6 +650,10 @@ struct BakeArgs {
     /// Write raw horizon maps beside the Fourier pyramids.
     #[arg(long, conflicts_with = "no_fourier")]
     keep_raw: bool,
+    /// When a later stage fails in a folder this bake created, keep what the earlier stages
+    /// committed (a valid tileset) instead of removing the folder.
+    #[arg(long)]
+    keep_partial: bool,
     #[command(flatten)]
     fourier: FourierFlags,
 }
@@ -694,12 +723,13 @@ fn run(cli: Cli) -> Result<()> {
         Command::Tile(a) => {
             let plan = Plan {
                 stages: vec![Stage::Tile],
-                tile: a.flags.options(),
+                tile: a.flags.options()?,
                 mip: MipOptions::default(),
                 horizon: HorizonOptions::default(),
                 fourier: None,
                 keep_raw: false,
                 horizon_level_at_most: None,
+                keep_partial: false,
             };
             let input = Input::Dem {
                 path: a.dem.clone(),
@@ -711,8 +741,9 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Bake(a) => {
             let mut plan = Plan {
-                tile: a.flags.options(),
+                tile: a.flags.options()?,
                 mip: a.mip.options(a.flags.compression, a.flags.max_output_gib),
+                keep_partial: a.keep_partial,
                 ..Plan::default()
             };
             let levels = match (&a.horizon_levels, &a.dem) {

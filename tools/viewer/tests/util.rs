@@ -128,6 +128,7 @@ pub fn scene() -> &'static Path {
             fourier: Some(FourierOptions::default()),
             keep_raw: false,
             horizon_level_at_most: None,
+            keep_partial: false,
         };
         let spec = SceneSpec {
             size: 1024,
@@ -217,6 +218,7 @@ pub fn shoemaker() -> Option<&'static Path> {
             fourier: Some(FourierOptions::default()),
             keep_raw: false,
             horizon_level_at_most: None,
+            keep_partial: false,
         };
         // The GeoTIFF names no body; its projection is on the 1737.4 km Moon.
         let input = Input::Dem {
