@@ -466,8 +466,27 @@ fn finish(
 #[cfg(test)]
 mod tests {
     use super::super::geometry::lunar_context;
-    use super::super::method::{horizons, Method};
     use super::*;
+
+    /// The reference's planes (as `horizons(.., Method::Reference)`, which this module may not
+    /// import: the method module imports it).
+    fn reference_planes(ctx: &Context, rect: Rect, a: usize) -> Vec<f32> {
+        let plane = rect.w * rect.h;
+        let geo = pixel_geometry(ctx, rect);
+        let mut out = vec![0.0f32; plane * a];
+        for (k, dst) in out.chunks_mut(plane).enumerate() {
+            reference(
+                ctx,
+                rect,
+                plane_azimuth(k, a),
+                ctx.max_height(),
+                0.0,
+                &geo,
+                dst,
+            );
+        }
+        out
+    }
 
     /// Rough terrain: smooth waves plus 1-px noise, with a few holes (no data).
     fn rough(w: usize, h: usize, seed: u64, holes: bool) -> Vec<f32> {
@@ -502,13 +521,13 @@ mod tests {
                 h: 40,
             };
             let a = 24;
-            let want = horizons(&ctx, rect, a, Method::Reference);
+            let want = reference_planes(&ctx, rect, a);
             let run = |threads| {
                 rayon::ThreadPoolBuilder::new()
                     .num_threads(threads)
                     .build()
                     .unwrap()
-                    .install(|| horizons(&ctx, rect, a, Method::Sweep))
+                    .install(|| horizons_sweep(&ctx, rect, a))
             };
             let got = run(1);
             let again = run(3);
@@ -554,7 +573,7 @@ mod tests {
             w: 24,
             h: 20,
         };
-        let got = horizons(&ctx, rect, 16, Method::Sweep);
+        let got = horizons_sweep(&ctx, rect, 16);
         for v in got {
             assert!(v.abs() < 1e-4, "{v}");
         }
