@@ -44,6 +44,26 @@ fn reach_px(radius_m: f64, relief_m: f64, pixel_m: f64) -> usize {
     (2.0 * (2.0 * radius_m * relief_m.max(0.0)).sqrt() / pixel_m).ceil() as usize + 2
 }
 
+/// Pixel spacing of the peers' synthetic UTM DEMs (m).
+pub(crate) const PEER_PIXEL_M: f64 = 30.0;
+
+/// The peers' synthetic DEM (`h` × `w`, row-major) as a patch at the centre of face +X, on
+/// Earth's sphere at their 30 m spacing: there the gnomonic plane's scale error is below 1e-5
+/// over ~30 km.
+pub(crate) fn peer_context(h: usize, w: usize, heights: Vec<f32>) -> HzContext {
+    let s = (2.0 * EARTH_RADIUS_M / PEER_PIXEL_M).round();
+    let si = s as i64;
+    HzContext {
+        face: Face::Px,
+        face_pixels: s,
+        origin: ((si - w as i64) / 2, (si - h as i64) / 2),
+        width: w,
+        height: h,
+        heights,
+        radius_m: EARTH_RADIUS_M,
+    }
+}
+
 pub(crate) fn real_cases(
     data: &Path,
     block: usize,

@@ -9,10 +9,9 @@ use std::path::Path;
 use anyhow::{bail, Result};
 use serde::Serialize;
 
+use crate::cases::{peer_context, PEER_PIXEL_M};
 use crate::common::{best_of, in_pool, random_pixels, read_npy_f32, EARTH_RADIUS_M, MARS_RADIUS_M};
 
-/// Pixel spacing of the peers' synthetic UTM DEMs.
-const PEER_PIXEL_M: f64 = 30.0;
 /// Fritsch et al.'s Mars whole-body bake: 800 m/px, ≈150 CPU-hours.
 const MARS_PIXEL_M: f64 = 800.0;
 const MARS_HMIN_M: f64 = -8_200.0;
@@ -406,9 +405,7 @@ pub fn run_horizon(
     json: bool,
     quiet: bool,
 ) -> Result<()> {
-    use penumbra::horizon::{
-        horizons, horizons_reference_step, Context as HzContext, Method, Rect,
-    };
+    use penumbra::horizon::{horizons, horizons_reference_step, Method, Rect};
     use rayon::prelude::*;
     use std::time::Instant;
 
@@ -433,19 +430,8 @@ pub fn run_horizon(
         .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
             (lo.min(v), hi.max(v))
         });
-    // The projected DEM as a patch at the centre of face +X, where the gnomonic plane's scale
-    // error is below 1e-5 over ~30 km.
-    let s = (2.0 * EARTH_RADIUS_M / PEER_PIXEL_M).round();
-    let si = s as i64;
-    let ctx = HzContext {
-        face: penumbra::cube::Face::Px,
-        face_pixels: s,
-        origin: ((si - w as i64) / 2, (si - h as i64) / 2),
-        width: w,
-        height: h,
-        heights,
-        radius_m: EARTH_RADIUS_M,
-    };
+    let ctx = peer_context(h, w, heights);
+    let s = ctx.face_pixels;
     let threads = rayon::current_num_threads();
     let load1 = load_average();
     let plane = w * h;

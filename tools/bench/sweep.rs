@@ -10,8 +10,8 @@ use serde::Serialize;
 
 use penumbra::horizon::{horizons, Method, Rect};
 
-use crate::cases::real_cases;
-use crate::common::{in_pool, random_pixels, read_npy_f32, EARTH_RADIUS_M};
+use crate::cases::{peer_context, real_cases};
+use crate::common::{in_pool, random_pixels, read_npy_f32};
 
 /// Error of one method against a truth, over every finite pixel·azimuth.
 #[derive(Serialize, Clone)]
@@ -63,11 +63,17 @@ struct Row {
     error: Error,
 }
 
-/// `f()`, or what an earlier run stored under `key` in `$PENUMBRA_BENCH_CACHE` (a folder;
-/// development runs only: the truth takes minutes and does not change with the method).
-fn cached(key: &str, f: impl FnOnce() -> Result<Vec<f32>>) -> Result<Vec<f32>> {
+/// `f()` timed, or what an earlier run stored under `key` in `$PENUMBRA_BENCH_CACHE` (a
+/// folder; development runs only: the truth takes minutes and does not change with the
+/// method), whose time is then unknown (NaN).
+fn cached(key: &str, f: impl FnOnce() -> Result<Vec<f32>>) -> Result<(Vec<f32>, f64)> {
+    let timed = |f: Box<dyn FnOnce() -> Result<Vec<f32>> + '_>| -> Result<(Vec<f32>, f64)> {
+        let t0 = Instant::now();
+        let v = f()?;
+        Ok((v, t0.elapsed().as_secs_f64()))
+    };
     let Some(dir) = std::env::var_os("PENUMBRA_BENCH_CACHE") else {
-        return f();
+        return timed(Box::new(f));
     };
     let name: String = key
         .chars()
@@ -75,16 +81,17 @@ fn cached(key: &str, f: impl FnOnce() -> Result<Vec<f32>>) -> Result<Vec<f32>> {
         .collect();
     let path = Path::new(&dir).join(format!("{name}.f32"));
     if let Ok(b) = std::fs::read(&path) {
-        return Ok(b
+        let v = b
             .chunks_exact(4)
             .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect());
+            .collect();
+        return Ok((v, f64::NAN));
     }
-    let v = f()?;
+    let (v, t) = timed(Box::new(f))?;
     std::fs::create_dir_all(&dir)?;
     let bytes: Vec<u8> = v.iter().flat_map(|x| x.to_le_bytes()).collect();
     std::fs::write(&path, bytes)?;
-    Ok(v)
+    Ok((v, t))
 }
 
 /// The peers' synthetic 30 m DEM as a patch at the centre of face +X (as `bench horizon`).
@@ -94,17 +101,7 @@ fn synthetic(peers: &Path) -> Result<Option<penumbra::horizon::Context>> {
         return Ok(None);
     }
     let (h, w, heights) = read_npy_f32(&npy)?;
-    let s = (2.0 * EARTH_RADIUS_M / 30.0).round();
-    let si = s as i64;
-    Ok(Some(penumbra::horizon::Context {
-        face: penumbra::cube::Face::Px,
-        face_pixels: s,
-        origin: ((si - w as i64) / 2, (si - h as i64) / 2),
-        width: w,
-        height: h,
-        heights,
-        radius_m: EARTH_RADIUS_M,
-    }))
+    Ok(Some(peer_context(h, w, heights)))
 }
 
 /// Whole-map timing of `m` on `threads`, best of `repeat`, and the values at `pix`.
@@ -187,11 +184,9 @@ pub fn run(
         let a = whole_azimuths;
         let pix = random_pixels(ctx.width, ctx.height, 1024);
         say("synthetic 1024²: reference at 1024 pixels".into());
-        let t0 = Instant::now();
-        let want = cached(&format!("synthetic-reference-{a}"), || {
+        let (want, t_ref) = cached(&format!("synthetic-reference-{a}"), || {
             in_pool(threads, || reference_at(&ctx, a, &pix))
         })?;
-        let t_ref = t0.elapsed().as_secs_f64();
         let plane = ctx.width * ctx.height;
         let ns = |t: f64, thr: usize, n: usize| t * thr as f64 / (n * a) as f64 * 1e9;
         rows.push(Row {
@@ -236,11 +231,9 @@ pub fn run(
             case.name,
             truth.name()
         ));
-        let t0 = Instant::now();
-        let want = cached(&format!("{}-{}-{a}", case.name, truth.name()), || {
+        let (want, t_truth) = cached(&format!("{}-{}-{a}", case.name, truth.name()), || {
             in_pool(threads, || horizons(&case.ctx, case.rect, a, truth))
         })?;
-        let t_truth = t0.elapsed().as_secs_f64();
         let mut methods = vec![(Method::Sweep, Vec::new(), 0.0)];
         if truth != Method::Fast && !skip_fast {
             methods.push((Method::Fast, Vec::new(), 0.0));
