@@ -88,6 +88,8 @@ struct Buffers {
     ux: Vec<f64>,
     uy: Vec<f64>,
     cols: Vec<Col>,
+    /// Unit directions in the line's plane at each column of the line's span.
+    cu: Vec<(f64, f64)>,
     hull: Vec<(f64, f64, u32)>,
     deg: Vec<f32>,
 }
@@ -104,6 +106,7 @@ impl Buffers {
             ux: Vec::new(),
             uy: Vec::new(),
             cols: Vec::new(),
+            cu: Vec::new(),
             hull: Vec::new(),
             deg: Vec::new(),
         }
@@ -129,6 +132,9 @@ struct Samples<'a> {
     y: &'a [f64],
     ux: &'a [f64],
     uy: &'a [f64],
+    /// Unit directions (ux, uy) at column `c0 + i`, every column of the line's span.
+    cu: &'a [(f64, f64)],
+    c0: i64,
 }
 
 /// Plane azimuth `phi` into `dst` and, where given, `phi` + π into `back_dst`.
@@ -205,6 +211,13 @@ fn pair(
             b.x[i] = bb * k;
             b.y[i] = a * k;
         }
+        let c0 = start.min(stop);
+        b.cu.clear();
+        b.cu.extend((c0..=start.max(stop)).map(|p| {
+            let (a, bb) = (a0 + p as f64 * a1, b0 + p as f64 * b1);
+            let inv = 1.0 / (a * a + bb * bb).sqrt();
+            (bb * inv, a * inv)
+        }));
         let smp = Samples {
             p: &b.p,
             h: &b.h,
@@ -212,10 +225,11 @@ fn pair(
             y: &b.y,
             ux: &b.ux,
             uy: &b.uy,
+            cu: &b.cu,
+            c0,
         };
         let view = View {
             ctx,
-            frame: (a0, a1, b0, b1),
             lines: &lines,
             smp: &smp,
             cos,
@@ -237,7 +251,6 @@ fn pair(
 /// What a line's sweep needs to hand its findings to the pixels.
 struct View<'a> {
     ctx: &'a Context,
-    frame: (f64, f64, f64, f64),
     lines: &'a Lines<'a>,
     smp: &'a Samples<'a>,
     cos: f64,
@@ -304,6 +317,11 @@ fn line_sweep(
 /// The pixels line column `c` brackets evaluate the line's horizon vertices (`cand`, sample
 /// indices) on their own rays at the same distance, and the pixel at or above the line the
 /// zero-distance slope too: every value is a point of the pixel's own ray.
+///
+/// An evaluation places the height found on the pixel's ray at the line's direction there
+/// (the line's plane stands in for the ray's, as everywhere in this method): at a column the
+/// direction comes from the line's column table and the height from the two taps of that
+/// column, so no evaluation takes a square root and most read two heights, not four.
 #[inline(always)]
 fn hand_out(v: &View, c: &Col, mirror: f64, hull: &[(f64, f64, u32)], acc: &mut [f64]) {
     let (lines, s) = (v.lines, v.smp);
@@ -313,8 +331,8 @@ fn hand_out(v: &View, c: &Col, mirror: f64, hull: &[(f64, f64, u32)], acc: &mut 
     let f = qa - c.y;
     let qa = qa as i64;
     let (upx, upy) = (mirror * s.ux[c.at], s.uy[c.at]);
-    let (a0, a1, b0, b1) = v.frame;
     let spacing = 1.0 / LINES_PER_PX as f64;
+    let qmax = (g.nq - 1) as f64;
     for (side, (q0, w)) in [(qa, spacing - f), (qa - 1, f + spacing - 1.0)]
         .into_iter()
         .enumerate()
@@ -335,24 +353,29 @@ fn hand_out(v: &View, c: &Col, mirror: f64, hull: &[(f64, f64, u32)], acc: &mut 
         } else {
             (prev, 1.0)
         };
-        let mut eval = |pv: f64| {
-            let qv = q0 as f64 + lines.t * (pv - c.p as f64);
-            if !g.inside(pv, qv) {
-                return;
-            }
-            let (hv, ok) = g.sample(pv, qv);
-            if !ok || hv.is_nan() {
-                return;
-            }
-            let (a, b) = (a0 + pv * a1, b0 + pv * b1);
-            let k = (radius + hv as f64) / (a * a + b * b).sqrt();
-            let (vx, vy) = (mirror * b * k, a * k);
-            let up = vx * upx + vy * upy - r0;
-            let hor = vy * upx - vx * upy;
+        // A point of the pixel's ray at height `hv` in direction (ux, uy) of the line plane.
+        let mut take = |hv: f64, ux: f64, uy: f64| {
+            let k = radius + hv;
+            let up = k * (mirror * ux * upx + uy * upy) - r0;
+            let hor = k * (uy * upx - mirror * ux * upy);
             if hor > 0.0 && up * bh > bu * hor {
                 bu = up;
                 bh = hor;
             }
+        };
+        // The pixel's ray where it crosses column `pw`: two taps along the column.
+        let at_col = |pw: i64| -> Option<(f64, f64, f64)> {
+            let qv = q0 as f64 + lines.t * (pw - c.p) as f64;
+            let ci = pw - s.c0;
+            if !(qv >= 0.0 && qv <= qmax) || ci < 0 || ci as usize >= s.cu.len() {
+                return None;
+            }
+            let (hv, ok) = g.sample(pw as f64, qv);
+            if !ok || hv.is_nan() {
+                return None;
+            }
+            let (ux, uy) = s.cu[ci as usize];
+            Some((hv as f64, ux, uy))
         };
         // The hull vertex the pixel, placed on the line at its own height, sees highest: at
         // or below the line observer's (a higher observer sees farther back; what the line
@@ -362,35 +385,57 @@ fn hand_out(v: &View, c: &Col, mirror: f64, hull: &[(f64, f64, u32)], acc: &mut 
             (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0) > 0.0
         };
         let n = hull.len();
-        let mut top = n;
+        // Columns evaluated so far (each at most once): the candidates' windows overlap.
+        let mut done = [i64::MIN; 3 * (2 * WINDOW_COLS as usize + 1)];
+        let mut nd = 0;
         if n > 0 {
-            top = n - 1;
+            let mut top = n - 1;
             while top > 0 && better(hull[top - 1], hull[top]) {
                 top -= 1;
             }
-        }
-        let cand = [
-            (top < n).then(|| hull[top].2 as usize),
-            (top + 1 < n).then(|| hull[top + 1].2 as usize),
-            (top >= 1 && top < n).then(|| hull[top - 1].2 as usize),
-        ];
-        for iv in cand.into_iter().flatten() {
-            let pv = s.p[iv];
-            eval(pv);
-            let pc = pv.round() as i64;
-            for d in -WINDOW_COLS..=WINDOW_COLS {
-                let pw = (pc + d) as f64;
-                if pw != pv && pw != c.p as f64 {
-                    eval(pw);
+            let cand = [
+                Some(top),
+                (top + 1 < n).then_some(top + 1),
+                top.checked_sub(1),
+            ];
+            for k in cand.into_iter().flatten() {
+                let iv = hull[k].2 as usize;
+                let pv = s.p[iv];
+                let pc = pv.round() as i64;
+                if pv != pc as f64 {
+                    // A row crossing: its own direction, four taps on the pixel's ray.
+                    let qv = q0 as f64 + lines.t * (pv - c.p as f64);
+                    if g.inside(pv, qv) {
+                        let (hv, ok) = g.sample(pv, qv);
+                        if ok && !hv.is_nan() {
+                            take(hv as f64, s.ux[iv], s.uy[iv]);
+                        }
+                    }
+                }
+                for d in -WINDOW_COLS..=WINDOW_COLS {
+                    let pw = pc + d;
+                    if pw == c.p || done[..nd].contains(&pw) {
+                        continue;
+                    }
+                    done[nd] = pw;
+                    nd += 1;
+                    if let Some((hv, ux, uy)) = at_col(pw) {
+                        take(hv, ux, uy);
+                    }
                 }
             }
         }
         if side == 0 {
-            // The pixel's own ray where it crosses the next columns (exact bilinear values on
-            // grid lines).
-            let look = -(lines.step as f64) * mirror;
-            for k in 1..=NEAR_COLS {
-                eval(c.p as f64 + look * k as f64);
+            // The pixel's own ray where it crosses the next columns.
+            let look = -lines.step * mirror as i64;
+            for k in 1..=NEAR_COLS as i64 {
+                let pw = c.p + look * k;
+                if done[..nd].contains(&pw) {
+                    continue;
+                }
+                if let Some((hv, ux, uy)) = at_col(pw) {
+                    take(hv, ux, uy);
+                }
             }
         }
         let mut best = if bh > 0.0 { bu / bh } else { f64::NEG_INFINITY };
