@@ -1587,3 +1587,58 @@ fn tick(v: f64) -> String {
         s.trim_end_matches('0').to_string()
     }
 }
+
+/// What a product built from one horizon map scores against a truth map.
+pub(crate) struct ProductError {
+    pub(crate) rms_deg: f64,
+    pub(crate) lit_mae: f64,
+    /// Shadow-bit mismatches over every sun (fraction, not per cent).
+    pub(crate) per_all: f64,
+}
+
+/// The product a user keeps, the paper's configuration (Fourier-16 multires f16, untapered),
+/// built from each of `elevs` (plane-major raw maps of `case`'s block, `a` azimuths) and
+/// measured against the truth built from `truth_elev`: the same suns, pixels and lit-fraction
+/// pixels as `penumbra-bench fourier`.
+pub(crate) fn paper_product_errors(
+    case: &Case,
+    truth_elev: &[f32],
+    elevs: &[&[f32]],
+    a: usize,
+    lit_pixels: usize,
+) -> Vec<ProductError> {
+    let n = case.rect.w;
+    let tile = HeightTile {
+        size: n,
+        height: (0..n * n)
+            .map(|p| {
+                case.ctx.heights[(case.rect.y0 + p / n) * case.ctx.width + case.rect.x0 + p % n]
+            })
+            .collect(),
+        mask: vec![0; n * n],
+    };
+    let opts = FourierOptions {
+        coefficients: 16,
+        layout: Layout::Multires,
+        encoding: Encoding::F16,
+        sigma: Sigma::None,
+        reduce: Reduce::Mean,
+        ..Default::default()
+    };
+    let enc = Encoder::for_tiles(&opts, n, 0, a, case.ctx.radius_m, case.terrain_min_m);
+    let t = truth(case, &enc, truth_elev, a, lit_pixels);
+    elevs
+        .iter()
+        .map(|elev| {
+            let (p, _) = enc.encode(elev, &tile);
+            let m = measure(&t, &Horizon::Fourier(&p), false);
+            let per_n =
+                m.err.per_miss.len() as f64 * (m.err.per_n.max(1) * SUN_AZ.len() as u64) as f64;
+            ProductError {
+                rms_deg: m.err.rms(),
+                lit_mae: m.lit_mae,
+                per_all: m.err.per_miss.iter().sum::<u64>() as f64 / per_n,
+            }
+        })
+        .collect()
+}

@@ -254,6 +254,14 @@ pub enum BenchCommand {
         /// Azimuths of the whole-map timing.
         #[arg(long, default_value_t = 360)]
         whole_azimuths: usize,
+        /// Instead: the product a user keeps (Fourier-16 multires f16) built from sweep and
+        /// fast horizons against the same built from exact horizons, lit-fraction MAE and PER
+        /// on each real DEM block (use `--azimuths 360`).
+        #[arg(long)]
+        product: bool,
+        /// Lit-fraction pixels per block for `--product`.
+        #[arg(long, default_value_t = 512)]
+        lit_pixels: usize,
         #[arg(long)]
         markdown: bool,
         #[arg(long)]
@@ -449,6 +457,15 @@ fn dispatch(cmd: BenchCommand, quiet: bool) -> Result<()> {
             data,
             block,
             azimuths,
+            product: true,
+            lit_pixels,
+            json,
+            ..
+        } => crate::sweep::run_product(&data, block, azimuths, lit_pixels, json, quiet),
+        BenchCommand::Sweep {
+            data,
+            block,
+            azimuths,
             truth,
             peers,
             repeat,
@@ -456,6 +473,7 @@ fn dispatch(cmd: BenchCommand, quiet: bool) -> Result<()> {
             whole_azimuths,
             markdown,
             json,
+            ..
         } => crate::sweep::run(
             &data,
             &peers,

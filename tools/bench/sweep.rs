@@ -296,3 +296,103 @@ pub fn run(
     }
     Ok(())
 }
+
+/// One row of the product comparison: the paper's Fourier product built from one method's
+/// horizons, against the exact method's raw maps.
+#[derive(Serialize)]
+struct ProductRow {
+    case: String,
+    method: &'static str,
+    azimuths: usize,
+    horizon_wall_s: f64,
+    raw: Error,
+    product_rms_deg: f64,
+    lit_mae: f64,
+    per_pct: f64,
+    /// Against the same product built from the exact method's horizons.
+    d_lit_mae: f64,
+    d_per_pp: f64,
+}
+
+/// Issue 34's product acceptance: Fourier-16 multires f16 built from `sweep` (and `fast`)
+/// horizons against the same built from `exact` horizons, lit-fraction MAE and PER at the
+/// suns of `penumbra-bench fourier`, the exact raw maps as truth, on every real DEM block.
+pub fn run_product(
+    data: &Path,
+    block: usize,
+    a: usize,
+    lit_pixels: usize,
+    json: bool,
+    quiet: bool,
+) -> Result<()> {
+    let say = |m: String| {
+        if !quiet {
+            eprintln!("bench sweep --product: {m}");
+        }
+    };
+    anyhow::ensure!(
+        a >= 64,
+        "--azimuths must be at least 64 for a 16-term series"
+    );
+    let threads = rayon::current_num_threads();
+    let (cases, notes) = real_cases(data, block, &say)?;
+    let mut rows = Vec::new();
+    for case in &cases {
+        say(format!("{}: exact, {a} azimuths", case.name));
+        let (exact, t_exact) = cached(&format!("{}-exact-{a}", case.name), || {
+            in_pool(threads, || horizons(&case.ctx, case.rect, a, Method::Exact))
+        })?;
+        let mut maps = vec![(Method::Exact, exact.clone(), t_exact)];
+        for m in [Method::Sweep, Method::Fast] {
+            say(format!("{}: {}", case.name, m.name()));
+            let t0 = Instant::now();
+            let v = in_pool(threads, || horizons(&case.ctx, case.rect, a, m))?;
+            maps.push((m, v, t0.elapsed().as_secs_f64()));
+        }
+        say(format!("{}: products", case.name));
+        let elevs: Vec<&[f32]> = maps.iter().map(|(_, v, _)| &v[..]).collect();
+        let got = crate::fourier::paper_product_errors(case, &exact, &elevs, a, lit_pixels);
+        let (base_mae, base_per) = (got[0].lit_mae, got[0].per_all);
+        for ((m, v, t), p) in maps.iter().zip(got) {
+            rows.push(ProductRow {
+                case: case.name.clone(),
+                method: m.name(),
+                azimuths: a,
+                horizon_wall_s: *t,
+                raw: error(v, &exact),
+                product_rms_deg: p.rms_deg,
+                lit_mae: p.lit_mae,
+                per_pct: 100.0 * p.per_all,
+                d_lit_mae: p.lit_mae - base_mae,
+                d_per_pp: 100.0 * (p.per_all - base_per),
+            });
+        }
+    }
+    if json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+        return Ok(());
+    }
+    println!(
+        "| case | horizons from | wall s | raw RMS ° | raw p99 ° | product RMS ° | lit MAE | PER % | Δ lit MAE | Δ PER pp |"
+    );
+    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    for r in &rows {
+        println!(
+            "| {} | {} | {:.2} | {:.4} | {:.3} | {:.4} | {:.5} | {:.3} | {:+.5} | {:+.3} |",
+            r.case,
+            r.method,
+            r.horizon_wall_s,
+            r.raw.rms_deg,
+            r.raw.p99_deg,
+            r.product_rms_deg,
+            r.lit_mae,
+            r.per_pct,
+            r.d_lit_mae,
+            r.d_per_pp
+        );
+    }
+    for n in notes {
+        println!("\n{n}");
+    }
+    Ok(())
+}
