@@ -282,6 +282,12 @@ impl Method {
             Method::Reference => "reference",
         }
     }
+
+    /// Whether the method sees the reach beyond its fine margin through far rings of coarser
+    /// levels (docs/horizons.md, "Far rings"); the others see it all at full resolution.
+    pub fn sees_far_rings(self) -> bool {
+        matches!(self, Method::Fast | Method::Sweep)
+    }
 }
 
 /// Raw horizon maps: per height tile one EXR of `azimuths` stacked planes.

@@ -85,7 +85,7 @@ pub fn horizons_far(
     if rings.is_empty() {
         return fast(ctx, rect, &pixel_geometry(ctx, rect), a, near_px, true);
     }
-    let mut far = FarHorizons::new(ctx, rect, a, near_px);
+    let mut far = FarHorizons::new(ctx, rect, a, near_px, Method::Fast);
     for ring in rings {
         far.add_ring(ring);
     }
@@ -192,11 +192,20 @@ pub struct FarHorizons<'a> {
 }
 
 impl<'a> FarHorizons<'a> {
-    /// The horizons of `rect` within `ctx` (as [`horizons_with`], before the zero-distance
-    /// slope).
-    pub fn new(ctx: &'a Context, rect: Rect, a: usize, near_px: f64) -> FarHorizons<'a> {
+    /// The horizons of `rect` within `ctx` by `method` (the fast method's before the
+    /// zero-distance slope; as [`horizons_with`] for the sweep method, which includes it).
+    pub fn new(
+        ctx: &'a Context,
+        rect: Rect,
+        a: usize,
+        near_px: f64,
+        method: Method,
+    ) -> FarHorizons<'a> {
         let geo = pixel_geometry(ctx, rect);
-        let out = fast(ctx, rect, &geo, a, near_px, false);
+        let out = match method {
+            Method::Sweep => linesweep::horizons_sweep(ctx, rect, a),
+            _ => fast(ctx, rect, &geo, a, near_px, false),
+        };
         FarHorizons {
             ctx,
             rect,
@@ -204,6 +213,11 @@ impl<'a> FarHorizons<'a> {
             geo,
             out,
         }
+    }
+
+    /// The horizons so far (plane-major).
+    pub fn current(&self) -> &[f32] {
+        &self.out
     }
 
     /// Raise the horizons to what `ring`'s terrain adds.
@@ -529,7 +543,7 @@ mod tests {
         // Without rings, one pass with the zero-distance slope and the phases give the same.
         assert_eq!(
             alone.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
-            FarHorizons::new(&ctx, rect, a, near_px)
+            FarHorizons::new(&ctx, rect, a, near_px, Method::Fast)
                 .finish()
                 .iter()
                 .map(|v| v.to_bits())

@@ -386,13 +386,13 @@ pub(crate) fn tile_rasters(
     let cover = *covers
         .entry((id.level, id.face))
         .or_insert_with(|| coverage_box(ts, id.level, id.face));
-    let fine = if method == Method::Fast {
+    let fine = if method.sees_far_rings() {
         reach.margin_px.min(fine_margin_px)
     } else {
         reach.margin_px
     };
     let (ctx, rect) = context_for(src, id, fine, cover)?;
-    let rings = if method == Method::Fast && fine < reach.needed_px {
+    let rings = if method.sees_far_rings() && fine < reach.needed_px {
         let o = ctx.origin;
         let win = (o.0, o.1, o.0 + ctx.width as i64, o.1 + ctx.height as i64);
         far_rings(src, id, win, fine, reach.needed_px, fine_margin_px, covers)
@@ -415,11 +415,18 @@ pub(crate) fn horizons_seeing_rings(
     azimuths: usize,
     method: Method,
     near_px: f64,
-) -> Result<Vec<f32>> {
+    budget: Option<TileId>,
+) -> Result<(Vec<f32>, Option<Tally>)> {
+    // The sweep's error budget is its error on the full-resolution context, before the rings
+    // (which add the same far terrain to any method) raise it.
+    let tally = |elev: &[f32]| budget.map(|id| Tally::measure(ctx, rect, id, azimuths, elev));
     if rings.is_empty() {
-        return Ok(horizons_with(ctx, rect, azimuths, method, near_px));
+        let elev = horizons_with(ctx, rect, azimuths, method, near_px);
+        let t = tally(&elev);
+        return Ok((elev, t));
     }
-    let mut far = FarHorizons::new(ctx, rect, azimuths, near_px);
+    let mut far = FarHorizons::new(ctx, rect, azimuths, near_px, method);
+    let t = tally(far.current());
     for (k, spec) in rings.iter().enumerate() {
         let read = src.cache().now();
         let ring = spec.build(src)?;
@@ -430,7 +437,7 @@ pub(crate) fn horizons_seeing_rings(
             far.add_ring(&ring);
         }
     }
-    Ok(far.finish())
+    Ok((far.finish(), t))
 }
 
 /// The window (global pixels of `level`, half-open) `margin` pixels around the footprint
@@ -826,7 +833,7 @@ impl Stage for HorizonStage<'_> {
 
     fn units(&self, ts: &Tileset, plan: &HorizonPlan) -> Result<Vec<Unit>> {
         let n = ts.layout.tile_size as u64;
-        let margin = if self.opts.method == Method::Fast {
+        let margin = if self.opts.method.sees_far_rings() {
             plan.fine_margin.min(self.opts.max_margin_px)
         } else {
             self.opts.max_margin_px
@@ -899,7 +906,7 @@ impl Stage for HorizonStage<'_> {
                 &mut scratch.covers,
             )?;
             pixaz = (n * n * opts.azimuths) as u64;
-            let elev = horizons_seeing_rings(
+            let (elev, tally) = horizons_seeing_rings(
                 store,
                 &ctx,
                 rect,
@@ -907,10 +914,9 @@ impl Stage for HorizonStage<'_> {
                 opts.azimuths,
                 opts.method,
                 opts.near_px,
+                (opts.method == Method::Sweep).then_some(id),
             )?;
-            if opts.method == Method::Sweep {
-                budget = Some(Tally::measure(&ctx, rect, id, opts.azimuths, &elev));
-            }
+            budget = tally;
             elev
         } else {
             vec![f32::NAN; n * n * opts.azimuths]
@@ -944,7 +950,7 @@ impl Stage for HorizonStage<'_> {
             })
             .collect::<Result<Vec<_>>>()?;
         let reach = reach.map(|(rad, reach)| {
-            let margin_px = if opts.method == Method::Fast {
+            let margin_px = if opts.method.sees_far_rings() {
                 // Far rings see the rest of the reach.
                 reach.margin_px.min(plan.fine_margin)
             } else {
@@ -953,8 +959,8 @@ impl Stage for HorizonStage<'_> {
             ReachDone {
                 rad: rad.to_bits(),
                 margin_px,
-                far_rings: opts.method == Method::Fast && margin_px < reach.needed_px,
-                capped: opts.method != Method::Fast && reach.margin_px < reach.needed_px,
+                far_rings: opts.method.sees_far_rings() && margin_px < reach.needed_px,
+                capped: !opts.method.sees_far_rings() && reach.margin_px < reach.needed_px,
             }
         });
         Ok(TileDone {

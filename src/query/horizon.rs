@@ -270,7 +270,16 @@ fn profile(
         w: 1,
         h: 1,
     };
-    let samples = horizons_seeing_rings(store, &ctx, one, &rings, azimuths, method, opts.near_px)?;
+    let (samples, _) = horizons_seeing_rings(
+        store,
+        &ctx,
+        one,
+        &rings,
+        azimuths,
+        method,
+        opts.near_px,
+        None,
+    )?;
     Ok((
         Profile::Samples(samples),
         "computed",

@@ -440,8 +440,8 @@ struct HorizonFlags {
     /// [default: 24]
     #[arg(long)]
     near_px: Option<f64>,
-    /// How far (pixels) around a tile the fast method reads its level's terrain; beyond that,
-    /// out to the whole reach, it sees far rings of coarser levels, each ring pixel no wider
+    /// How far (pixels) around a tile the fast and sweep methods read its level's terrain; beyond that,
+    /// out to the whole reach, they see far rings of coarser levels, each ring pixel no wider
     /// seen from the tile than a pixel at this distance (16..=65536; larger is slower, closer
     /// to the exact method and needs more memory; default two tile widths, at least 1024).
     #[arg(long)]
@@ -475,15 +475,15 @@ impl HorizonFlags {
         }
     }
 
-    /// `--fine-margin-px`, which only the fast method takes (the others see the whole reach
-    /// at full resolution, up to --max-margin-px).
+    /// `--fine-margin-px`, which only the methods with far rings take (fast and sweep; the
+    /// others see the whole reach at full resolution, up to --max-margin-px).
     fn fine_margin_px(&self) -> penumbra::Result<Option<u64>> {
         match self.fine_margin_px {
-            Some(_) if self.method != Method::Fast => Err(penumbra::Error::param(
+            Some(_) if !self.method.sees_far_rings() => Err(penumbra::Error::param(
                 "fine-margin-px",
                 format!(
-                    "is the fast method's only: --method {} sees the whole reach at full \
-                     resolution (drop --fine-margin-px, or use --method fast)",
+                    "is for the methods with far rings: --method {} sees the whole reach at \
+                     full resolution (drop --fine-margin-px, or use --method fast or sweep)",
                     self.method.name()
                 ),
             )),
