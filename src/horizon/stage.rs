@@ -77,7 +77,7 @@ pub struct HorizonOptions {
     pub max_output_gib: f64,
     /// The fast method's exact near field, plane pixels (0..=MAX_NEAR_PX).
     pub near_px: f64,
-    /// The fast method's full-resolution margin around a tile (pixels of its level); beyond
+    /// The fast and sweep methods' full-resolution margin around a tile (pixels of its level); beyond
     /// it, out to the whole reach, far rings of coarser levels ([`FarRing`]). None:
     /// [`default_fine_margin_px`].
     pub fine_margin_px: Option<u64>,
@@ -372,8 +372,8 @@ pub(crate) fn far_rings(
 }
 
 /// The rasters tile `id`'s horizons are computed over with `method`: the context `reach`
-/// asks for at full resolution, except that the fast method takes at most `fine_margin_px`
-/// there and sees the rest of the reach through far rings (planned, not yet read).
+/// asks for at full resolution, except that the fast and sweep methods take at most `fine_margin_px`
+/// there and see the rest of the reach through far rings (planned, not yet read).
 pub(crate) fn tile_rasters(
     src: &Store,
     id: TileId,
