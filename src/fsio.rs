@@ -27,14 +27,62 @@ pub fn write_atomic(
 /// a crash of the whole system can, and that changes the boot id. Where no boot id can be read,
 /// each file is synced as [`write_atomic`] does. Two fsyncs per tile were half the wall time
 /// of tiling LDEM_4 at 4 levels on a disk-backed folder (docs/benchmarks.md, "Tiling").
+///
+/// When `path` lies below a staging root that records hashes ([`StagedHashes`]), the bytes
+/// are hashed (blake3) as `write` writes them, and once the file has its name the hash is
+/// appended to that root's log with the file's size and stamp, so that the commit indexes the
+/// file without reading it back ([`read_staged_hashes`]).
 pub fn write_staged(
     path: &Path,
-    write: impl FnOnce(&mut std::fs::File) -> Result<()>,
+    write: impl FnOnce(&mut StagedFile<'_>) -> Result<()>,
 ) -> Result<()> {
     if let Some(e) = injected_disk_full(path) {
         return Err(Error::io(path, e));
     }
-    write_renamed(path, boot_id().is_none(), write)
+    let log = hash_log_for(path);
+    let written = write_renamed(path, boot_id().is_none(), |f| {
+        let mut staged = StagedFile {
+            file: f,
+            hasher: log.as_ref().map(|_| blake3::Hasher::new()),
+        };
+        write(&mut staged)?;
+        match staged.hasher {
+            Some(h) => {
+                // The stamp of the file as written: the rename keeps its inode and mtime.
+                let m = staged.file.metadata().at(path)?;
+                Ok(Some((h.finalize(), FileStamp::of(&m))))
+            }
+            None => Ok(None),
+        }
+    })?;
+    // Recorded only once the file has its name: a kill before this line leaves a file without
+    // a record, which the commit hashes.
+    if let (Some((log, rel)), Some((hash, stamp))) = (log, written) {
+        log.append(&rel, stamp, &hash)?;
+    }
+    Ok(())
+}
+
+/// The file [`write_staged`] hands its writer: writes go to the temp file and, when the
+/// staging root records hashes, into the file's blake3 as they are made. Only sequential
+/// writes, so that the hash is the hash of the file.
+pub struct StagedFile<'a> {
+    file: &'a mut std::fs::File,
+    hasher: Option<blake3::Hasher>,
+}
+
+impl Write for StagedFile<'_> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.file.write(buf)?;
+        if let Some(h) = &mut self.hasher {
+            h.update(&buf[..n]);
+        }
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.file.flush()
+    }
 }
 
 /// Test hook for the failure paths of multi-stage runs (`tests/cli.rs`, disk full during
@@ -54,11 +102,11 @@ fn injected_disk_full(path: &Path) -> Option<std::io::Error> {
         .then(|| std::io::Error::from_raw_os_error(28))
 }
 
-fn write_renamed(
+fn write_renamed<T>(
     path: &Path,
     durable: bool,
-    write: impl FnOnce(&mut std::fs::File) -> Result<()>,
-) -> Result<()> {
+    write: impl FnOnce(&mut std::fs::File) -> Result<T>,
+) -> Result<T> {
     let dir = path.parent().unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).at(dir)?;
     let name = path
@@ -68,22 +116,295 @@ fn write_renamed(
     let tmp = dir.join(format!(".{name}{TEMP_MARK}{}", std::process::id()));
     let result = (|| {
         let mut f = std::fs::File::create(&tmp).at(&tmp)?;
-        write(&mut f)?;
+        let t = write(&mut f)?;
         f.flush().at(&tmp)?;
         if durable {
             f.sync_all().at(&tmp)?;
         }
-        Ok(())
+        Ok(t)
     })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(e);
-    }
+    let t = match result {
+        Ok(t) => t,
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            return Err(e);
+        }
+    };
     std::fs::rename(&tmp, path).at(path)?;
     if durable {
         sync_dir(dir)?;
     }
-    Ok(())
+    Ok(t)
+}
+
+/// A file's size and where it lives on disk (inode, modification time in nanoseconds): what a
+/// staged file's hash record is held against at the commit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct FileStamp {
+    pub len: u64,
+    /// 0 where the system has no inode numbers.
+    pub ino: u64,
+    pub mtime_ns: i128,
+}
+
+impl FileStamp {
+    pub fn of(m: &std::fs::Metadata) -> FileStamp {
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::MetadataExt;
+            FileStamp {
+                len: m.len(),
+                ino: m.ino(),
+                mtime_ns: i128::from(m.mtime()) * 1_000_000_000 + i128::from(m.mtime_nsec()),
+            }
+        }
+        #[cfg(not(unix))]
+        {
+            let mtime_ns = m
+                .modified()
+                .ok()
+                .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+                .map_or(0, |d| d.as_nanos() as i128);
+            FileStamp {
+                len: m.len(),
+                ino: 0,
+                mtime_ns,
+            }
+        }
+    }
+}
+
+/// Folder of a staging root's hash logs: `hashes/<pid>.log`, one per process, a line per file
+/// [`write_staged`] wrote there: `path<TAB>bytes<TAB>inode<TAB>mtime_ns<TAB>blake3 hex`.
+pub const HASH_LOGS: &str = "hashes";
+/// Largest hash log read back (a line is about 150 bytes).
+const MAX_HASH_LOG_BYTES: u64 = 1 << 30;
+
+/// One staging root's hash log, opened at its first record.
+#[derive(Debug)]
+struct HashLog {
+    root: PathBuf,
+    file: std::sync::Mutex<Option<std::fs::File>>,
+}
+
+/// The staging roots whose staged files have their hashes recorded, latest last.
+static HASH_LOGS_OPEN: std::sync::Mutex<Vec<std::sync::Arc<HashLog>>> =
+    std::sync::Mutex::new(Vec::new());
+
+fn hash_logs_open() -> std::sync::MutexGuard<'static, Vec<std::sync::Arc<HashLog>>> {
+    HASH_LOGS_OPEN.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// While alive, every file [`write_staged`] writes below `root` has its blake3, size and stamp
+/// appended to this process's hash log there (`root/hashes/<pid>.log`). The tileset's writer
+/// holds one for the staging folder of the run under way ([`crate::tileset::writer`]); a later
+/// registration of the same root takes over from an earlier one.
+#[derive(Debug)]
+pub struct StagedHashes(std::sync::Arc<HashLog>);
+
+impl StagedHashes {
+    pub fn record_below(root: &Path) -> StagedHashes {
+        let log = std::sync::Arc::new(HashLog {
+            root: root.to_path_buf(),
+            file: std::sync::Mutex::new(None),
+        });
+        hash_logs_open().push(log.clone());
+        StagedHashes(log)
+    }
+
+    /// Record the hash of the file at `rel` (below the root, `/` between names) with its
+    /// stamp, as [`write_staged`] does once a file it wrote has its name: for a file written
+    /// below the root by other means (`penumbra-bench integrity` replays a stage's records
+    /// with it). A path that cannot be written into a log line is not recorded.
+    pub fn record(&self, rel: &str, stamp: FileStamp, hash: &blake3::Hash) -> Result<()> {
+        self.0.append(rel, stamp, hash)
+    }
+}
+
+impl Drop for StagedHashes {
+    fn drop(&mut self) {
+        hash_logs_open().retain(|l| !std::sync::Arc::ptr_eq(l, &self.0));
+    }
+}
+
+/// The hash log recording files written at `path`, and the path relative to its root (`/`
+/// between names, as [`list_files`] gives it); None when nothing records there or the path
+/// cannot be written into a log line (then the commit hashes the file).
+fn hash_log_for(path: &Path) -> Option<(std::sync::Arc<HashLog>, String)> {
+    let log = {
+        let logs = hash_logs_open();
+        logs.iter()
+            .rev()
+            .find(|l| path.starts_with(&l.root))?
+            .clone()
+    };
+    let mut rel = String::new();
+    for c in path.strip_prefix(&log.root).ok()?.components() {
+        let std::path::Component::Normal(name) = c else {
+            return None;
+        };
+        if !rel.is_empty() {
+            rel.push('/');
+        }
+        rel.push_str(name.to_str()?);
+    }
+    recordable(&rel).then_some((log, rel))
+}
+
+/// A relative path a hash log line can hold.
+fn recordable(rel: &str) -> bool {
+    !rel.is_empty() && !rel.contains(['\t', '\n'])
+}
+
+impl HashLog {
+    fn path(&self) -> PathBuf {
+        self.root
+            .join(HASH_LOGS)
+            .join(format!("{}.log", std::process::id()))
+    }
+
+    /// Append the record of the file at `rel`: one `write` of a whole line, kept by the kernel
+    /// through a kill like the file itself.
+    fn append(&self, rel: &str, stamp: FileStamp, hash: &blake3::Hash) -> Result<()> {
+        if !recordable(rel) {
+            return Ok(());
+        }
+        let line = format!(
+            "{rel}\t{}\t{}\t{}\t{}\n",
+            stamp.len,
+            stamp.ino,
+            stamp.mtime_ns,
+            hash.to_hex()
+        );
+        let path = self.path();
+        let mut f = self.file.lock().unwrap_or_else(|e| e.into_inner());
+        if f.is_none() {
+            *f = Some(open_hash_log(&path)?);
+        }
+        let f = f.as_mut().expect("opened above");
+        f.write_all(line.as_bytes()).at(&path)
+    }
+}
+
+/// Open a hash log for appending. A log of an earlier process with the same pid may end in a
+/// line a kill cut short: it is ended first, so that it stays a line of its own (and is not read
+/// back, its hash being the last field and of fixed length) instead of running into this one's.
+fn open_hash_log(path: &Path) -> Result<std::fs::File> {
+    use std::io::{Seek, SeekFrom};
+    let dir = path.parent().unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).at(dir)?;
+    let mut f = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .read(true)
+        .open(path)
+        .at(path)?;
+    if f.metadata().at(path)?.len() > 0 {
+        let mut last = [0u8];
+        f.seek(SeekFrom::End(-1)).at(path)?;
+        f.read_exact(&mut last).at(path)?;
+        if last[0] != b'\n' {
+            f.write_all(b"\n").at(path)?;
+        }
+    }
+    Ok(f)
+}
+
+/// The hashes [`write_staged`] recorded below a staging root, by file.
+#[derive(Debug, Default)]
+pub struct StagedHashRecords(std::collections::HashMap<String, Vec<(FileStamp, blake3::Hash)>>);
+
+impl StagedHashRecords {
+    /// The recorded blake3 of the file at `rel` (relative to the root) if a record's size and
+    /// stamp are the file's as it is now (`stamp`) and no other such record disagrees; None
+    /// otherwise (no record, the file rewritten or replaced since, a conflict): then the
+    /// caller hashes the file.
+    pub fn hash_of(&self, rel: &str, stamp: FileStamp) -> Option<blake3::Hash> {
+        let mut found = None;
+        for (s, h) in self.0.get(rel)? {
+            if *s == stamp {
+                match found {
+                    None => found = Some(*h),
+                    Some(f) if f != *h => return None,
+                    Some(_) => {}
+                }
+            }
+        }
+        found
+    }
+
+    /// How many records were read.
+    pub fn len(&self) -> usize {
+        self.0.values().map(Vec::len).sum()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+}
+
+/// Every record the processes that wrote below `root` left in its hash logs. Whole, well-formed
+/// lines only: a line a kill cut short, or any line that is not exactly a path, three numbers
+/// and a 64-digit hash, is skipped; a log that cannot be read is skipped whole. A file left
+/// without a record is hashed by the commit, so skipping is always safe.
+pub fn read_staged_hashes(root: &Path) -> StagedHashRecords {
+    let mut out = StagedHashRecords::default();
+    let Ok(entries) = std::fs::read_dir(root.join(HASH_LOGS)) else {
+        return out;
+    };
+    let mut logs: Vec<PathBuf> = entries
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "log"))
+        .collect();
+    logs.sort();
+    for p in logs {
+        if let Ok(bytes) = read_capped(&p, MAX_HASH_LOG_BYTES, "a log of file hashes") {
+            add_hash_log(&mut out, &bytes);
+        }
+    }
+    out
+}
+
+/// The records of one hash log's bytes (see [`read_staged_hashes`]).
+pub fn read_staged_hashes_from(log: &[u8]) -> StagedHashRecords {
+    let mut out = StagedHashRecords::default();
+    add_hash_log(&mut out, log);
+    out
+}
+
+fn add_hash_log(out: &mut StagedHashRecords, bytes: &[u8]) {
+    for line in bytes.split_inclusive(|&b| b == b'\n') {
+        let Some(line) = line.strip_suffix(b"\n") else {
+            break;
+        };
+        if let Some((rel, stamp, hash)) = parse_hash_record(line) {
+            out.0.entry(rel).or_default().push((stamp, hash));
+        }
+    }
+}
+
+fn parse_hash_record(line: &[u8]) -> Option<(String, FileStamp, blake3::Hash)> {
+    let line = std::str::from_utf8(line).ok()?;
+    let mut f = line.split('\t');
+    let (rel, len, ino, mtime, hash) = (f.next()?, f.next()?, f.next()?, f.next()?, f.next()?);
+    let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
+    if f.next().is_some()
+        || rel.is_empty()
+        || !digits(len)
+        || !digits(ino)
+        || !(digits(mtime) || mtime.strip_prefix('-').is_some_and(digits))
+        || hash.len() != 64
+        || !hash.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'))
+    {
+        return None;
+    }
+    let stamp = FileStamp {
+        len: len.parse().ok()?,
+        ino: ino.parse().ok()?,
+        mtime_ns: mtime.parse().ok()?,
+    };
+    Some((rel.to_string(), stamp, blake3::Hash::from_hex(hash).ok()?))
 }
 
 /// This boot of the system (Linux: `/proc/sys/kernel/random/boot_id`), or None where there is

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use crate::util::{copy_tree, penumbra_bin, snapshot, Rng};
+use crate::util::{copy_tree, indexes, penumbra_bin, snapshot, Rng};
 
 fn run(args: &[&str]) -> Output {
     penumbra_bin().args(args).output().unwrap()
@@ -97,7 +97,7 @@ const DEEP: &[&str] = &[
 
 /// Ten `kill -9` at random moments of `cmd` (each on a fresh copy of `start`, or from nothing),
 /// each followed by a rerun of `cmd` to completion: the result must equal an uninterrupted
-/// run's bytes, `tileset.json` included, with no temp file or staged run left.
+/// run's bytes, `tileset.json` and the indexes included, with no temp file or staged run left.
 fn kill_trials(label: &str, start: Option<&Path>, cmd: &dyn Fn(&Path) -> Command, seed: u64) {
     let tmp = tempfile::tempdir().unwrap();
     let fresh = |dir: &Path| {
@@ -117,6 +117,7 @@ fn kill_trials(label: &str, start: Option<&Path>, cmd: &dyn Fn(&Path) -> Command
     );
     let first = t0.elapsed();
     let want = snapshot(&reference);
+    let want_index = indexes(&reference);
     let out = tmp.path().join("killed");
     // The shorter of two uninterrupted runs: the first one pays for cold caches, and a short
     // stage (f16 mips take well under a second) would otherwise end before most kills.
@@ -158,6 +159,10 @@ fn kill_trials(label: &str, start: Option<&Path>, cmd: &dyn Fn(&Path) -> Command
             snapshot(&out),
             want,
             "{label}: rerun after a kill at {at:?} differs"
+        );
+        assert!(
+            indexes(&out) == want_index,
+            "{label}: the index after a kill at {at:?} differs"
         );
         assert!(leftovers(&out).is_empty(), "{label}: {:?}", leftovers(&out));
     }
@@ -253,6 +258,90 @@ fn killed_streamed_fourier_resumes_to_the_uninterrupted_bytes() {
             c
         },
         0x0f0e_0d0c_0b0a_0908,
+    );
+}
+
+/// The commit indexes staged files from the hashes their writers recorded as they wrote them
+/// (`hashes/<pid>.log` in the staging folder) and reads back only files without a usable
+/// record. The mip stage in two shards: the first leaves a record of every file it staged;
+/// its log then damaged as kills and accidents leave one (its last record never written, the
+/// one before cut short, a file's only record replaced by one of another size, another's by
+/// one of another inode, both with a wrong hash, garbage), the second shard's commit still
+/// gives the bytes and the index of an uninterrupted run.
+#[test]
+fn the_commit_indexes_from_recorded_hashes_and_survives_damaged_records() {
+    use penumbra::tileset::fsio;
+    let tmp = tempfile::tempdir().unwrap();
+    let (whole, parts) = (tmp.path().join("whole"), tmp.path().join("parts"));
+    let w = whole.to_str().unwrap();
+    ok(&[
+        "bake",
+        "--scene-size",
+        "1024",
+        "--levels",
+        "4",
+        "--tile-size",
+        "32",
+        "--no-horizons",
+        "--out",
+        w,
+    ]);
+    copy_tree(&whole, &parts);
+    let p = parts.to_str().unwrap();
+    ok(&["mip", w, "--precision", "f16"]);
+    ok(&["mip", p, "--precision", "f16", "--shard", "0/2"]);
+
+    let staging = parts
+        .join(penumbra::tileset::STATE_DIR)
+        .join("staging")
+        .join("mip");
+    let recorded = fsio::read_staged_hashes(&staging);
+    let mut staged = 0;
+    for d in ["maxmip", "minmax"] {
+        for (rel, _) in fsio::list_files(&staging.join(d)).unwrap() {
+            let rel = format!("{d}/{rel}");
+            let f = staging.join(&rel);
+            let stamp = fsio::FileStamp::of(&std::fs::symlink_metadata(&f).unwrap());
+            let want = blake3::hash(&std::fs::read(&f).unwrap());
+            assert_eq!(recorded.hash_of(&rel, stamp), Some(want), "{rel}");
+            staged += 1;
+        }
+    }
+    assert!(staged >= 10, "{staged} files staged");
+    assert_eq!(recorded.len(), staged, "one record a file");
+
+    let logs: Vec<PathBuf> = std::fs::read_dir(staging.join(fsio::HASH_LOGS))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(logs.len(), 1, "{logs:?}");
+    let text = std::fs::read_to_string(&logs[0]).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let n = lines.len();
+    let fields = |l: &str| l.split('\t').map(str::to_string).collect::<Vec<_>>();
+    // The only records of the first two files: were either trusted, its hash would be wrong.
+    let lie = blake3::hash(b"not the file").to_hex().to_string();
+    let mut wrong_size = fields(lines[0]);
+    wrong_size[1] = (wrong_size[1].parse::<u64>().unwrap() + 1).to_string();
+    wrong_size[4] = lie.clone();
+    let mut other_inode = fields(lines[1]);
+    other_inode[2] = (other_inode[2].parse::<u64>().unwrap() + 1).to_string();
+    other_inode[4] = lie;
+    let mut damaged = vec![
+        "garbage".to_string(),
+        wrong_size.join("\t"),
+        other_inode.join("\t"),
+    ];
+    damaged.extend(lines[2..n - 2].iter().map(|l| l.to_string()));
+    let cut = lines[n - 2];
+    let damaged = format!("{}\n{}", damaged.join("\n"), &cut[..cut.len() / 2]);
+    std::fs::write(&logs[0], damaged).unwrap();
+
+    ok(&["mip", p, "--precision", "f16", "--shard", "1/2"]);
+    assert_eq!(snapshot(&whole), snapshot(&parts));
+    assert!(
+        indexes(&whole) == indexes(&parts),
+        "the index differs from an uninterrupted run's"
     );
 }
 

@@ -144,6 +144,22 @@ pub fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     out
 }
 
+/// The tileset's indexes (`.penumbra/index/<product>.json`) with their bytes, by product file:
+/// the writer's bookkeeping that [`snapshot`] leaves out, but whose bytes a resumed or sharded
+/// run must reproduce too.
+pub fn indexes(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    let d = dir.join(penumbra::tileset::STATE_DIR).join("index");
+    let mut out = BTreeMap::new();
+    for e in std::fs::read_dir(&d).unwrap() {
+        let p = e.unwrap().path();
+        out.insert(
+            p.file_name().unwrap().to_string_lossy().into_owned(),
+            std::fs::read(&p).unwrap(),
+        );
+    }
+    out
+}
+
 /// A GeoTIFF GeoKeyDirectory (version 1.1.0) from (key, location, count, value) entries.
 pub fn geokeys(entries: &[(u16, u16, u16, u16)]) -> Vec<u16> {
     let mut v = vec![1, 1, 0, entries.len() as u16];

@@ -6,8 +6,10 @@
 //! Layout of the state folder `.penumbra/`:
 //! - `lock`, `commit.lock`: see [`super::lock`];
 //! - `staging/<stage>/`: a run in progress: `run.json` (its run key, so that a rerun with the
-//!   same key resumes), the product folders as they will appear in the tileset, then
-//!   `tileset.json` and `index/<product>.json` once the run is complete;
+//!   same key resumes), the product folders as they will appear in the tileset, `units/<pid>.log`
+//!   (the units each process finished) and `hashes/<pid>.log` (the size, stamp and blake3 of
+//!   each file it wrote, hashed as it was written: [`fsio::write_staged`]), then `tileset.json`
+//!   and `index/<product>.json` once the run is complete;
 //! - `commit.json`: the plan of a commit under way (present only during one);
 //! - `index/<product>.json`: every file of a committed product with its size and blake3
 //!   ([`IndexEntry`]), so that an up-to-date check can verify that the files it vouches for are
@@ -83,6 +85,8 @@ pub struct Staging {
     pub root: PathBuf,
     /// True when an interrupted run with the same run key left files here to keep.
     pub resume: bool,
+    /// While the run lasts, the files it stages have their hashes recorded for the commit.
+    _hashes: fsio::StagedHashes,
 }
 
 impl Staging {
@@ -258,7 +262,12 @@ impl Writer {
         let _ = std::fs::remove_file(root.join(MANIFEST));
         remove_tree(&root.join("index"))?;
         self.staging = Some(root.clone());
-        Ok(Staging { root, resume })
+        let _hashes = fsio::StagedHashes::record_below(&root);
+        Ok(Staging {
+            root,
+            resume,
+            _hashes,
+        })
     }
 
     /// Leave the staged run as it is, uncommitted, for a later process with the same run key
@@ -339,6 +348,7 @@ impl Writer {
         let mut indexes = Vec::new();
         let index_dir = staging.root.join("index");
         std::fs::create_dir_all(&index_dir).at(&index_dir)?;
+        let recorded = fsio::read_staged_hashes(&staging.root);
         for &p in writes {
             let mut files = Vec::new();
             for d in p.dirs() {
@@ -351,7 +361,7 @@ impl Writer {
                     removes.push(d.to_string());
                 }
             }
-            let files = hash_files(&staging.root, files)?;
+            let (files, _) = index_entries(&staging.root, files, &recorded)?;
             let json = serde_json::to_vec(&files).expect("index serialises");
             write_atomic_bytes(&index_dir.join(format!("{}.json", p.name())), &json)?;
             indexes.push(p.name().to_string());
@@ -472,19 +482,50 @@ impl Drop for Writer {
     }
 }
 
-/// The index entries of staged files (`rel`, size): each file's blake3, hashed in parallel.
-fn hash_files(root: &Path, files: Vec<(String, u64)>) -> Result<Vec<IndexEntry>> {
+/// The index entries of the files (`rel`, size) staged below `root`, and how many of them
+/// were read back and hashed. A file's blake3 is the one [`fsio::write_staged`] recorded as it
+/// wrote the file when a record's size, inode and mtime are the file's on disk now; any other
+/// file (no record: written by a process killed between its rename and its record, by an older
+/// version, or not through `write_staged`; a record of an earlier version of the file, whose
+/// stamp no longer matches) is read and hashed, in parallel, as every file was before the
+/// records. Either way the entry holds the blake3 of the file's bytes, so the index is the same.
+///
+/// Trusting a matching record is safe because only this tool writes a staging folder, under the
+/// tileset's writer lock, and always through a temp file renamed into place: a rewrite is a new
+/// inode (made while the old one still exists) with a new record, so a record whose stamp
+/// matches is of the bytes now there. A record that does not match is ignored, never an error.
+/// Were the file changed in place behind the tool's back keeping its size, inode and mtime, the
+/// index would keep the hash of what the tool wrote, and the store's reads and `verify` would
+/// refuse the changed file, as they refuse one changed after the commit.
+pub fn index_entries(
+    root: &Path,
+    files: Vec<(String, u64)>,
+    recorded: &fsio::StagedHashRecords,
+) -> Result<(Vec<IndexEntry>, usize)> {
     use rayon::prelude::*;
-    files
+    let entries: Vec<(IndexEntry, bool)> = files
         .into_par_iter()
         .map(|(rel, len)| {
             let p = root.join(&rel);
+            if !recorded.is_empty() {
+                let stamp = fsio::FileStamp::of(&std::fs::symlink_metadata(&p).at(&p)?);
+                if stamp.len == len {
+                    if let Some(h) = recorded.hash_of(&rel, stamp) {
+                        return Ok((IndexEntry(rel, len, h.to_hex().to_string()), false));
+                    }
+                }
+            }
             let f = std::fs::File::open(&p).at(&p)?;
             let mut h = blake3::Hasher::new();
             h.update_reader(f).at(&p)?;
-            Ok(IndexEntry(rel, len, h.finalize().to_hex().to_string()))
+            Ok((
+                IndexEntry(rel, len, h.finalize().to_hex().to_string()),
+                true,
+            ))
         })
-        .collect()
+        .collect::<Result<_>>()?;
+    let hashed = entries.iter().filter(|(_, h)| *h).count();
+    Ok((entries.into_iter().map(|(e, _)| e).collect(), hashed))
 }
 
 /// A list of plain names in an unlisted product's manifest entry (`dirs`, `reads`); the
@@ -513,6 +554,7 @@ mod record_tests {
         let s = Staging {
             root: d.path().to_path_buf(),
             resume: true,
+            _hashes: fsio::StagedHashes::record_below(d.path()),
         };
         assert!(s.read_records().unwrap().is_empty());
         let log = s.record_log().unwrap();
@@ -526,5 +568,180 @@ mod record_tests {
         assert_eq!(r["3-px-0-1"], b"{\"a\":1}");
         assert!(r["3-px-0-2"] == b"[1,2]" || r["3-px-0-2"] == b"[3]");
         assert!(!r.contains_key("3-px-0-3"));
+    }
+}
+
+#[cfg(test)]
+mod hash_record_tests {
+    use super::*;
+
+    fn staged(root: &Path, rel: &str, bytes: &[u8]) {
+        let p = root.join(rel);
+        fsio::write_staged(&p, |f| f.write_all(bytes).at(&p)).unwrap();
+    }
+
+    /// Every file's index entry as the commit made it before the records: read back and hashed.
+    fn read_back(root: &Path, files: &[(String, u64)]) -> Vec<IndexEntry> {
+        files
+            .iter()
+            .map(|(rel, len)| {
+                let h = blake3::hash(&std::fs::read(root.join(rel)).unwrap());
+                IndexEntry(rel.clone(), *len, h.to_hex().to_string())
+            })
+            .collect()
+    }
+
+    fn log_of_this_process(root: &Path) -> PathBuf {
+        root.join(fsio::HASH_LOGS)
+            .join(format!("{}.log", std::process::id()))
+    }
+
+    /// Files staged through `write_staged` are indexed from their records without a read; a
+    /// file without a usable record (the process killed between the rename and the record, a
+    /// record cut short, a file rewritten or resized since its record) is read and hashed, and
+    /// the index is the same either way.
+    #[test]
+    fn the_commit_uses_records_that_match_and_hashes_the_rest() {
+        let d = tempfile::tempdir().unwrap();
+        let root = d.path().join("staging").join("mip");
+        let hashes = fsio::StagedHashes::record_below(&root);
+        let names: Vec<String> = (0..8).map(|i| format!("maxmip/0/px/0/{i}.exr")).collect();
+        for (i, n) in names.iter().enumerate() {
+            staged(&root, n, &vec![i as u8; 1000 + 37 * i]);
+        }
+        let files = || {
+            list_files(&root.join("maxmip"))
+                .unwrap()
+                .into_iter()
+                .map(|(r, l)| (format!("maxmip/{r}"), l))
+                .collect::<Vec<_>>()
+        };
+        let recorded = fsio::read_staged_hashes(&root);
+        assert_eq!(recorded.len(), 8);
+        let (entries, hashed) = index_entries(&root, files(), &recorded).unwrap();
+        assert_eq!(hashed, 0, "every file had its record");
+        assert_eq!(entries, read_back(&root, &files()));
+
+        let log = log_of_this_process(&root);
+        let text = std::fs::read_to_string(&log).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), 8);
+        // 7: killed between its rename and its record (the line never written); 6: its line cut
+        // short by the kill (every prefix of it is refused, not only this one).
+        for cut in 0..lines[6].len() {
+            assert!(
+                fsio::read_staged_hashes_from(format!("{}\n", &lines[6][..cut]).as_bytes())
+                    .is_empty(),
+                "a line cut at {cut} was read"
+            );
+        }
+        let mut kept = lines[..6].join("\n");
+        kept.push('\n');
+        kept.push_str(&lines[6][..lines[6].len() - 5]);
+        std::fs::write(&log, &kept).unwrap();
+        // 0: rewritten since by something else, same size (a new inode: the record's stamp no
+        // longer matches); 1: grown since (its size no longer matches).
+        let p0 = root.join(&names[0]);
+        let tmp = root.join("maxmip/0/px/0/.0.exr.tmp.1");
+        std::fs::write(&tmp, vec![9u8; 1000]).unwrap();
+        std::fs::rename(&tmp, &p0).unwrap();
+        std::fs::OpenOptions::new()
+            .append(true)
+            .open(root.join(&names[1]))
+            .unwrap()
+            .write_all(b"padding")
+            .unwrap();
+        // 2: a record from another process whose size is wrong, one with a malformed hash,
+        // garbage: all ignored.
+        let other = root.join(fsio::HASH_LOGS).join("1.log");
+        let l2: Vec<&str> = lines[2].split('\t').collect();
+        std::fs::write(
+            &other,
+            format!(
+                "{}\t5\t{}\t{}\t{}\n{}\t{}\t{}\t{}\tXYZ\nnot a record\n\n",
+                l2[0], l2[2], l2[3], l2[4], l2[0], l2[1], l2[2], l2[3]
+            ),
+        )
+        .unwrap();
+        let recorded = fsio::read_staged_hashes(&root);
+        assert_eq!(
+            recorded.len(),
+            6 + 1,
+            "the six whole lines and the sized one"
+        );
+        let (entries, hashed) = index_entries(&root, files(), &recorded).unwrap();
+        assert_eq!(entries, read_back(&root, &files()));
+        assert_eq!(hashed, 4, "files 0, 1, 6 and 7 read back");
+        drop(hashes);
+    }
+
+    /// Two records of a file that both match its stamp but disagree (which a run of this tool
+    /// cannot leave) are not trusted: the file is hashed. A single record that matches the
+    /// file's size, inode and mtime is trusted as it is (why that is safe: `index_entries`).
+    #[test]
+    fn conflicting_records_are_not_trusted_and_a_matching_one_is() {
+        let d = tempfile::tempdir().unwrap();
+        let root = d.path().to_path_buf();
+        let _hashes = fsio::StagedHashes::record_below(&root);
+        staged(&root, "minmax/1/nz/0/0.exr", b"the bytes written");
+        let files = list_files(&root.join("minmax"))
+            .unwrap()
+            .into_iter()
+            .map(|(r, l)| (format!("minmax/{r}"), l))
+            .collect::<Vec<_>>();
+        let line = std::fs::read_to_string(log_of_this_process(&root)).unwrap();
+        let (head, _) = line.trim_end().rsplit_once('\t').unwrap();
+        let lie = format!("{head}\t{}\n", blake3::hash(b"other bytes").to_hex());
+        let other = root.join(fsio::HASH_LOGS).join("1.log");
+        std::fs::write(&other, &lie).unwrap();
+        let (entries, hashed) =
+            index_entries(&root, files.clone(), &fsio::read_staged_hashes(&root)).unwrap();
+        assert_eq!((hashed, &entries), (1, &read_back(&root, &files)));
+        // The lying record alone matches the file's stamp: it is what the index says.
+        std::fs::remove_file(log_of_this_process(&root)).unwrap();
+        let (entries, hashed) =
+            index_entries(&root, files.clone(), &fsio::read_staged_hashes(&root)).unwrap();
+        assert_eq!(hashed, 0);
+        assert_eq!(
+            entries[0].2,
+            blake3::hash(b"other bytes").to_hex().to_string()
+        );
+    }
+
+    /// A process whose pid a killed one had appends to that one's log: a line the kill cut
+    /// short is ended first, so the new records read back whole.
+    #[test]
+    fn a_log_reused_by_pid_ends_the_cut_line_first() {
+        let d = tempfile::tempdir().unwrap();
+        let root = d.path().to_path_buf();
+        let log = log_of_this_process(&root);
+        std::fs::create_dir_all(log.parent().unwrap()).unwrap();
+        std::fs::write(&log, b"height/0/px/0/0.exr\t12").unwrap();
+        let _hashes = fsio::StagedHashes::record_below(&root);
+        staged(&root, "height/0/px/0/1.exr", b"tile");
+        let recorded = fsio::read_staged_hashes(&root);
+        assert_eq!(recorded.len(), 1);
+        let stamp =
+            fsio::FileStamp::of(&std::fs::metadata(root.join("height/0/px/0/1.exr")).unwrap());
+        assert_eq!(
+            recorded.hash_of("height/0/px/0/1.exr", stamp),
+            Some(blake3::hash(b"tile"))
+        );
+    }
+
+    /// Nothing is recorded outside a registered root, nor after its registration ends.
+    #[test]
+    fn only_registered_roots_record() {
+        let d = tempfile::tempdir().unwrap();
+        let root = d.path().join("a");
+        staged(&root, "x/1.bin", b"1");
+        let h = fsio::StagedHashes::record_below(&root);
+        staged(&d.path().join("b"), "x/2.bin", b"2");
+        staged(&root, "x/3.bin", b"3");
+        drop(h);
+        staged(&root, "x/4.bin", b"4");
+        let r = fsio::read_staged_hashes(&root);
+        assert_eq!(r.len(), 1);
+        assert!(!d.path().join("b").join(fsio::HASH_LOGS).exists());
     }
 }
