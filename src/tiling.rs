@@ -1206,7 +1206,13 @@ impl TileSink<'_> {
         height::write_height_tile(&hpath, &tile, self.opts.compression, Some(&identity))?;
         if let Some(a) = self.albedo {
             let apath = crate::tileset::tile_path(self.out, manifest::ALBEDO_PATTERN, id);
-            write_albedo_tile(&apath, &render_albedo_tile(a, self.layout, id))?;
+            let identity =
+                crate::format::Identity::tile(crate::format::albedo::ID, id, self.run_key);
+            write_albedo_tile(
+                &apath,
+                &render_albedo_tile(a, self.layout, id),
+                Some(&identity),
+            )?;
         }
         Ok(Some(stats))
     }

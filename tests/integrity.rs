@@ -1,10 +1,12 @@
-//! Damaged tilesets, generated: every product file of a small baked tileset (heights, both
-//! mipmaps, face pyramids, raw horizon maps, Fourier pyramids) is in turn swapped with a
+//! Damaged tilesets, generated: every product file of a small baked tileset (heights, albedo,
+//! both mipmaps, face pyramids, raw horizon maps, Fourier pyramids) is in turn swapped with a
 //! sibling of its product (as is, and with the index rewritten to the swapped bytes so that
-//! only the file's identity can tell), replaced by a FIFO, linked to /dev/zero and padded by a
-//! sparse 5 GiB; then `penumbra verify` must flag exactly that file (exit 1) and a command that
-//! reads it must exit 2 naming it and what is wrong, within 5 s and 100 MB of RSS. A FIFO,
-//! device or folder `tileset.json` does the same for every command. See issue 41.
+//! only the file's identity can tell), re-encoded at another precision (encoding, bit depth)
+//! with its identity kept and the index rewritten (so that only the manifest's labels can
+//! tell), replaced by a FIFO, linked to /dev/zero and padded by a sparse 5 GiB; then
+//! `penumbra verify` must flag exactly that file (exit 1) and a command that reads it must
+//! exit 2 naming it and what is wrong, within 5 s and 100 MB of RSS. A FIFO, device or folder
+//! `tileset.json` does the same for every command. See issue 41.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -75,11 +77,20 @@ fn refused(args: &[&str], file: &str, what: &[&str], case: &str) {
 }
 
 /// The tileset every case damages: the embedded scene at 4 levels of 32² tiles (12 tiles), with
-/// mipmaps, raw horizon maps and Fourier pyramids at level 3 (47 product files).
+/// an 8-bit RGB albedo, mipmaps, raw horizon maps and Fourier pyramids at level 3 (59 product
+/// files).
 fn base(dir: &Path) {
+    let png = dir.with_extension("albedo.png");
+    image::RgbImage::from_fn(64, 32, |x, y| {
+        image::Rgb([(x * 4) as u8, (y * 8) as u8, 128])
+    })
+    .save(&png)
+    .unwrap();
     let o = penumbra_bin()
         .args([
             "bake",
+            "--albedo",
+            png.to_str().unwrap(),
             "--scene-size",
             "1024",
             "--levels",
@@ -100,7 +111,7 @@ fn base(dir: &Path) {
 /// Every indexed file by product: (relative path, size).
 fn indexed(dir: &Path) -> BTreeMap<String, Vec<(String, u64)>> {
     let mut out = BTreeMap::new();
-    for p in ["height", "mip", "horizon", "fourier"] {
+    for p in ["height", "albedo", "mip", "horizon", "fourier"] {
         let ix: Vec<(String, u64, String)> = serde_json::from_slice(
             &std::fs::read(dir.join(format!(".penumbra/index/{p}.json"))).unwrap(),
         )
@@ -118,6 +129,7 @@ fn kind(rel: &str) -> &'static str {
     let parts: Vec<&str> = rel.split('/').collect();
     match parts[0] {
         "height" => "height",
+        "albedo" => "albedo",
         "maxmip" => "maxmip",
         "minmax" if parts.len() == 4 && parts[3] == "face.exr" => "minmax-face",
         "minmax" if parts.get(3) == Some(&"face") => "minmax-face-chunk",
@@ -199,9 +211,9 @@ fn reader(dir: &str, ts: &Tileset, rel: &str) -> Vec<String> {
             a.extend(["--level".into(), level]);
             a
         }
-        // No command reads the maximum pyramids (the viewer and shaders do, through the
-        // store): the library's read is checked instead.
-        "maxmip" => return Vec::new(),
+        // No command reads the maximum pyramids or the albedo (the viewer and shaders do,
+        // through the store): the library's read is checked instead ([`library_read`]).
+        "maxmip" | "albedo" => return Vec::new(),
         "minmax" => {
             let mut a = q("mip");
             a.extend(["--level".into(), "0".into(), "--tile-level".into(), level]);
@@ -256,6 +268,120 @@ fn reindex(dir: &Path, product: &str, rel: &str) {
     std::fs::write(&p, serde_json::to_vec(&ix).unwrap()).unwrap();
 }
 
+/// The file at `from` re-encoded at another precision (encoding, bit depth: what the manifest's
+/// labels say of it) with its identity kept, written to `to`; the label that must name it.
+fn relabel(from: &Path, to: &Path, kind: &str, ts: &Tileset) -> &'static str {
+    use penumbra::exrcodec::{self, Channel, Encoding, Samples, TileCompression, ZipLevel};
+    use penumbra::format::{self, Identity};
+    use std::borrow::Cow;
+    let bytes = std::fs::read(from).unwrap();
+    let exr_id = || Identity::parse(&exrcodec::read_identity(&bytes).unwrap().unwrap()).unwrap();
+    let n = ts.layout.tile_size as usize;
+    let half = |v: &[f32]| -> Vec<exr::prelude::f16> {
+        v.iter().map(|&x| exr::prelude::f16::from_f32(x)).collect()
+    };
+    let (out, label) = match kind {
+        "height" => {
+            let t = format::height::decode_height_tile(&bytes).unwrap();
+            let mask: Vec<f32> = t.mask.iter().map(|&m| m as f32).collect();
+            let out = exrcodec::encode_identified(
+                "penumbra-height",
+                Some(&exr_id().text()),
+                (t.size, t.size),
+                &[
+                    Channel {
+                        name: "height",
+                        levels: vec![Samples::F16(Cow::Owned(half(&t.height)))],
+                    },
+                    Channel {
+                        name: "mask",
+                        levels: vec![Samples::F16(Cow::Owned(half(&mask)))],
+                    },
+                ],
+                &Encoding::scanlines(TileCompression::Zip),
+            )
+            .unwrap();
+            (out, "height tile format")
+        }
+        "maxmip" | "minmax" | "minmax-face" | "minmax-face-chunk" => {
+            let f = format::mip::decode_mip_exr(&bytes).unwrap();
+            let out = format::mip::encode_mip_exr_identified(
+                f.sizes[0],
+                f.channels.get("min").map(|v| v.as_slice()),
+                &f.channels["max"],
+                format::mip::Precision::F16,
+                TileCompression::Zip,
+                ZipLevel::DEFAULT,
+                "relabelled",
+                Some(&exr_id()),
+            )
+            .unwrap();
+            let label = if kind.starts_with("minmax-face") {
+                "products.mip.face_precision"
+            } else {
+                "products.mip.precision"
+            };
+            (out, label)
+        }
+        "horizon" => {
+            let (a, e) = format::horizon::decode_horizon_exr(&bytes, n).unwrap();
+            let out = format::horizon::encode_horizon_exr_identified(
+                n,
+                a,
+                &e,
+                format::horizon::HorizonPrecision::F32,
+                TileCompression::Zip,
+                ZipLevel::DEFAULT,
+                Some(&exr_id()),
+            )
+            .unwrap();
+            (out, "products.horizon.precision")
+        }
+        "fourier" => {
+            let a = ts.products.fourier.as_ref().unwrap().azimuths;
+            let mut p = format::fourier::Pyramid::decode(&bytes, from, n, a).unwrap();
+            let id = format::fourier::read_identity(&bytes)
+                .unwrap()
+                .unwrap()
+                .unwrap();
+            p.encoding = format::fourier::Encoding::Snorm16;
+            for g in &mut p.groups {
+                g.scale = g.coef.iter().flatten().fold(1e-3f32, |m, v| m.max(v.abs()));
+            }
+            (p.encode_identified(Some(&id)), "products.fourier.encoding")
+        }
+        "albedo" => {
+            let facts = format::albedo::read_header(&bytes).unwrap();
+            let id = Identity::parse(facts.identity.as_deref().unwrap()).unwrap();
+            let img = image::load_from_memory(&bytes).unwrap().into_rgb16();
+            let tile = format::albedo::AlbedoTile {
+                size: img.width() as usize,
+                channels: 3,
+                sixteen_bit: true,
+                data: img.into_raw(),
+            };
+            let out = format::albedo::encode_albedo_tile(&tile, Some(&id)).unwrap();
+            (out, "products.albedo.bit_depth")
+        }
+        k => panic!("no re-encoding for {k}"),
+    };
+    std::fs::write(to, out).unwrap();
+    label
+}
+
+/// The library's read of `rel` (a file no command reads: the maximum pyramids, the albedo),
+/// which must fail: its error.
+fn library_read(dir: &Path, rel: &str) -> String {
+    let store = penumbra::tileset::Store::open(dir).unwrap();
+    let id = tile_of(rel);
+    let r = match kind(rel) {
+        "maxmip" => store.mip(id, true).map(|_| ()),
+        "albedo" => store.albedo(id).map(|_| ()),
+        k => panic!("{k} has a command that reads it"),
+    };
+    r.unwrap_err().to_string()
+}
+
 fn mkfifo(p: &Path) {
     let ok = std::process::Command::new("mkfifo")
         .arg(p)
@@ -271,6 +397,9 @@ const DAMAGES: &[(&str, &[&str], &[&str])] = &[
     ("swap", &["size", "hash"], &["index recorded"]),
     // A sibling's bytes and an index that agrees: only the identity tells.
     ("swap-reindexed", &["identity"], &["claims to be"]),
+    // The file's samples at another precision (encoding, bit depth), its identity kept and
+    // the index agreeing: only the manifest's labels can tell ([`relabel`] says which).
+    ("relabelled", &["label"], &[]),
     ("fifo", &["not-a-file"], &["FIFO"]),
     ("dev-zero", &["outside-link"], &["outside the tileset"]),
     ("sparse-5gib", &["size"], &["index recorded"]),
@@ -323,6 +452,7 @@ fn every_damaged_product_file_is_refused_by_its_readers_and_flagged_by_verify() 
             // Chosen before any damage (it reads the height tile to find a pixel with data).
             let args = reader(ds, &ts, rel);
             for &(damage, flags, words) in DAMAGES {
+                let mut words: Vec<&str> = words.to_vec();
                 if damage.starts_with("swap") && sibling.is_none() {
                     continue;
                 }
@@ -333,6 +463,10 @@ fn every_damaged_product_file_is_refused_by_its_readers_and_flagged_by_verify() 
                         if damage == "swap-reindexed" {
                             reindex(&dir, product, rel);
                         }
+                    }
+                    "relabelled" => {
+                        words.push(relabel(&saved, &path, k, &ts));
+                        reindex(&dir, product, rel);
                     }
                     "fifo" => mkfifo(&path),
                     "dev-zero" => std::os::unix::fs::symlink("/dev/zero", &path).unwrap(),
@@ -366,8 +500,7 @@ fn every_damaged_product_file_is_refused_by_its_readers_and_flagged_by_verify() 
                 // A command that reads it refuses it.
                 if args.is_empty() {
                     let t0 = Instant::now();
-                    let store = penumbra::tileset::Store::open(&dir).unwrap();
-                    let e = store.mip(tile_of(rel), true).unwrap_err().to_string();
+                    let e = library_read(&dir, rel);
                     assert!(
                         e.contains(rel.as_str()) && words.iter().any(|w| e.contains(w)),
                         "{case}: {e}"
@@ -375,12 +508,12 @@ fn every_damaged_product_file_is_refused_by_its_readers_and_flagged_by_verify() 
                     assert!(t0.elapsed() < LIMIT, "{case}: {:?}", t0.elapsed());
                 } else {
                     let args: Vec<&str> = args.iter().map(String::as_str).collect();
-                    refused(&args, rel, words, &case);
+                    refused(&args, rel, &words, &case);
                 }
                 // Restore.
                 std::fs::remove_file(&path).unwrap();
                 std::fs::rename(&saved, &path).unwrap();
-                if damage == "swap-reindexed" {
+                if damage == "swap-reindexed" || damage == "relabelled" {
                     let f = dir.join(format!(".penumbra/index/{product}.json"));
                     std::fs::write(f, &index_backup[product]).unwrap();
                 }
@@ -390,6 +523,7 @@ fn every_damaged_product_file_is_refused_by_its_readers_and_flagged_by_verify() 
     }
     for k in [
         "height",
+        "albedo",
         "maxmip",
         "minmax",
         "minmax-face",

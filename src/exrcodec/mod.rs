@@ -234,23 +234,57 @@ fn header(
 /// The text of an EXR file's [`IDENTITY_ATTRIBUTE`] (None: it has none), from its header
 /// alone: no pixel is decoded.
 pub fn read_identity(bytes: &[u8]) -> Result<Option<String>, String> {
+    read_header(bytes).map(|h| h.identity)
+}
+
+/// What a product check needs of an EXR file's header: its identity and its channels.
+#[derive(Clone, Debug)]
+pub struct HeaderFacts {
+    /// The text of the header's [`IDENTITY_ATTRIBUTE`] (None: it has none).
+    pub identity: Option<String>,
+    /// Each channel's name and stored sample type, in the file's order.
+    pub channels: Vec<(String, SampleType)>,
+}
+
+/// The identity and the channels of an EXR file, from its header alone: no pixel is decoded.
+pub fn read_header(bytes: &[u8]) -> Result<HeaderFacts, String> {
     let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false)
         .map_err(|e| e.to_string())?;
     let header = meta
         .headers
         .first()
         .ok_or_else(|| "no image layer".to_string())?;
-    Ok(
-        match header
-            .own_attributes
-            .other
-            .get(&exr::meta::attribute::Text::from(IDENTITY_ATTRIBUTE))
-        {
-            Some(AttributeValue::Text(t)) => Some(t.to_string()),
-            Some(_) => Some(String::new()),
-            None => None,
-        },
-    )
+    Ok(HeaderFacts {
+        identity: identity_of(header),
+        channels: header
+            .channels
+            .list
+            .iter()
+            .map(|c| (c.name.to_string(), c.sample_type))
+            .collect(),
+    })
+}
+
+/// The text of a header's [`IDENTITY_ATTRIBUTE`] (an empty text when it is not text).
+fn identity_of(header: &Header) -> Option<String> {
+    match header
+        .own_attributes
+        .other
+        .get(&exr::meta::attribute::Text::from(IDENTITY_ATTRIBUTE))
+    {
+        Some(AttributeValue::Text(t)) => Some(t.to_string()),
+        Some(_) => Some(String::new()),
+        None => None,
+    }
+}
+
+/// A sample type as the manifest's labels name it: `f16`, `f32` or `u32`.
+pub fn sample_name(t: SampleType) -> &'static str {
+    match t {
+        SampleType::F16 => "f16",
+        SampleType::F32 => "f32",
+        SampleType::U32 => "u32",
+    }
 }
 
 /// Name of the text attribute that holds a file's identity (`crate::format::Identity`): which
@@ -785,15 +819,7 @@ pub fn decode(bytes: &[u8], largest_only: bool) -> Result<Decoded, String> {
         .zip(out)
         .map(|((c, t), levels)| (c.name.to_string(), t, levels))
         .collect();
-    let identity = match header
-        .own_attributes
-        .other
-        .get(&exr::meta::attribute::Text::from(IDENTITY_ATTRIBUTE))
-    {
-        Some(AttributeValue::Text(t)) => Some(t.to_string()),
-        Some(_) => Some(String::new()),
-        None => None,
-    };
+    let identity = identity_of(header);
     Ok(Decoded {
         identity,
         layer_name: header

@@ -526,6 +526,124 @@ impl Pyramid {
     }
 }
 
+/// What a pyramid file's header says it holds, which the manifest's labels describe.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct HeaderLabels {
+    /// Coefficients kept (0 when fully lit).
+    pub k: usize,
+    pub layout: Layout,
+    pub encoding: Encoding,
+    pub sigma: Sigma,
+    pub fully_lit: bool,
+}
+
+impl Pyramid {
+    /// What its header says it holds.
+    pub fn labels(&self) -> HeaderLabels {
+        HeaderLabels {
+            k: self.k,
+            layout: self.layout,
+            encoding: self.encoding,
+            sigma: self.sigma,
+            fully_lit: self.fully_lit,
+        }
+    }
+}
+
+/// The labels of a pyramid file's header, read from the header alone (verify checks the file's
+/// hash against the index first).
+pub fn read_labels(bytes: &[u8]) -> std::result::Result<HeaderLabels, String> {
+    if bytes.len() < HEADER_BYTES + CHECKSUM_BYTES || &bytes[..8] != MAGIC {
+        return Err("not a Penumbra Fourier pyramid (bad magic or too short)".into());
+    }
+    let k = u32::from_le_bytes(bytes[20..24].try_into().expect("4 bytes")) as usize;
+    let layout = match bytes[24] {
+        0 => Layout::Full,
+        1 => Layout::Multires,
+        x => return Err(format!("unknown layout code {x}")),
+    };
+    let encoding = match bytes[25] {
+        0 => Encoding::F16,
+        1 => Encoding::Snorm16,
+        x => return Err(format!("unknown encoding code {x}")),
+    };
+    let sigma = match bytes[26] {
+        0 => Sigma::None,
+        1 => Sigma::Lanczos,
+        x => return Err(format!("unknown sigma code {x}")),
+    };
+    Ok(HeaderLabels {
+        k,
+        layout,
+        encoding,
+        sigma,
+        fully_lit: bytes[27] & FLAG_FULLY_LIT != 0,
+    })
+}
+
+/// The key of tile `id` in the manifest's `tile_coefficients`: `level/face/x/y`.
+pub fn tile_key(id: TileId) -> String {
+    format!("{}/{}/{}/{}", id.level, id.face.name(), id.x, id.y)
+}
+
+/// What to do about a pyramid whose header is not what the manifest's labels say.
+const RELABEL: &str = "the file was rewritten or the manifest edited after the stage made them: \
+                       restore the manifest, or delete the file and rerun the stage that makes it \
+                       (`penumbra verify DIR` lists every such file)";
+
+/// Compare what tile `id`'s pyramid holds (`found`, from its header) with the manifest entry's
+/// labels: `encoding`, `layout`, `sigma`, and the coefficients it keeps (`coefficients`, or the
+/// tile's `tile_coefficients`; none when fully lit, which needs `min_sun_el_deg`). The error
+/// names the label and says what the file holds (without the path).
+pub fn check_labels(
+    found: &HeaderLabels,
+    f: &FourierProduct,
+    id: TileId,
+) -> std::result::Result<(), String> {
+    let differs = |field: &str, holds: &str, says: &str| {
+        Err(format!(
+            "holds {holds}, but the manifest's `products.fourier.{field}` says {says}; {RELABEL}"
+        ))
+    };
+    if found.encoding.name() != f.encoding {
+        let holds = format!("{}-encoded coefficients", found.encoding.name());
+        return differs("encoding", &holds, &f.encoding);
+    }
+    if found.layout.name() != f.layout {
+        let holds = format!("groups in the {} layout", found.layout.name());
+        return differs("layout", &holds, &f.layout);
+    }
+    if found.sigma.name() != f.sigma {
+        let holds = format!("coefficients tapered with sigma {}", found.sigma.name());
+        return differs("sigma", &holds, &f.sigma);
+    }
+    if found.fully_lit && f.min_sun_el_deg.is_none() {
+        return Err(format!(
+            "is marked fully lit (no coefficients), but the manifest's \
+             `products.fourier.min_sun_el_deg` is absent: no tile was marked; {RELABEL}"
+        ));
+    }
+    let (want, field) = match &f.tile_coefficients {
+        Some(m) => match m.get(&tile_key(id)) {
+            Some(&k) => (k, "tile_coefficients"),
+            None => {
+                return Err(format!(
+                    "is not listed in the manifest's `products.fourier.tile_coefficients` \
+                     (tile {}); {RELABEL}",
+                    tile_key(id)
+                ))
+            }
+        },
+        None if found.fully_lit => (0, "coefficients"),
+        None => (f.coefficients, "coefficients"),
+    };
+    if found.k != want {
+        let holds = format!("{} coefficients per pixel", found.k);
+        return differs(field, &holds, &want.to_string());
+    }
+    Ok(())
+}
+
 /// The identity in a pyramid file's header, read from the header alone (verify checks the
 /// file's hash against the index first): None when it has none, `Err` when the file is too
 /// short to hold one or not a pyramid file.

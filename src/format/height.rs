@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, IoContext, Result};
 use crate::exrcodec::{self, Channel, Samples};
 
-use crate::format::{exr_identity, Identity};
+use crate::format::{check_channels, exr_channels, exr_identity, ChannelLabel, Identity};
 use crate::fsio::write_staged;
 
 /// A square height tile including its halo.
@@ -177,24 +177,53 @@ pub fn max_file_bytes(stored: usize) -> u64 {
 /// Decode the bytes of a height tile file, whatever its identity; the error says what is wrong
 /// (without the path).
 pub fn decode_height_tile(bytes: &[u8]) -> std::result::Result<HeightTile, String> {
-    decode(bytes).map(|(t, _)| t)
+    decode(bytes).map(|(t, _, _)| t)
 }
 
 /// Decode the bytes of a height tile file that must be `expected` (its identity attribute is
-/// checked; [`Identity::check`] says what is wrong otherwise).
+/// checked; [`Identity::check`] says what is wrong otherwise) and hold the channels `labels`
+/// says ([`labels`]; [`check_channels`] says what is wrong otherwise).
 pub fn decode_height_tile_as(
     bytes: &[u8],
     expected: &Identity,
+    labels: &[ChannelLabel],
 ) -> std::result::Result<HeightTile, String> {
-    let (t, id) = decode(bytes)?;
+    let (t, id, found) = decode(bytes)?;
     Identity::check(expected, exr_identity(id))?;
+    check_channels(&found, labels)?;
     Ok(t)
 }
 
-fn decode(bytes: &[u8]) -> std::result::Result<(HeightTile, Option<String>), String> {
+/// The sample type the height tile format gives a channel (docs/tileset.md): `height` f32,
+/// `mask` f16.
+fn sample_of(channel: &str) -> &'static str {
+    match channel {
+        "mask" => "f16",
+        _ => "f32",
+    }
+}
+
+/// What a height tile must hold by the manifest: the channels `products.height.channels`
+/// lists, each of the sample type the format gives it.
+pub fn labels(p: &HeightProduct) -> Vec<ChannelLabel> {
+    p.channels
+        .iter()
+        .map(|c| ChannelLabel {
+            name: c.clone(),
+            sample: sample_of(c).to_string(),
+            names_by: "the manifest's `products.height.channels`".into(),
+            sample_by: "the height tile format (docs/tileset.md)".into(),
+        })
+        .collect()
+}
+
+type Decoded = (HeightTile, Option<String>, Vec<(String, &'static str)>);
+
+fn decode(bytes: &[u8]) -> std::result::Result<Decoded, String> {
     let mut image = exrcodec::decode(bytes, true).map_err(|e| {
         format!("not a readable EXR height tile ({e}); delete it and rerun the stage")
     })?;
+    let found = exr_channels(image.channels.iter().map(|(n, t, _)| (n, *t)));
     let (w, h) = image.size();
     if w != h {
         return Err(format!("height tile is {w}×{h}, not square"));
@@ -214,6 +243,7 @@ fn decode(bytes: &[u8]) -> std::result::Result<(HeightTile, Option<String>), Str
             mask,
         },
         image.identity,
+        found,
     ))
 }
 

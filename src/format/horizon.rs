@@ -12,7 +12,7 @@ use exr::prelude::f16;
 use crate::error::{Error, IoContext, Result};
 use crate::exrcodec::TileCompression;
 use crate::exrcodec::{self, Channel, Samples, ZipLevel};
-use crate::format::{exr_identity, Identity};
+use crate::format::{check_channels, exr_channels, exr_identity, ChannelLabel, Identity};
 use crate::fsio::write_staged;
 use crate::layout::TileId;
 use serde::{Deserialize, Serialize};
@@ -187,25 +187,40 @@ pub fn decode_horizon_exr(
     bytes: &[u8],
     n: usize,
 ) -> std::result::Result<(usize, Vec<f32>), String> {
-    decode(bytes, n).map(|(a, e, _)| (a, e))
+    decode(bytes, n).map(|(a, e, _, _)| (a, e))
 }
 
-/// Decode the bytes of a horizon file that must be `expected` (its identity is checked).
+/// Decode the bytes of a horizon file that must be `expected` (its identity is checked) and
+/// hold the channel `labels` says ([`labels`]).
 pub fn decode_horizon_exr_as(
     bytes: &[u8],
     n: usize,
     expected: &Identity,
+    labels: &[ChannelLabel],
 ) -> std::result::Result<(usize, Vec<f32>), String> {
-    let (a, e, id) = decode(bytes, n)?;
+    let (a, e, id, found) = decode(bytes, n)?;
     Identity::check(expected, exr_identity(id))?;
+    check_channels(&found, labels)?;
     Ok((a, e))
 }
 
-type Decoded = (usize, Vec<f32>, Option<String>);
+/// What a horizon file must hold by the manifest: the one channel `products.horizon.channel`
+/// names, in the sample type `products.horizon.precision` gives.
+pub fn labels(h: &HorizonProduct) -> Vec<ChannelLabel> {
+    vec![ChannelLabel::of(
+        &h.channel,
+        &h.precision,
+        "products.horizon.channel",
+        "products.horizon.precision",
+    )]
+}
+
+type Decoded = (usize, Vec<f32>, Option<String>, Vec<(String, &'static str)>);
 
 fn decode(bytes: &[u8], n: usize) -> std::result::Result<Decoded, String> {
     let mut image =
         exrcodec::decode(bytes, true).map_err(|e| format!("not a readable horizon EXR ({e})"))?;
+    let found = exr_channels(image.channels.iter().map(|(n, t, _)| (n, *t)));
     let (w, h) = image.size();
     if w != n || h % n != 0 || h == 0 {
         return Err(format!(
@@ -216,7 +231,7 @@ fn decode(bytes: &[u8], n: usize) -> std::result::Result<Decoded, String> {
         .take("elevation")
         .and_then(|mut l| l.drain(..).next())
         .ok_or_else(|| "no 'elevation' channel".to_string())?;
-    Ok((h / n, elev, image.identity))
+    Ok((h / n, elev, image.identity, found))
 }
 pub const PATTERN: &str = "horizon/{level}/{face}/{y}/{x}.exr";
 /// Version of the horizon products' layout and convention (part of the run key).

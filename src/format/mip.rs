@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 use crate::cube::Face;
 use crate::error::{Error, IoContext, Result};
 use crate::exrcodec::TileCompression;
-use crate::format::{exr_identity, Identity};
+use crate::format::{check_channels, exr_channels, exr_identity, ChannelLabel, Identity};
 use crate::fsio::write_staged;
 use crate::layout::TileId;
 
@@ -212,22 +212,69 @@ pub fn max_file_bytes(n: usize, channels: usize) -> u64 {
 /// Decode the bytes of a mip file, whatever its identity; the error says what is wrong
 /// (without the path).
 pub fn decode_mip_exr(bytes: &[u8]) -> std::result::Result<MipFile, String> {
-    decode(bytes).map(|(f, _)| f)
+    decode(bytes).map(|(f, _, _)| f)
 }
 
-/// Decode the bytes of a mip file that must be `expected` (its identity is checked).
+/// Decode the bytes of a mip file that must be `expected` (its identity is checked) and hold
+/// the channels `labels` says ([`labels`]).
 pub fn decode_mip_exr_as(
     bytes: &[u8],
     expected: &Identity,
+    labels: &[ChannelLabel],
 ) -> std::result::Result<MipFile, String> {
-    let (f, id) = decode(bytes)?;
+    let (f, id, found) = decode(bytes)?;
     Identity::check(expected, exr_identity(id))?;
+    check_channels(&found, labels)?;
     Ok(f)
 }
 
-fn decode(bytes: &[u8]) -> std::result::Result<(MipFile, Option<String>), String> {
+/// The three kinds of mip file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MipKind {
+    /// A tile's maximum pyramid.
+    Max,
+    /// A tile's (min, max) pyramid.
+    MinMax,
+    /// A face pyramid or a chunk of one.
+    Face,
+}
+
+impl MipKind {
+    /// The kind of the files whose identities are named `id` (`maxmip`, `minmax`, …).
+    pub fn of_id(id: &str) -> Option<MipKind> {
+        match id {
+            MAX_ID => Some(MipKind::Max),
+            MINMAX_ID => Some(MipKind::MinMax),
+            FACE_ID | FACE_CHUNK_ID => Some(MipKind::Face),
+            _ => None,
+        }
+    }
+}
+
+/// What a mip file of `kind` must hold by the manifest: the channels `max_channels` (or
+/// `minmax_channels`, which the face pyramids have too) lists, in the sample type
+/// `precision` (the face pyramids': `face_precision`) gives.
+pub fn labels(m: &MipProduct, kind: MipKind) -> Vec<ChannelLabel> {
+    let (names, names_field) = match kind {
+        MipKind::Max => (&m.max_channels, "products.mip.max_channels"),
+        _ => (&m.minmax_channels, "products.mip.minmax_channels"),
+    };
+    let (precision, field) = match kind {
+        MipKind::Face => (m.face_precision, "products.mip.face_precision"),
+        _ => (m.precision, "products.mip.precision"),
+    };
+    names
+        .iter()
+        .map(|n| ChannelLabel::of(n, precision.name(), names_field, field))
+        .collect()
+}
+
+type Decoded = (MipFile, Option<String>, Vec<(String, &'static str)>);
+
+fn decode(bytes: &[u8]) -> std::result::Result<Decoded, String> {
     let image =
         exrcodec::decode(bytes, false).map_err(|e| format!("not a readable mipmap EXR ({e})"))?;
+    let found = exr_channels(image.channels.iter().map(|(n, t, _)| (n, *t)));
     let (w, h) = image.size();
     if w != h {
         return Err(format!("mipmap is {w}×{h}, not square"));
@@ -245,7 +292,7 @@ fn decode(bytes: &[u8]) -> std::result::Result<(MipFile, Option<String>), String
         }
         channels.insert(name, levels);
     }
-    Ok((MipFile { sizes, channels }, identity))
+    Ok((MipFile { sizes, channels }, identity, found))
 }
 pub const MAX_PATTERN: &str = "maxmip/{level}/{face}/{y}/{x}.exr";
 pub const MINMAX_PATTERN: &str = "minmax/{level}/{face}/{y}/{x}.exr";
@@ -298,6 +345,16 @@ pub enum Precision {
     F32,
     /// f16: max rounded up and min rounded down to the next f16, so bounds stay bounds.
     F16,
+}
+
+impl Precision {
+    /// `f32` or `f16`, as the manifest writes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::F16 => "f16",
+        }
+    }
 }
 
 impl std::str::FromStr for Precision {

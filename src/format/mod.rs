@@ -196,7 +196,8 @@ impl Identity {
             )),
             None => Err(format!(
                 "carries no identity where {expected} was expected: it was written by a penumbra \
-                 older than tileset format 2, or by another program; {REBUILD}"
+                 older than tileset format 2 (an albedo tile: older than its identity chunk), or \
+                 by another program; {REBUILD}"
             )),
         }
     }
@@ -220,6 +221,93 @@ impl std::fmt::Display for Identity {
             self.x
         )
     }
+}
+
+/// What the manifest says one channel of an EXR product file holds, and what says so: checked
+/// against the file's header on every read and by `penumbra verify` ([`check_channels`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ChannelLabel {
+    pub name: String,
+    /// Its sample type: `f16` or `f32`.
+    pub sample: String,
+    /// What lists the channel, e.g. "the manifest's `products.mip.max_channels`".
+    pub names_by: String,
+    /// What gives its sample type, e.g. "the manifest's `products.mip.precision`".
+    pub sample_by: String,
+}
+
+impl ChannelLabel {
+    /// A channel whose name the manifest field `names` lists and whose sample type the field
+    /// `sample_field` gives.
+    pub fn of(name: &str, sample: &str, names: &str, sample_field: &str) -> ChannelLabel {
+        ChannelLabel {
+            name: name.to_string(),
+            sample: sample.to_string(),
+            names_by: format!("the manifest's `{names}`"),
+            sample_by: format!("the manifest's `{sample_field}`"),
+        }
+    }
+}
+
+/// What to do about a file whose contents are not what the manifest's labels say.
+const RELABEL: &str = "the file was rewritten or the manifest edited after the stage made them: \
+                       restore the manifest, or delete the file and rerun the stage that makes it \
+                       (`penumbra verify DIR` lists every such file)";
+
+/// Compare the channels an EXR file holds (`found`: name and sample type, as its header says)
+/// with the manifest's labels (`want`); the error names the label and says what the file holds
+/// (without the path).
+pub fn check_channels(
+    found: &[(String, &str)],
+    want: &[ChannelLabel],
+) -> std::result::Result<(), String> {
+    let holds = || {
+        found
+            .iter()
+            .map(|(n, t)| format!("`{n}` ({t})"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    for w in want {
+        match found.iter().find(|(n, _)| *n == w.name) {
+            None => {
+                return Err(format!(
+                    "holds no channel `{}`, which {} lists (it holds {}); {RELABEL}",
+                    w.name,
+                    w.names_by,
+                    holds()
+                ))
+            }
+            Some((_, t)) if *t != w.sample => {
+                return Err(format!(
+                    "holds channel `{}` as {t} samples, but {} says {}; {RELABEL}",
+                    w.name, w.sample_by, w.sample
+                ))
+            }
+            Some(_) => {}
+        }
+    }
+    if let Some((n, t)) = found
+        .iter()
+        .find(|(n, _)| want.iter().all(|w| w.name != *n))
+    {
+        let by = want.first().map_or("the manifest", |w| w.names_by.as_str());
+        return Err(format!(
+            "holds channel `{n}` ({t}), which {by} does not list; {RELABEL}"
+        ));
+    }
+    Ok(())
+}
+
+/// The channels of a decoded or parsed EXR header as [`check_channels`] takes them.
+pub(crate) fn exr_channels<'a, I>(channels: I) -> Vec<(String, &'static str)>
+where
+    I: IntoIterator<Item = (&'a String, exr::meta::attribute::SampleType)>,
+{
+    channels
+        .into_iter()
+        .map(|(n, t)| (n.clone(), crate::exrcodec::sample_name(t)))
+        .collect()
 }
 
 /// Parse an EXR file's identity attribute text for [`Identity::check`].

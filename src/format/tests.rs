@@ -364,3 +364,175 @@ mod mip_layout {
         }
     }
 }
+
+/// A mip, horizon or height file's header is compared with the manifest's labels: the sample
+/// type, the channel names; the error names the label and what the file holds.
+#[test]
+fn exr_headers_are_checked_against_the_labels() {
+    use crate::format::{check_channels, exr_channels, ChannelLabel, Identity};
+    let n = 16;
+    let sizes = level_sizes(n);
+    let levels: Vec<Vec<f32>> = sizes.iter().map(|&s| values(s * s, 5)).collect();
+    let id = Identity::tile(
+        crate::format::mip::MAX_ID,
+        crate::layout::TileId {
+            level: 1,
+            face: crate::cube::Face::Px,
+            x: 0,
+            y: 1,
+        },
+        &"a".repeat(64),
+    );
+    let bytes = crate::format::mip::encode_mip_exr_identified(
+        n,
+        None,
+        &levels,
+        Precision::F16,
+        TileCompression::Zip,
+        ZipLevel::DEFAULT,
+        "t",
+        Some(&id),
+    )
+    .unwrap();
+    let h = read_header(&bytes).unwrap();
+    let found = exr_channels(h.channels.iter().map(|(n, t)| (n, *t)));
+    assert_eq!(found, vec![("max".to_string(), "f16")]);
+    let label = |sample: &str| {
+        vec![ChannelLabel::of(
+            "max",
+            sample,
+            "products.mip.max_channels",
+            "products.mip.precision",
+        )]
+    };
+    check_channels(&found, &label("f16")).unwrap();
+    let e = check_channels(&found, &label("f32")).unwrap_err();
+    assert!(
+        e.contains("holds channel `max` as f16 samples")
+            && e.contains("`products.mip.precision` says f32"),
+        "{e}"
+    );
+    // Decoding through the store's path says the same.
+    let e = crate::format::mip::decode_mip_exr_as(&bytes, &id, &label("f32")).unwrap_err();
+    assert!(e.contains("products.mip.precision"), "{e}");
+    crate::format::mip::decode_mip_exr_as(&bytes, &id, &label("f16")).unwrap();
+    // A channel the label does not list, one it lists that the file lacks.
+    let two = vec![
+        ChannelLabel::of(
+            "min",
+            "f16",
+            "products.mip.minmax_channels",
+            "products.mip.precision",
+        ),
+        ChannelLabel::of(
+            "max",
+            "f16",
+            "products.mip.minmax_channels",
+            "products.mip.precision",
+        ),
+    ];
+    let e = check_channels(&found, &two).unwrap_err();
+    assert!(
+        e.contains("holds no channel `min`") && e.contains("minmax_channels"),
+        "{e}"
+    );
+    let e =
+        check_channels(&[("max".into(), "f16"), ("x".into(), "f32")], &label("f16")).unwrap_err();
+    assert!(e.contains("holds channel `x` (f32)"), "{e}");
+}
+
+/// Albedo tiles carry their identity in a `tEXt` chunk right after the image header: the rest
+/// of the file is the bytes written without it, the image decodes to the same pixels, and the
+/// header is checked against the identity and the manifest's labels.
+#[test]
+fn albedo_tiles_carry_their_identity_in_a_text_chunk() {
+    use crate::format::albedo::{
+        check_labels, decode_albedo_tile_as, encode_albedo_tile, read_header, AlbedoProduct,
+        AlbedoTile, ID,
+    };
+    use crate::format::{Identity, SourceFile};
+    let size = 13;
+    for (channels, sixteen_bit) in [(1, false), (3, false), (4, true), (2, true)] {
+        let tile = AlbedoTile {
+            size,
+            channels,
+            sixteen_bit,
+            data: (0..size * size * channels)
+                .map(|i| (i * 7919 % if sixteen_bit { 65536 } else { 256 }) as u16)
+                .collect(),
+        };
+        let id = Identity::tile(
+            ID,
+            crate::layout::TileId {
+                level: 2,
+                face: crate::cube::Face::Nz,
+                x: 3,
+                y: 1,
+            },
+            &"0123456789abcdef".repeat(4),
+        );
+        let plain = encode_albedo_tile(&tile, None).unwrap();
+        let with = encode_albedo_tile(&tile, Some(&id)).unwrap();
+        // Only the chunk was added, after IHDR (8 + 25 bytes).
+        let extra = with.len() - plain.len();
+        assert_eq!(&with[..33], &plain[..33]);
+        assert_eq!(&with[33 + extra..], &plain[33..]);
+        assert_eq!(&with[37..41], b"tEXt");
+        let facts = read_header(&with).unwrap();
+        assert_eq!(facts.identity.as_deref(), Some(id.text().as_str()));
+        let bit_depth = if sixteen_bit { 16 } else { 8 };
+        assert_eq!(
+            (facts.bit_depth, facts.channels as usize),
+            (bit_depth, channels)
+        );
+        assert_eq!(read_header(&plain).unwrap().identity, None);
+        let product = AlbedoProduct {
+            path: crate::format::albedo::ALBEDO_PATTERN.into(),
+            source: SourceFile {
+                path: "a.png".into(),
+                bytes: 1,
+                blake3: "0".repeat(64),
+            },
+            bit_depth,
+            channels: channels as u8,
+            west_lon_deg: -180.0,
+        };
+        // The image crate (which checks every CRC) reads the same pixels back.
+        let back = decode_albedo_tile_as(&with, &id, &product, size).unwrap();
+        assert_eq!(back, tile);
+        // Another tile's identity, no identity, another label, another size: refused.
+        let other = Identity { x: 4, ..id.clone() };
+        let e = decode_albedo_tile_as(&with, &other, &product, size).unwrap_err();
+        assert!(e.contains("claims to be albedo 2/nz/y1/x3"), "{e}");
+        let e = decode_albedo_tile_as(&plain, &id, &product, size).unwrap_err();
+        assert!(e.contains("carries no identity"), "{e}");
+        let flipped = AlbedoProduct {
+            bit_depth: 24 - bit_depth,
+            ..product.clone()
+        };
+        let e = check_labels(&facts, &flipped).unwrap_err();
+        assert!(
+            e.contains(&format!("holds {bit_depth}-bit samples"))
+                && e.contains("`products.albedo.bit_depth` says"),
+            "{e}"
+        );
+        let e = decode_albedo_tile_as(&with, &id, &product, size + 2).unwrap_err();
+        assert!(e.contains("albedo tile is 13×13"), "{e}");
+        // A damaged chunk is refused by its CRC.
+        let mut bad = with.clone();
+        bad[50] ^= 1;
+        assert!(read_header(&bad).unwrap_err().contains("CRC"));
+    }
+}
+
+/// A Fourier pyramid's labels read from its header alone are those it was written with.
+#[test]
+fn fourier_headers_are_checked_against_the_labels() {
+    use crate::format::fourier::{read_labels, Encoding, Layout, Pyramid, Sigma};
+    let p = Pyramid::fully_lit(8, 16, Layout::Multires, Encoding::F16, Sigma::None, 1.0);
+    let bytes = p.encode();
+    let l = read_labels(&bytes).unwrap();
+    assert_eq!(l, p.labels());
+    assert!(l.fully_lit && l.k == 0);
+    assert!(read_labels(&bytes[..40]).is_err());
+}

@@ -374,7 +374,7 @@ fn choose_k(
 
 /// Key of a tile in `tile_coefficients`.
 pub fn tile_key(id: TileId) -> String {
-    format!("{}/{}/{}/{}", id.level, id.face.name(), id.x, id.y)
+    pyramid::tile_key(id)
 }
 
 /// Collects per-tile results into the manifest's entry.

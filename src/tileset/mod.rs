@@ -304,8 +304,8 @@ impl Store {
         Ok(bytes)
     }
 
-    /// Read a height tile (uncached), checking it against the index (size, hash), its identity
-    /// and its size against the manifest.
+    /// Read a height tile (uncached), checking it against the index (size, hash), its identity,
+    /// its channels and its size against the manifest.
     pub fn read_height(&self, id: TileId) -> Result<HeightTile> {
         let p = self.height_path(id)?;
         let s = self.ts.layout.stored_size();
@@ -316,7 +316,14 @@ impl Store {
             "a height tile",
         )?;
         let expected = format::Identity::tile(format::height::ID, id, &self.ts.run_key);
-        let t = format::height::decode_height_tile_as(&bytes, &expected)
+        let labels = self
+            .ts
+            .products
+            .height
+            .as_ref()
+            .map(format::height::labels)
+            .unwrap_or_default();
+        let t = format::height::decode_height_tile_as(&bytes, &expected, &labels)
             .map_err(|e| Error::invalid(&p, e))?;
         if t.size != s {
             return Err(Error::invalid(
@@ -338,8 +345,9 @@ impl Store {
         })
     }
 
-    /// A tile's (min, max) mipmap, checked against the tile size (`max`: the one-channel
-    /// maximum pyramid instead).
+    /// A tile's (min, max) mipmap, checked against the index, its identity, the manifest's
+    /// channels and precision, and the tile size (`max`: the one-channel maximum pyramid
+    /// instead).
     pub fn mip(&self, id: TileId, max: bool) -> Result<format::mip::MipFile> {
         let m =
             self.ts.products.mip.as_ref().ok_or_else(|| {
@@ -363,7 +371,13 @@ impl Store {
             format::mip::MINMAX_ID
         };
         let expected = format::Identity::tile(name, id, &m.run_key);
-        let f = format::mip::decode_mip_exr_as(&bytes, &expected).map_err(|msg| {
+        let kind = if max {
+            format::mip::MipKind::Max
+        } else {
+            format::mip::MipKind::MinMax
+        };
+        let labels = format::mip::labels(m, kind);
+        let f = format::mip::decode_mip_exr_as(&bytes, &expected, &labels).map_err(|msg| {
             Error::invalid(&p, format!("{msg}; delete it and rerun `penumbra mip`"))
         })?;
         if f.sizes.first() != Some(&n) {
@@ -376,7 +390,8 @@ impl Store {
     }
 
     /// The face pyramid file `path` of tile level `level` and `face` (`chunk`: the chunk
-    /// (cx, cy) it is), checked against the index and its identity.
+    /// (cx, cy) it is), checked against the index, its identity and the manifest's channels and
+    /// `face_precision`.
     pub fn face_mip(
         &self,
         path: &Path,
@@ -403,13 +418,14 @@ impl Store {
             "a face pyramid",
         )?;
         let expected = format::Identity::face(name, level, face, x, y, &m.run_key);
-        format::mip::decode_mip_exr_as(&bytes, &expected).map_err(|msg| {
+        let labels = format::mip::labels(m, format::mip::MipKind::Face);
+        format::mip::decode_mip_exr_as(&bytes, &expected, &labels).map_err(|msg| {
             Error::invalid(path, format!("{msg}; delete it and rerun `penumbra mip`"))
         })
     }
 
-    /// A tile's Fourier pyramid, checked against the manifest (tile size, azimuths) and its
-    /// checksum.
+    /// A tile's Fourier pyramid, checked against the index, its identity, the manifest (tile
+    /// size, azimuths, encoding, layout, sigma, coefficients) and its checksum.
     pub fn fourier(&self, id: TileId) -> Result<format::fourier::Pyramid> {
         let f = self.ts.products.fourier.as_ref().ok_or_else(|| {
             self.missing(
@@ -426,11 +442,14 @@ impl Store {
             "a Fourier pyramid",
         )?;
         let expected = format::Identity::tile(format::fourier::ID, id, &f.run_key);
-        format::fourier::Pyramid::decode_as(&bytes, &p, n, f.azimuths, &expected)
+        let pyramid = format::fourier::Pyramid::decode_as(&bytes, &p, n, f.azimuths, &expected)?;
+        format::fourier::check_labels(&pyramid.labels(), f, id)
+            .map_err(|m| Error::invalid(&p, m))?;
+        Ok(pyramid)
     }
 
     /// A tile's raw horizon maps (`A` planes of n² elevations, degrees), checked against the
-    /// manifest's azimuth count.
+    /// index, its identity and the manifest's channel, precision and azimuth count.
     pub fn horizon(&self, id: TileId) -> Result<Vec<f32>> {
         let h = self.ts.products.horizon.as_ref().ok_or_else(|| {
             self.missing("tileset has no horizon maps: compute them with the horizon stage")
@@ -444,8 +463,9 @@ impl Store {
             "a horizon map",
         )?;
         let expected = format::Identity::tile(format::horizon::ID, id, &h.run_key);
-        let (a, planes) =
-            format::horizon::decode_horizon_exr_as(&bytes, n, &expected).map_err(|msg| {
+        let labels = format::horizon::labels(h);
+        let (a, planes) = format::horizon::decode_horizon_exr_as(&bytes, n, &expected, &labels)
+            .map_err(|msg| {
                 Error::invalid(&p, format!("{msg}; delete it and rerun `penumbra horizon`"))
             })?;
         if a != h.azimuths {
@@ -455,6 +475,30 @@ impl Store {
             ));
         }
         Ok(planes)
+    }
+
+    /// A tile's albedo (halo included), checked against the index, its identity, the manifest's
+    /// bit depth and channels and the tile size; None where the tileset has no albedo tile
+    /// (no albedo product, or no data in the tile).
+    pub fn albedo(&self, id: TileId) -> Result<Option<format::albedo::AlbedoTile>> {
+        let Some(a) = self.ts.products.albedo.as_ref() else {
+            return Ok(None);
+        };
+        if !self.ts.has_tile(id) {
+            return Ok(None);
+        }
+        let p = tile_path(&self.dir, &a.path, id);
+        let s = self.ts.layout.stored_size();
+        let bytes = self.read_product_file(
+            Product::Albedo,
+            &p,
+            format::albedo::max_file_bytes(s),
+            "an albedo tile",
+        )?;
+        let expected = format::Identity::tile(format::albedo::ID, id, &self.ts.run_key);
+        format::albedo::decode_albedo_tile_as(&bytes, &expected, a, s)
+            .map(Some)
+            .map_err(|m| Error::invalid(&p, m))
     }
 
     /// The shared height-tile cache (for stages that manage its budget).

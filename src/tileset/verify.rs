@@ -1,7 +1,9 @@
 //! `penumbra verify`: every file of a tileset against its product's index (present, a regular
 //! file inside the tileset, the recorded size, the recorded blake3) and against its identity
 //! (the product, tile and run it says it is, compared with what its path and the manifest say
-//! it must be), and every tile the coverage lists against the index. Nothing is written; each
+//! it must be) and the manifest's labels (what its header says it holds: channels and sample
+//! types, the Fourier encoding, layout, sigma and coefficients, the albedo bit depth and
+//! channels), and every tile the coverage lists against the index. Nothing is written; each
 //! file is read once, whole, bounded by its recorded size, files in parallel.
 
 use std::collections::BTreeMap;
@@ -26,7 +28,7 @@ pub struct Finding {
     /// The product whose index lists it (or whose coverage expects it).
     pub product: String,
     /// What kind of problem: `missing`, `not-a-file`, `outside-link`, `size`, `hash`,
-    /// `identity`, `unreadable`, `unlisted`, `no-index`.
+    /// `identity`, `label`, `unreadable`, `unlisted`, `no-index`.
     pub problem: String,
     /// What was found and what was expected, in words.
     pub detail: String,
@@ -37,7 +39,7 @@ pub struct Finding {
 pub struct ProductSummary {
     pub files: u64,
     pub bytes: u64,
-    /// Files whose identity was compared (all but albedo PNGs and unlisted products' files).
+    /// Files whose identity (and labels) were compared (all but unlisted products' files).
     pub identities: u64,
     pub problems: u64,
 }
@@ -93,7 +95,12 @@ fn patterns(ts: &Tileset, product: Product) -> Vec<(String, &'static str)> {
             .iter()
             .map(|f| (f.path.clone(), format::fourier::ID))
             .collect(),
-        Product::Albedo | Product::Other(_) => Vec::new(),
+        Product::Albedo => p
+            .albedo
+            .iter()
+            .map(|a| (a.path.clone(), format::albedo::ID))
+            .collect(),
+        Product::Other(_) => Vec::new(),
     }
 }
 
@@ -123,8 +130,8 @@ fn match_pattern(pattern: &str, rel: &str) -> Option<BTreeMap<String, String>> {
 }
 
 /// What the file at `rel` of `product` must say it is, from its path and the manifest; None
-/// for files that carry no identity (albedo PNGs, unlisted products) or whose path follows no
-/// pattern (then `Err`, with what is wrong).
+/// for files that carry no identity (unlisted products), `Err` (with what is wrong) for one
+/// whose path follows no pattern.
 fn expected_identity(
     ts: &Tileset,
     product: Product,
@@ -218,25 +225,73 @@ fn check_file(
         Some(Err(msg)) => out.push(finding("identity", msg)),
         Some(Ok(expected)) => {
             compared = true;
-            let found = if product == Product::Fourier {
-                format::fourier::read_identity(&bytes)
-            } else {
-                crate::exrcodec::read_identity(&bytes).map(format::exr_identity)
-            };
-            match found {
+            match header(ts, &expected, &bytes) {
                 Err(e) => out.push(finding(
                     "unreadable",
                     format!("its header cannot be read ({e})"),
                 )),
-                Ok(found) => {
+                Ok((found, labels)) => {
                     if let Err(msg) = Identity::check(&expected, found) {
                         out.push(finding("identity", msg));
+                    } else if let Err(msg) = labels {
+                        out.push(finding("label", msg));
                     }
                 }
             }
         }
     }
     (out, compared)
+}
+
+type Found = Option<std::result::Result<Identity, String>>;
+
+/// The identity a product file's header holds, and its header against the manifest's labels
+/// (`Err`: what differs), read from the header alone; `Err` when the header cannot be read.
+fn header(
+    ts: &Tileset,
+    expected: &Identity,
+    bytes: &[u8],
+) -> std::result::Result<(Found, std::result::Result<(), String>), String> {
+    let p = &ts.products;
+    let tile = TileId {
+        level: expected.level,
+        face: expected.face,
+        x: expected.x,
+        y: expected.y,
+    };
+    match expected.product.as_str() {
+        format::fourier::ID => {
+            let found = format::fourier::read_identity(bytes)?;
+            let labels = format::fourier::read_labels(bytes)?;
+            let check = p
+                .fourier
+                .as_ref()
+                .map_or(Ok(()), |f| format::fourier::check_labels(&labels, f, tile));
+            Ok((found, check))
+        }
+        format::albedo::ID => {
+            let facts = format::albedo::read_header(bytes)?;
+            let found = format::exr_identity(facts.identity.clone());
+            let check = p
+                .albedo
+                .as_ref()
+                .map_or(Ok(()), |a| format::albedo::check_labels(&facts, a));
+            Ok((found, check))
+        }
+        name => {
+            let h = crate::exrcodec::read_header(bytes)?;
+            let found = format::exr_identity(h.identity);
+            let channels = format::exr_channels(h.channels.iter().map(|(n, t)| (n, *t)));
+            let labels = match (name, format::mip::MipKind::of_id(name)) {
+                (format::height::ID, _) => p.height.as_ref().map(format::height::labels),
+                (format::horizon::ID, _) => p.horizon.as_ref().map(format::horizon::labels),
+                (_, Some(kind)) => p.mip.as_ref().map(|m| format::mip::labels(m, kind)),
+                _ => None,
+            };
+            let check = labels.map_or(Ok(()), |l| format::check_channels(&channels, &l));
+            Ok((found, check))
+        }
+    }
 }
 
 /// An error's message without the path it names (the report lists the path).
@@ -288,7 +343,12 @@ fn expected_files(ts: &Tileset, product: Product) -> Vec<String> {
                 }
             }
         }
-        Product::Albedo | Product::Other(_) => {}
+        Product::Albedo => {
+            if let Some(a) = &p.albedo {
+                out.extend(tiles.iter().map(|&id| rel(&a.path, id)));
+            }
+        }
+        Product::Other(_) => {}
     }
     out
 }

@@ -2,8 +2,8 @@
 The tileset on the GPU: the tiles a frame draws, each with its mesh, normals, albedo and
 shadow data, made on first use and kept while they are drawn.
 
-A tile is read through the library's [`Store`] (heights; the albedo through the manifest's
-path pattern), meshed on the CPU ([`crate::mesh`]), and handed to the shadow module
+A tile is read through the library's [`Store`] (heights and albedo, each checked against the
+tileset's index, its identity and the manifest), meshed on the CPU ([`crate::mesh`]), and handed to the shadow module
 ([`Shadows::prepare_tile`]) for the selected method. Changing the sun updates every kept
 tile's shadow uniforms; changing the method drops them (each method reads different data).
 */
@@ -13,7 +13,7 @@ use std::time::Instant;
 
 use anyhow::{Context as _, Result};
 use penumbra::layout::TileId;
-use penumbra::tileset::{tile_path, Store};
+use penumbra::tileset::Store;
 use wgpu::util::DeviceExt;
 
 use crate::camera::SunPos;
@@ -237,27 +237,15 @@ impl Scene {
     }
 
     /// The albedo tile of `id` as RGBA8 (stored size, halo included), when the tileset has
-    /// albedo.
+    /// albedo: read through the store, which checks it against the index, its identity and
+    /// the manifest (bit depth, channels, size).
     fn albedo(&self, id: TileId) -> Result<Option<Vec<u8>>> {
-        let ts = self.store.manifest();
-        let Some(a) = &ts.products.albedo else {
+        let Some(tile) = self.store.albedo(id)? else {
             return Ok(None);
         };
-        let path = tile_path(self.store.dir(), &a.path, id);
-        let img = image::ImageReader::open(&path)
-            .and_then(|r| r.with_guessed_format())
-            .with_context(|| format!("{}: cannot open the albedo tile", path.display()))?
-            .decode()
-            .with_context(|| format!("{}: cannot decode the albedo tile", path.display()))?;
-        let s = ts.layout.stored_size() as u32;
-        if img.width() != s || img.height() != s {
-            anyhow::bail!(
-                "{}: albedo tile is {}×{} but the manifest says {s}²",
-                path.display(),
-                img.width(),
-                img.height()
-            );
-        }
+        let img = tile
+            .to_image()
+            .context("the store returned an albedo tile of the wrong length")?;
         Ok(Some(img.to_rgba8().into_raw()))
     }
 }

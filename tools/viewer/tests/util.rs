@@ -94,14 +94,22 @@ fn fixtures() -> PathBuf {
     Path::new(env!("CARGO_TARGET_TMPDIR")).join("viewer-fixtures")
 }
 
-/// Bake `input` into `dir` with `plan` unless a complete tileset (one with `needs`' product)
-/// is there already.
+/// Whether every file of the tileset in `dir` is what the tileset says it is: a cached fixture
+/// written by an older penumbra (whose files lack what this one checks) is rebuilt.
+fn sound(dir: &Path) -> bool {
+    penumbra::tileset::verify::verify(dir).is_ok_and(|r| r.clean())
+}
+
+/// Bake `input` into `dir` with `plan` unless a complete, sound tileset (one with `needs`'
+/// product) is there already.
 fn baked(dir: &Path, input: &Input, plan: &Plan, fourier: bool) -> PathBuf {
     if let Ok(ts) = penumbra::manifest::Tileset::load(dir) {
-        if ts.products.mip.is_some() && (!fourier || ts.products.fourier.is_some()) {
+        if ts.products.mip.is_some() && (!fourier || ts.products.fourier.is_some()) && sound(dir) {
             return dir.to_path_buf();
         }
     }
+    // Made again from nothing: a stale fixture's files would count as up to date.
+    let _ = std::fs::remove_dir_all(dir);
     std::fs::create_dir_all(dir.parent().unwrap()).unwrap();
     bake::bake(input, dir, plan, &NoProgress).expect("fixture bakes");
     dir.to_path_buf()
@@ -262,7 +270,9 @@ pub fn albedo_globe() -> &'static Path {
     DIR.get_or_init(|| {
         let root = fixtures().join("albedo-globe");
         let out = root.join("tiles");
-        if penumbra::manifest::Tileset::load(&out).is_ok_and(|t| t.products.albedo.is_some()) {
+        if penumbra::manifest::Tileset::load(&out).is_ok_and(|t| t.products.albedo.is_some())
+            && sound(&out)
+        {
             return out;
         }
         let _ = std::fs::remove_dir_all(&root);
