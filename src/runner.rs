@@ -48,6 +48,17 @@ pub fn run_key(spec: &StageSpec, inputs: &[&str], params: &[&[u8]]) -> String {
     )
 }
 
+/// What a stage's run key hashes besides the run keys of its inputs, as text: this tool's
+/// version, the stage's format strings and `params` (recorded in the product's manifest entry
+/// as `run_key_basis`; `basis.key(inputs)` is [`run_key`] of the same parameters).
+pub fn key_basis(spec: &StageSpec, params: Vec<String>) -> crate::format::KeyBasis {
+    crate::format::KeyBasis {
+        tool: env!("CARGO_PKG_VERSION").to_string(),
+        format: spec.format.iter().map(|f| f.to_string()).collect(),
+        params,
+    }
+}
+
 /// A run under way.
 pub struct Run {
     spec: StageSpec,

@@ -41,6 +41,9 @@ pub struct HorizonSource {
     pub terrain_min_m: f64,
     pub terrain_max_m: f64,
     pub distances: Vec<HorizonLevelDistance>,
+    /// What the run key of the run that made them hashes besides its inputs' (a streamed
+    /// product's `run_key_basis`).
+    pub basis: crate::format::KeyBasis,
 }
 
 /// A consumer of horizon maps, set up by the graph.

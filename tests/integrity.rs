@@ -5,8 +5,11 @@
 //! with its identity kept and the index rewritten (so that only the manifest's labels can
 //! tell), replaced by a FIFO, linked to /dev/zero and padded by a sparse 5 GiB; then
 //! `penumbra verify` must flag exactly that file (exit 1) and a command that reads it must
-//! exit 2 naming it and what is wrong, within 5 s and 100 MB of RSS. A FIFO, device or folder
-//! `tileset.json` does the same for every command. See issue 41.
+//! exit 2 naming it and what is wrong, within 5 s and 100 MB of RSS. Each label of the manifest
+//! that describes the files (precisions, channels, encoding, sigma, albedo bit depth and
+//! channels) flipped to each other value is refused by every command that reads the product
+//! and flagged by `verify`, with and without the run key basis that names it at once. A FIFO,
+//! device or folder `tileset.json` does the same for every command. See issue 41.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -632,4 +635,179 @@ fn format_1_tilesets_are_refused_with_what_to_rerun() {
         err.contains("tileset.json") && err.contains("rebuild it"),
         "{err}"
     );
+}
+
+/// Each label of the manifest that describes the files (sample types, channel names, the
+/// Fourier encoding and sigma, the albedo bit depth and channels) flipped to each other value,
+/// with the stage products' run key basis recorded and without it (as a penumbra that did not
+/// record it wrote the manifest): every command that reads the product exits 2, naming either
+/// the manifest and the field (the basis or the run key name it when the tileset is opened) or
+/// the product file and the label (only its header can tell), within the limits; `verify`
+/// refuses the tileset naming the field, or flags the product's files with `label` problems
+/// naming it.
+#[test]
+fn every_label_flipped_is_refused_by_its_readers_and_flagged_by_verify() {
+    use serde_json::{json, Value};
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("ts");
+    base(&dir);
+    let ds = dir.to_str().unwrap();
+    let ts = Tileset::load(&dir).unwrap();
+    let m = dir.join("tileset.json");
+    let good_bytes = std::fs::read(&m).unwrap();
+    let good: Value = serde_json::from_slice(&good_bytes).unwrap();
+    let files = indexed(&dir);
+    // A file of each kind, and the command (or library read) that reads it.
+    let file_of = |k: &str| -> String {
+        files
+            .values()
+            .flatten()
+            .map(|(r, _)| r.clone())
+            .find(|r| kind(r) == k)
+            .unwrap_or_else(|| panic!("no {k} file"))
+    };
+    // (label, the values it is flipped to, the kinds of file it describes)
+    let rows: Vec<(&str, Vec<Value>, &[&str])> = vec![
+        (
+            "products.height.channels",
+            vec![json!(["height"]), json!(["height", "mask", "slope"])],
+            &["height"],
+        ),
+        ("products.mip.precision", vec![json!("f16")], &["minmax"]),
+        (
+            "products.mip.face_precision",
+            vec![json!("f16")],
+            &["minmax-face"],
+        ),
+        (
+            "products.mip.max_channels",
+            vec![json!(["min"])],
+            &["maxmip"],
+        ),
+        (
+            "products.mip.minmax_channels",
+            vec![json!(["max"]), json!(["min", "max", "mean"])],
+            &["minmax", "minmax-face"],
+        ),
+        (
+            "products.horizon.precision",
+            vec![json!("f32")],
+            &["horizon"],
+        ),
+        (
+            "products.horizon.channel",
+            vec![json!("height")],
+            &["horizon"],
+        ),
+        (
+            "products.fourier.encoding",
+            vec![json!("snorm16")],
+            &["fourier"],
+        ),
+        (
+            "products.fourier.sigma",
+            vec![json!("lanczos")],
+            &["fourier"],
+        ),
+        ("products.albedo.bit_depth", vec![json!(16)], &["albedo"]),
+        (
+            "products.albedo.channels",
+            vec![json!(1), json!(2), json!(4)],
+            &["albedo"],
+        ),
+    ];
+    let mut cases = 0;
+    let (mut at_open, mut at_file) = (0, 0);
+    for with_basis in [true, false] {
+        for (field, values, kinds) in &rows {
+            for value in values {
+                let mut v = good.clone();
+                let parts: Vec<&str> = field.split('.').collect();
+                let mut cur = &mut v;
+                for p in &parts[..parts.len() - 1] {
+                    cur = &mut cur[*p];
+                }
+                assert_ne!(cur[parts[parts.len() - 1]], *value, "{field}");
+                cur[parts[parts.len() - 1]] = value.clone();
+                if !with_basis {
+                    for p in ["mip", "horizon", "fourier"] {
+                        v["products"][p]
+                            .as_object_mut()
+                            .unwrap()
+                            .remove("run_key_basis");
+                    }
+                }
+                std::fs::write(&m, serde_json::to_vec_pretty(&v).unwrap()).unwrap();
+                let case = format!("{field} = {value} (basis: {with_basis})");
+                let named = format!("field `{field}`");
+                // Every reader of each kind of file the label describes.
+                for k in kinds.iter() {
+                    let rel = file_of(k);
+                    let args = reader(ds, &ts, &rel);
+                    let (err, code) = if args.is_empty() {
+                        let t0 = Instant::now();
+                        let e = match penumbra::tileset::Store::open(&dir) {
+                            Ok(_) => library_read(&dir, &rel),
+                            Err(e) => e.to_string(),
+                        };
+                        assert!(t0.elapsed() < LIMIT, "{case}: {:?}", t0.elapsed());
+                        (e, Some(2))
+                    } else {
+                        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+                        let (o, t, rss) = run_bounded(&args);
+                        assert!(t < LIMIT && rss < MAX_RSS_KIB, "{case}: {t:?} {rss} KiB");
+                        (
+                            String::from_utf8_lossy(&o.stderr).into_owned(),
+                            o.status.code(),
+                        )
+                    };
+                    assert_eq!(code, Some(2), "{case}: {k}: {err}");
+                    if err.contains("tileset.json") && err.contains(&named) {
+                        at_open += 1;
+                    } else {
+                        assert!(
+                            err.contains(&rel) && err.contains(&format!("`{field}`")),
+                            "{case}: {k} {rel}: names neither the field nor the file and the \
+                             label: {err}"
+                        );
+                        at_file += 1;
+                    }
+                }
+                // verify: refused naming the field, or the files flagged naming the label.
+                let (o, t, rss) = run_bounded(&["verify", ds, "--json"]);
+                assert!(
+                    t < LIMIT && rss < MAX_RSS_KIB,
+                    "{case}: verify {t:?} {rss} KiB"
+                );
+                let err = String::from_utf8_lossy(&o.stderr);
+                match o.status.code() {
+                    Some(2) => assert!(
+                        err.contains("tileset.json") && err.contains(&named),
+                        "{case}: verify: {err}"
+                    ),
+                    Some(1) => {
+                        let r: Value = serde_json::from_slice(&o.stdout).unwrap();
+                        let found = r["findings"].as_array().unwrap();
+                        assert!(
+                            !found.is_empty()
+                                && found.iter().all(|f| f["problem"] == "label"
+                                    && f["detail"]
+                                        .as_str()
+                                        .unwrap()
+                                        .contains(&format!("`{field}`"))
+                                    && kinds.contains(&kind(f["path"].as_str().unwrap()))),
+                            "{case}: verify: {found:?}"
+                        );
+                    }
+                    c => panic!("{case}: verify exited {c:?}: {err}"),
+                }
+                cases += 1;
+            }
+        }
+    }
+    std::fs::write(&m, &good_bytes).unwrap();
+    let (o, _, _) = run_bounded(&["verify", ds]);
+    assert_eq!(o.status.code(), Some(0));
+    eprintln!("labels flipped: {cases} cases, {at_open} refused at open, {at_file} by a file");
+    assert!(at_open > 0 && at_file > 0);
 }

@@ -794,4 +794,9 @@ pub struct FourierProduct {
     pub distances: Vec<HorizonLevelDistance>,
     /// Hash of the tool version, the inputs' run keys and the options.
     pub run_key: String,
+    /// What `run_key` hashes besides the run keys of the products it was made from (the tool
+    /// version, the stage's format strings, its parameters as text), so that a reader
+    /// recomputes it; absent in tilesets written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub run_key_basis: Option<super::KeyBasis>,
 }

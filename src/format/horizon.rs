@@ -341,6 +341,11 @@ pub struct HorizonProduct {
     pub distances: Vec<HorizonLevelDistance>,
     /// Hash of the tool version, the height tiles' run key and the horizon options.
     pub run_key: String,
+    /// What `run_key` hashes besides the run keys of the products it was made from (the tool
+    /// version, the stage's format strings, its parameters as text), so that a reader
+    /// recomputes it; absent in tilesets written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub run_key_basis: Option<super::KeyBasis>,
 }
 
 /// A horizon method's measured error against the reference (degrees, before the maps are

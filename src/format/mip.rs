@@ -457,4 +457,9 @@ pub struct MipProduct {
     pub levels: Vec<MipLevelRange>,
     /// Hash of the tool version, the height tiles' run key and the mip options.
     pub run_key: String,
+    /// What `run_key` hashes besides the run keys of the products it was made from (the tool
+    /// version, the stage's format strings, its parameters as text), so that a reader
+    /// recomputes it; absent in tilesets written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub run_key_basis: Option<super::KeyBasis>,
 }

@@ -223,6 +223,49 @@ impl std::fmt::Display for Identity {
     }
 }
 
+/// A run key: blake3 of the tool `version`, a stage's `format` version strings, the run keys
+/// of its `inputs` and its `params`, in that order (`runner::run_key` with this tool's version;
+/// `manifest::consistency` recomputes a manifest's).
+pub fn run_key_of(version: &str, format: &[&str], inputs: &[&str], params: &[&[u8]]) -> String {
+    let mut h = blake3::Hasher::new();
+    h.update(version.as_bytes());
+    for f in format {
+        h.update(f.as_bytes());
+    }
+    for k in inputs {
+        h.update(k.as_bytes());
+    }
+    for p in params {
+        h.update(p);
+    }
+    h.finalize().to_hex().to_string()
+}
+
+/// What a stage product's run key hashes besides the run keys of the products it was made from,
+/// exactly as the stage hashed it: the tool version that ran the stage, the stage's format and
+/// algorithm version strings, and its parameters (the height pattern, its options as JSON, …),
+/// each as text. Recorded in the product's manifest entry (`run_key_basis`) so that a reader
+/// recomputes the key and compares the entry's labels (precision, method, encoding, …) with the
+/// options the files were really made with (docs/tileset.md, "`tileset.json`").
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct KeyBasis {
+    /// The version of the penumbra that ran the stage.
+    pub tool: String,
+    /// The stage's format and algorithm version strings.
+    pub format: Vec<String>,
+    /// Its parameters, in the order hashed.
+    pub params: Vec<String>,
+}
+
+impl KeyBasis {
+    /// The run key of a run on this basis whose inputs have the run keys `inputs`.
+    pub fn key(&self, inputs: &[&str]) -> String {
+        let format: Vec<&str> = self.format.iter().map(String::as_str).collect();
+        let params: Vec<&[u8]> = self.params.iter().map(|p| p.as_bytes()).collect();
+        run_key_of(&self.tool, &format, inputs, &params)
+    }
+}
+
 /// What the manifest says one channel of an EXR product file holds, and what says so: checked
 /// against the file's header on every read and by `penumbra verify` ([`check_channels`]).
 #[derive(Clone, Debug, PartialEq, Eq)]

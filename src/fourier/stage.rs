@@ -19,6 +19,7 @@ use crate::format::fourier::{
 use crate::error::{Error, Result};
 use crate::format::height::HeightTile;
 use crate::format::horizon::HorizonError;
+use crate::format::KeyBasis;
 use crate::layout::TileId;
 use crate::manifest::{self, FourierProduct, HorizonLevelDistance, Tileset};
 use crate::progress::Progress;
@@ -419,6 +420,7 @@ pub struct Source<'a> {
 }
 
 /// The manifest entry of a finished run.
+#[allow(clippy::too_many_arguments)]
 pub fn product(
     ts: &Tileset,
     opts: &FourierOptions,
@@ -427,6 +429,7 @@ pub fn product(
     tally: Tally,
     source: Source,
     run_key: String,
+    run_key_basis: KeyBasis,
 ) -> FourierProduct {
     let n = ts.layout.tile_size as usize;
     FourierProduct {
@@ -458,6 +461,7 @@ pub fn product(
         terrain_max_m: source.terrain.1,
         distances: source.distances,
         run_key,
+        run_key_basis: Some(run_key_basis),
     }
 }
 
@@ -527,6 +531,16 @@ pub struct FourierStage {
     pub opts: FourierOptions,
 }
 
+impl FourierStage {
+    /// What the run key hashes besides the raw maps' run key: the options as JSON.
+    fn basis(&self) -> KeyBasis {
+        runner::key_basis(
+            &STAGE,
+            vec![serde_json::to_string(&self.opts).unwrap_or_default()],
+        )
+    }
+}
+
 /// What a run from raw maps knows once the tileset is checked.
 pub struct FourierPlan {
     levels: Vec<u8>,
@@ -590,13 +604,7 @@ impl Stage for FourierStage {
 
     fn key(&self, ts: &Tileset, _plan: &FourierPlan) -> String {
         let h = ts.products.horizon.as_ref().expect("checked");
-        runner::run_key(
-            &STAGE,
-            &[&h.run_key],
-            &[serde_json::to_string(&self.opts)
-                .unwrap_or_default()
-                .as_bytes()],
-        )
+        self.basis().key(&[&h.run_key])
     }
 
     fn units(&self, ts: &Tileset, plan: &FourierPlan) -> Result<Vec<Unit>> {
@@ -675,6 +683,7 @@ impl Stage for FourierStage {
                 distances: h.distances.clone(),
             },
             cx.key.to_string(),
+            self.basis(),
         ));
         Ok((manifest, report))
     }

@@ -141,6 +141,7 @@ impl SinkRun for FourierRun {
                 distances: source.distances.clone(),
             },
             run_key.to_string(),
+            source.basis.clone(),
         );
         manifest.products.fourier = Some(entry);
         Ok(self.summary(lit, bytes))

@@ -22,8 +22,8 @@ use crate::format::horizon::ID as HORIZON_ID;
 use crate::format::horizon::{
     tile_path, write_horizon_exr, HorizonPrecision, AZIMUTH_CONVENTION, FORMAT, LAYOUT, PATTERN,
 };
-use crate::format::Identity;
 use crate::format::TileCompression;
+use crate::format::{Identity, KeyBasis};
 use crate::layout::TileId;
 use crate::manifest::{self, HorizonLevelDistance, HorizonProduct, Tileset};
 use crate::progress::Progress;
@@ -717,6 +717,35 @@ pub struct HorizonScratch {
 }
 
 impl HorizonStage<'_> {
+    /// What the run key hashes besides the height tiles' run key: the height pattern, the
+    /// options as JSON (the sinks' options appended as fields of the same object, and
+    /// `keep_raw` when raw maps are written beside a sink), the terrain range bounding the
+    /// search and the fine margin in effect (so that a changed default recomputes).
+    fn basis(&self, ts: &Tileset, plan: &HorizonPlan) -> KeyBasis {
+        let height_path = &ts.products.height.as_ref().expect("checked").path;
+        let (tmin, tmax) = plan.range;
+        let mut params = serde_json::to_string(&self.opts).unwrap_or_default();
+        params.pop();
+        for s in &self.sinks {
+            for (name, json) in s.key_fields() {
+                params.push_str(&format!(",\"{name}\":{json}"));
+            }
+        }
+        if self.raw && !self.sinks.is_empty() {
+            params.push_str(",\"keep_raw\":true");
+        }
+        params.push('}');
+        runner::key_basis(
+            &self.spec(),
+            vec![
+                height_path.clone(),
+                params,
+                format!("{tmin} {tmax}"),
+                format!("fine margin {}", plan.fine_margin),
+            ],
+        )
+    }
+
     /// The products written and the version strings: the sinks' first, then the raw maps.
     fn writes(&self) -> Vec<Product> {
         let mut w: Vec<Product> = self
@@ -803,32 +832,7 @@ impl Stage for HorizonStage<'_> {
     }
 
     fn key(&self, ts: &Tileset, plan: &HorizonPlan) -> String {
-        let height_path = &ts.products.height.as_ref().expect("checked").path;
-        let (tmin, tmax) = plan.range;
-        // The options as JSON, the sinks' options appended as fields of the same object (and
-        // `keep_raw` when raw maps are written beside a sink).
-        let mut params = serde_json::to_string(&self.opts).unwrap_or_default();
-        params.pop();
-        for s in &self.sinks {
-            for (name, json) in s.key_fields() {
-                params.push_str(&format!(",\"{name}\":{json}"));
-            }
-        }
-        if self.raw && !self.sinks.is_empty() {
-            params.push_str(",\"keep_raw\":true");
-        }
-        params.push('}');
-        runner::run_key(
-            &self.spec(),
-            &[&ts.run_key],
-            &[
-                height_path.as_bytes(),
-                params.as_bytes(),
-                format!("{tmin} {tmax}").as_bytes(),
-                // The margin in effect, so that a changed default recomputes.
-                format!("fine margin {}", plan.fine_margin).as_bytes(),
-            ],
-        )
+        self.basis(ts, plan).key(&[&ts.run_key])
     }
 
     fn units(&self, ts: &Tileset, plan: &HorizonPlan) -> Result<Vec<Unit>> {
@@ -1035,6 +1039,7 @@ impl Stage for HorizonStage<'_> {
             terrain_min_m: tmin,
             terrain_max_m: tmax,
             distances: dist.clone(),
+            basis: self.basis(ts, plan),
         };
         let mut manifest = ts.clone();
         for ((sink, run), rec) in self.sinks.iter().zip(&plan.sinks).zip(records) {
@@ -1057,6 +1062,7 @@ impl Stage for HorizonStage<'_> {
                 terrain_max_m: tmax,
                 distances: dist.clone(),
                 run_key: cx.key.to_string(),
+                run_key_basis: Some(source.basis.clone()),
             });
         }
         report.distances = dist;

@@ -424,7 +424,9 @@ pub fn check(ts: &Tileset, path: &Path) -> Result<()> {
     for (name, entry) in &p.extra {
         unlisted(path, name, entry)?;
     }
-    Ok(())
+    // The stage products' run keys and labels against what their runs hashed, once every
+    // value is known to be in range.
+    super::consistency::check_keys(ts, path)
 }
 
 /// Most products the registry does not list, and most names in one's `dirs` or `reads`.

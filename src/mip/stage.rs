@@ -18,7 +18,7 @@ use crate::format::mip::{
     FACE_CHUNK_TILES, FACE_PATTERN, MAX_PATTERN, MINMAX_PATTERN, MIP_FORMAT, TEXEL_CONVENTION,
 };
 use crate::format::mip::{FACE_CHUNK_ID, FACE_ID, MAX_ID, MINMAX_ID};
-use crate::format::{Identity, TileCompression};
+use crate::format::{Identity, KeyBasis, TileCompression};
 use crate::layout::TileId;
 use crate::manifest::{self, MipLevelRange, MipProduct, Tileset};
 use crate::progress::Progress;
@@ -142,6 +142,18 @@ impl MipStage {
     pub fn new(opts: MipOptions) -> MipStage {
         MipStage { opts }
     }
+
+    /// What the run key hashes besides the height tiles' run key: the height pattern and the
+    /// options as JSON.
+    fn basis(&self, plan: &MipPlan) -> KeyBasis {
+        runner::key_basis(
+            &STAGE,
+            vec![
+                plan.height_path.clone(),
+                serde_json::to_string(&self.opts).unwrap_or_default(),
+            ],
+        )
+    }
 }
 
 /// What a mip run knows once the tileset is checked.
@@ -193,16 +205,7 @@ impl Stage for MipStage {
     }
 
     fn key(&self, ts: &Tileset, plan: &MipPlan) -> String {
-        runner::run_key(
-            &STAGE,
-            &[&ts.run_key],
-            &[
-                plan.height_path.as_bytes(),
-                serde_json::to_string(&self.opts)
-                    .unwrap_or_default()
-                    .as_bytes(),
-            ],
-        )
+        self.basis(plan).key(&[&ts.run_key])
     }
 
     fn units(&self, ts: &Tileset, plan: &MipPlan) -> Result<Vec<Unit>> {
@@ -386,6 +389,7 @@ impl Stage for MipStage {
             global_max_m: gmax as f64,
             levels: ranges,
             run_key: cx.key.to_string(),
+            run_key_basis: Some(self.basis(cx.plan)),
         };
         let (gmin, gmax) = (product.global_min_m, product.global_max_m);
         let mut manifest = ts.clone();
@@ -492,4 +496,28 @@ fn mip_tile(
         Precision::F32 => (lo, hi),
         Precision::F16 => (f16_down(lo).to_f32(), f16_up(hi).to_f32()),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A mip entry written before `run_key_basis` was recorded is checked against the options
+    /// text `manifest::consistency` rebuilds: the one this stage hashes.
+    #[test]
+    fn the_legacy_key_check_hashes_the_stages_options() {
+        for precision in [Precision::F32, Precision::F16] {
+            for compression in [TileCompression::Zip, TileCompression::None] {
+                let opts = MipOptions {
+                    precision,
+                    compression,
+                    ..MipOptions::default()
+                };
+                assert_eq!(
+                    serde_json::to_string(&opts).unwrap(),
+                    crate::manifest::consistency::legacy_mip_options(precision, compression)
+                );
+            }
+        }
+    }
 }
