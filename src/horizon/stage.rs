@@ -407,6 +407,7 @@ pub(crate) fn tile_rasters(
 /// before the next ([`FarHorizons`]). The nearest rings' tiles stay cached for the next tile,
 /// which reads nearly the same ones; the farther rings' tiles are dropped once read, so that
 /// the cache does not grow with the level count.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn horizons_seeing_rings(
     src: &Store,
     ctx: &Context,
