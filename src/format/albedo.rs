@@ -60,82 +60,52 @@ pub fn write_albedo_tile(
     write_staged(path, |f| f.write_all(&bytes).at(path))
 }
 
-/// The bytes of an albedo tile file: the PNG the `image` crate encodes, with `identity` as a
-/// `tEXt` chunk [`IDENTITY_KEYWORD`] right after the image header (the pixels' chunks are the
-/// same bytes with or without it).
+/// The bytes of an albedo tile file: a PNG (the `png` crate, default compression) with
+/// `identity` as a `tEXt` chunk [`IDENTITY_KEYWORD`], which the encoder writes right after the
+/// image header (the pixels' chunks are the same bytes with or without it).
 pub fn encode_albedo_tile(
     tile: &AlbedoTile,
     identity: Option<&Identity>,
 ) -> std::result::Result<Vec<u8>, String> {
-    let img = tile
-        .to_image()
-        .ok_or("albedo tile buffer has the wrong length")?;
-    let mut buf = std::io::Cursor::new(Vec::new());
-    img.write_to(&mut buf, image::ImageFormat::Png)
-        .map_err(|e| format!("PNG encoding failed: {e}"))?;
-    let mut png = buf.into_inner();
-    if let Some(id) = identity {
-        // The signature, then IHDR: 4 bytes of length (13), its type, 13 bytes, its CRC.
-        if png.len() < IHDR_END || &png[12..16] != b"IHDR" {
-            return Err("PNG encoder wrote no image header first".into());
-        }
-        let chunk = text_chunk(IDENTITY_KEYWORD, &id.text());
-        png.splice(IHDR_END..IHDR_END, chunk);
+    let n = tile.size;
+    if tile.data.len() != n * n * tile.channels {
+        return Err("albedo tile buffer has the wrong length".into());
     }
-    Ok(png)
+    let color = match tile.channels {
+        1 => png::ColorType::Grayscale,
+        2 => png::ColorType::GrayscaleAlpha,
+        3 => png::ColorType::Rgb,
+        4 => png::ColorType::Rgba,
+        c => return Err(format!("albedo tile has {c} channels, not 1 to 4")),
+    };
+    let samples: Vec<u8> = if tile.sixteen_bit {
+        tile.data.iter().flat_map(|v| v.to_be_bytes()).collect()
+    } else {
+        tile.data.iter().map(|&v| v as u8).collect()
+    };
+    let fail = |e: png::EncodingError| format!("PNG encoding failed: {e}");
+    let mut out = Vec::new();
+    let mut enc = png::Encoder::new(&mut out, n as u32, n as u32);
+    enc.set_color(color);
+    enc.set_depth(if tile.sixteen_bit {
+        png::BitDepth::Sixteen
+    } else {
+        png::BitDepth::Eight
+    });
+    if let Some(id) = identity {
+        enc.add_text_chunk(IDENTITY_KEYWORD.into(), id.text())
+            .map_err(fail)?;
+    }
+    let mut w = enc.write_header().map_err(fail)?;
+    w.write_image_data(&samples).map_err(fail)?;
+    w.finish().map_err(fail)?;
+    Ok(out)
 }
 
-/// The PNG signature.
-const SIGNATURE: &[u8; 8] = b"\x89PNG\r\n\x1a\n";
-/// Where the image header chunk ends (signature, length, type, 13 bytes, CRC).
-const IHDR_END: usize = 8 + 4 + 4 + 13 + 4;
 /// The keyword of the `tEXt` chunk that holds an albedo tile's identity.
 pub const IDENTITY_KEYWORD: &str = "penumbraIdentity";
 
-/// A `tEXt` chunk of `keyword` and `text` (both ASCII here).
-fn text_chunk(keyword: &str, text: &str) -> Vec<u8> {
-    let mut data = Vec::with_capacity(keyword.len() + 1 + text.len());
-    data.extend_from_slice(keyword.as_bytes());
-    data.push(0);
-    data.extend_from_slice(text.as_bytes());
-    let mut c = Vec::with_capacity(data.len() + 12);
-    c.extend_from_slice(&(data.len() as u32).to_be_bytes());
-    c.extend_from_slice(b"tEXt");
-    c.extend_from_slice(&data);
-    c.extend_from_slice(&crc32(&c[4..]).to_be_bytes());
-    c
-}
-
-/// CRC-32 (ISO 3309, as PNG chunks use it) of `bytes`.
-fn crc32(bytes: &[u8]) -> u32 {
-    const TABLE: [u32; 256] = {
-        let mut t = [0u32; 256];
-        let mut n = 0;
-        while n < 256 {
-            let mut c = n as u32;
-            let mut k = 0;
-            while k < 8 {
-                c = if c & 1 != 0 {
-                    0xEDB8_8320 ^ (c >> 1)
-                } else {
-                    c >> 1
-                };
-                k += 1;
-            }
-            t[n] = c;
-            n += 1;
-        }
-        t
-    };
-    let mut c = 0xFFFF_FFFFu32;
-    for &b in bytes {
-        c = TABLE[((c ^ b as u32) & 0xFF) as usize] ^ (c >> 8);
-    }
-    c ^ 0xFFFF_FFFF
-}
-
-/// What an albedo tile's PNG header says, read from its chunks' headers without inflating a
-/// pixel.
+/// What an albedo tile's PNG header says, read without inflating a pixel.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct PngFacts {
     /// The text of its [`IDENTITY_KEYWORD`] chunk (None: it has none).
@@ -148,58 +118,44 @@ pub struct PngFacts {
     pub channels: u8,
 }
 
-/// Read a PNG's header and text chunks (the chunks' lengths and CRCs checked); the error says
-/// what is wrong (without the path).
-pub fn read_header(bytes: &[u8]) -> std::result::Result<PngFacts, String> {
-    if bytes.len() < IHDR_END || &bytes[..8] != SIGNATURE || &bytes[12..16] != b"IHDR" {
-        return Err("not a PNG file (bad signature or no image header first)".into());
-    }
-    let be = |o: usize| u32::from_be_bytes(bytes[o..o + 4].try_into().expect("4 bytes"));
-    let mut facts = PngFacts {
-        identity: None,
-        width: be(16),
-        height: be(20),
-        bit_depth: bytes[24],
-        channels: match bytes[25] {
-            0 => 1,
-            2 => 3,
-            4 => 2,
-            6 => 4,
-            _ => 0,
+/// A PNG decoder over a file's bytes in memory.
+type PngReader<'a> = png::Reader<std::io::Cursor<&'a [u8]>>;
+
+/// A PNG's decoder past its header and the chunks before the first image data (the `png`
+/// crate checks every CRC), and what they say; the error says what is wrong (without the
+/// path).
+fn open(bytes: &[u8]) -> std::result::Result<(PngFacts, PngReader<'_>), String> {
+    // A damaged ancillary chunk (the identity's) is an error, not a chunk to skip.
+    let mut options = png::DecodeOptions::default();
+    options.set_skip_ancillary_crc_failures(false);
+    let reader = png::Decoder::new_with_options(std::io::Cursor::new(bytes), options)
+        .read_info()
+        .map_err(|e| format!("not a readable PNG header ({e})"))?;
+    let info = reader.info();
+    let facts = PngFacts {
+        identity: info
+            .uncompressed_latin1_text
+            .iter()
+            .find(|t| t.keyword == IDENTITY_KEYWORD)
+            .map(|t| t.text.clone()),
+        width: info.width,
+        height: info.height,
+        bit_depth: info.bit_depth as u8,
+        channels: match info.color_type {
+            png::ColorType::Grayscale => 1,
+            png::ColorType::GrayscaleAlpha => 2,
+            png::ColorType::Rgb => 3,
+            png::ColorType::Rgba => 4,
+            png::ColorType::Indexed => 0,
         },
     };
-    let mut at = 8;
-    loop {
-        if at + 12 > bytes.len() {
-            return Err("PNG ends before its IEND chunk".into());
-        }
-        let len = be(at) as usize;
-        let end = at + 12 + len;
-        if end > bytes.len() {
-            return Err(format!("PNG chunk at byte {at} runs past the end"));
-        }
-        let kind = &bytes[at + 4..at + 8];
-        let data = &bytes[at + 8..at + 8 + len];
-        if (kind == b"IHDR" || kind == b"tEXt")
-            && crc32(&bytes[at + 4..at + 8 + len]) != be(at + 8 + len)
-        {
-            return Err(format!(
-                "PNG chunk {} at byte {at} fails its CRC",
-                String::from_utf8_lossy(kind)
-            ));
-        }
-        if kind == b"tEXt" {
-            if let Some(text) = data.strip_prefix(IDENTITY_KEYWORD.as_bytes()) {
-                if let Some(text) = text.strip_prefix(b"\0") {
-                    facts.identity = Some(String::from_utf8_lossy(text).into_owned());
-                }
-            }
-        }
-        if kind == b"IEND" {
-            return Ok(facts);
-        }
-        at = end;
-    }
+    Ok((facts, reader))
+}
+
+/// Read a PNG's header and the text chunks before its image data; the error says what is
+/// wrong (without the path).
+pub fn read_header(bytes: &[u8]) -> std::result::Result<PngFacts, String> {
+    open(bytes).map(|(facts, _)| facts)
 }
 
 /// What an albedo tile must hold by the manifest (`bit_depth`, `channels`) against what its
@@ -245,7 +201,7 @@ pub fn decode_albedo_tile_as(
     a: &AlbedoProduct,
     size: usize,
 ) -> std::result::Result<AlbedoTile, String> {
-    let facts = read_header(bytes)?;
+    let (facts, mut reader) = open(bytes)?;
     Identity::check(expected, exr_identity(facts.identity.clone()))?;
     check_labels(&facts, a)?;
     if (facts.width as usize, facts.height as usize) != (size, size) {
@@ -254,24 +210,17 @@ pub fn decode_albedo_tile_as(
             facts.width, facts.height
         ));
     }
-    let img = image::load_from_memory_with_format(bytes, image::ImageFormat::Png)
+    let (channels, sixteen_bit) = (facts.channels as usize, facts.bit_depth == 16);
+    let mut raw = vec![0u8; size * size * channels * if sixteen_bit { 2 } else { 1 }];
+    reader
+        .next_frame(&mut raw)
         .map_err(|e| format!("not a readable PNG albedo tile ({e})"))?;
-    use image::DynamicImage as D;
-    let (channels, sixteen_bit, data): (usize, bool, Vec<u16>) = match img {
-        D::ImageLuma8(b) => (1, false, b.into_raw().into_iter().map(u16::from).collect()),
-        D::ImageLumaA8(b) => (2, false, b.into_raw().into_iter().map(u16::from).collect()),
-        D::ImageRgb8(b) => (3, false, b.into_raw().into_iter().map(u16::from).collect()),
-        D::ImageRgba8(b) => (4, false, b.into_raw().into_iter().map(u16::from).collect()),
-        D::ImageLuma16(b) => (1, true, b.into_raw()),
-        D::ImageLumaA16(b) => (2, true, b.into_raw()),
-        D::ImageRgb16(b) => (3, true, b.into_raw()),
-        D::ImageRgba16(b) => (4, true, b.into_raw()),
-        other => {
-            return Err(format!(
-                "albedo tile decodes to {:?}, not 8/16-bit grey, grey + alpha, RGB or RGBA",
-                other.color()
-            ))
-        }
+    let data: Vec<u16> = if sixteen_bit {
+        raw.chunks_exact(2)
+            .map(|b| u16::from_be_bytes([b[0], b[1]]))
+            .collect()
+    } else {
+        raw.into_iter().map(u16::from).collect()
     };
     Ok(AlbedoTile {
         size,
