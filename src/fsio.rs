@@ -343,14 +343,11 @@ impl StagedHashRecords {
     }
 }
 
-/// Every record the processes that wrote below `root` left in its hash logs. Whole, well-formed
-/// lines only: a line a kill cut short, or any line that is not exactly a path, three numbers
-/// and a 64-digit hash, is skipped; a log that cannot be read is skipped whole. A file left
-/// without a record is hashed by the commit, so skipping is always safe.
-pub fn read_staged_hashes(root: &Path) -> StagedHashRecords {
-    let mut out = StagedHashRecords::default();
-    let Ok(entries) = std::fs::read_dir(root.join(HASH_LOGS)) else {
-        return out;
+/// The `*.log` files of `dir` (one per process that appended to it), in name order; none
+/// when it cannot be listed.
+pub fn logs_in(dir: &Path) -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
     };
     let mut logs: Vec<PathBuf> = entries
         .flatten()
@@ -358,7 +355,16 @@ pub fn read_staged_hashes(root: &Path) -> StagedHashRecords {
         .filter(|p| p.extension().is_some_and(|x| x == "log"))
         .collect();
     logs.sort();
-    for p in logs {
+    logs
+}
+
+/// Every record the processes that wrote below `root` left in its hash logs. Whole, well-formed
+/// lines only: a line a kill cut short, or any line that is not exactly a path, three numbers
+/// and a 64-digit hash, is skipped; a log that cannot be read is skipped whole. A file left
+/// without a record is hashed by the commit, so skipping is always safe.
+pub fn read_staged_hashes(root: &Path) -> StagedHashRecords {
+    let mut out = StagedHashRecords::default();
+    for p in logs_in(&root.join(HASH_LOGS)) {
         if let Ok(bytes) = read_capped(&p, MAX_HASH_LOG_BYTES, "a log of file hashes") {
             add_hash_log(&mut out, &bytes);
         }

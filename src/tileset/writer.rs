@@ -118,17 +118,7 @@ impl Staging {
     /// Every unit record runs of this key left here, by unit name (the last of a name wins).
     pub fn read_records(&self) -> Result<std::collections::HashMap<String, Vec<u8>>> {
         let mut out = std::collections::HashMap::new();
-        let dir = self.root.join(Self::UNITS);
-        let Ok(entries) = std::fs::read_dir(&dir) else {
-            return Ok(out);
-        };
-        let mut logs: Vec<PathBuf> = entries
-            .flatten()
-            .map(|e| e.path())
-            .filter(|p| p.extension().is_some_and(|x| x == "log"))
-            .collect();
-        logs.sort();
-        for p in logs {
+        for p in fsio::logs_in(&self.root.join(Self::UNITS)) {
             let bytes = fsio::read_capped(&p, Self::MAX_LOG_BYTES, "a log of unit records")?;
             // Whole lines only: the last may have been cut by a crash.
             for line in bytes.split_inclusive(|&b| b == b'\n') {
