@@ -64,6 +64,23 @@ pub(crate) fn penumbra_exe() -> Result<PathBuf> {
     Ok(exe)
 }
 
+/// Tile `dem` (LDEM_4's label) into `out` as the benchmarks' LDEM_4 tileset
+/// ([`LDEM4_BENCH_TILING`]), by the `penumbra` binary.
+pub(crate) fn tile_ldem4(dem: &Path, out: &Path) -> Result<()> {
+    let status = Command::new(penumbra_exe()?)
+        .args(["--quiet", "tile"])
+        .arg(dem)
+        .args(LDEM4_BENCH_TILING)
+        .arg("--out")
+        .arg(out)
+        .stdout(std::process::Stdio::null())
+        .status()?;
+    if !status.success() {
+        bail!("tiling LDEM_4 for the benchmark failed");
+    }
+    Ok(())
+}
+
 /// A bench's scratch folder (`penumbra-bench-<pid>` under `--work` or the system's temp
 /// folder), removed when it goes out of scope, so that a bench that fails half-way leaves no
 /// tilesets or rasters behind.

@@ -11,7 +11,6 @@
 //! what the commit did before the records (every file read back and hashed).
 
 use std::path::PathBuf;
-use std::process::Command;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
@@ -23,7 +22,7 @@ use penumbra::mip::MipOptions;
 use penumbra::progress::NoProgress;
 use penumbra::tileset::Store;
 
-use crate::common::{best_of, in_pool, penumbra_exe, tempfile_dir, LDEM4_BENCH_TILING};
+use crate::common::{best_of, in_pool, tempfile_dir, tile_ldem4};
 
 /// The horizon level and azimuths of the horizon stage measured (a short run: the smaller the
 /// stage's time, the larger the checks' share).
@@ -91,17 +90,7 @@ pub fn run(
         }
     };
     say("tiling LDEM_4 (--tile-size 256 --levels 4)");
-    let status = Command::new(penumbra_exe()?)
-        .args(["--quiet", "tile"])
-        .arg(&src)
-        .args(LDEM4_BENCH_TILING)
-        .arg("--out")
-        .arg(&out)
-        .stdout(std::process::Stdio::null())
-        .status()?;
-    if !status.success() {
-        bail!("tiling LDEM_4 for the benchmark failed");
-    }
+    tile_ldem4(&src, &out)?;
     say("mip stage, one thread");
     let t0 = std::time::Instant::now();
     in_pool(1, || {

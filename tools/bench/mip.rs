@@ -2,14 +2,13 @@
 //! LDEM_4 tileset, against a plain memcpy of the same buffers measured in the same run.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use serde::Serialize;
 
 use penumbra::manifest::Tileset;
 
-use crate::common::{best_of, in_pool, penumbra_exe, tempfile_dir, LDEM4_BENCH_TILING};
+use crate::common::{best_of, in_pool, tempfile_dir, tile_ldem4};
 
 /// Runs of the whole mip stage with each compression (alternating), the best reported.
 const STAGE_REPS: usize = 5;
@@ -174,17 +173,7 @@ pub fn run_mip(
         if !quiet {
             eprintln!("bench mip: tiling LDEM_4 (--tile-size 256 --levels 4)");
         }
-        let status = Command::new(penumbra_exe()?)
-            .args(["--quiet", "tile"])
-            .arg(&src_dem)
-            .args(LDEM4_BENCH_TILING)
-            .arg("--out")
-            .arg(&out)
-            .stdout(std::process::Stdio::null())
-            .status()?;
-        if !status.success() {
-            bail!("tiling LDEM_4 for the benchmark failed");
-        }
+        tile_ldem4(&src_dem, &out)?;
         let ts = Tileset::load(&out)?;
         let pattern = ts
             .products
