@@ -342,7 +342,7 @@ pub fn run_product(
         let (exact, t_exact) = cached(&format!("{}-exact-{a}", case.name), || {
             in_pool(threads, || horizons(&case.ctx, case.rect, a, Method::Exact))
         })?;
-        let mut maps = vec![(Method::Exact, exact.clone(), t_exact)];
+        let mut maps = vec![(Method::Exact, exact, t_exact)];
         for m in [Method::Sweep, Method::Fast] {
             say(format!("{}: {}", case.name, m.name()));
             let t0 = Instant::now();
@@ -351,7 +351,8 @@ pub fn run_product(
         }
         say(format!("{}: products", case.name));
         let elevs: Vec<&[f32]> = maps.iter().map(|(_, v, _)| &v[..]).collect();
-        let got = crate::fourier::paper_product_errors(case, &exact, &elevs, a, lit_pixels);
+        let exact = elevs[0];
+        let got = crate::fourier::paper_product_errors(case, exact, &elevs, a, lit_pixels);
         let (base_mae, base_per) = (got[0].lit_mae, got[0].per_all);
         for ((m, v, t), p) in maps.iter().zip(got) {
             rows.push(ProductRow {
@@ -359,7 +360,7 @@ pub fn run_product(
                 method: m.name(),
                 azimuths: a,
                 horizon_wall_s: *t,
-                raw: error(v, &exact),
+                raw: error(v, exact),
                 product_rms_deg: p.rms_deg,
                 lit_mae: p.lit_mae,
                 per_pct: 100.0 * p.per_all,
