@@ -18,7 +18,7 @@ use crate::horizon::{HorizonOptions, HorizonReport};
 use crate::mip::{MipOptions, MipReport};
 use crate::progress::Progress;
 use crate::runner::Select;
-use crate::scene::{self, SceneSpec};
+use crate::synthetic::{self, SyntheticSpec};
 use crate::tileset::Product;
 use crate::tiling::{self, Embedded, TileOptions, TileReport};
 
@@ -38,7 +38,7 @@ pub enum Stage {
 /// Where the terrain comes from.
 pub enum Input {
     /// The embedded synthetic south-pole scene on the Moon.
-    Embedded(SceneSpec),
+    Embedded(SyntheticSpec),
     /// A DEM file and the body it belongs to as the caller chose it.
     Dem { path: PathBuf, body: BodyChoice },
 }
@@ -228,8 +228,8 @@ impl Node for TileNode<'_> {
         }
         let r = match self.input {
             Input::Embedded(spec) => {
-                let parts = scene::generate(spec);
-                let hash = scene::content_hash(&parts);
+                let parts = synthetic::generate(spec);
+                let hash = synthetic::content_hash(&parts);
                 let dem = Dem::new(parts, self.opts.max_fill_px)?;
                 let body = Body::preset("moon")?;
                 let label = format!("south-pole-scene-{}px-{}m", spec.size, spec.pixel_m);

@@ -23,9 +23,9 @@ pub mod mip;
 pub mod progress;
 pub mod query;
 pub mod runner;
-pub mod scene;
 pub mod shadow;
 pub mod sink;
+pub mod synthetic;
 pub mod tileset;
 pub mod tiling;
 

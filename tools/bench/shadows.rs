@@ -345,7 +345,7 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
     };
     let t_all = Instant::now();
     let scene = penumbra::dem::Dem::new(
-        penumbra::scene::generate(&penumbra::scene::SceneSpec::default()),
+        penumbra::synthetic::generate(&penumbra::synthetic::SyntheticSpec::default()),
         64,
     )?;
     let mut cases = vec![dem_case(

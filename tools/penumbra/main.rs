@@ -19,7 +19,7 @@ use penumbra::graph::{self, Node};
 use penumbra::horizon::{HorizonOptions, HorizonPrecision, Method};
 use penumbra::mip::{MipOptions, Precision};
 use penumbra::query::HorizonFrom;
-use penumbra::scene::SceneSpec;
+use penumbra::synthetic::SyntheticSpec;
 use penumbra::tiling::{Prefilter, TileOptions};
 use penumbra_cli::output;
 
@@ -773,9 +773,9 @@ fn run(cli: Cli) -> Result<()> {
                     if a.scene_size < 1024 || a.scene_size > 16384 {
                         anyhow::bail!("--scene-size {} is outside 1024..16384", a.scene_size);
                     }
-                    Input::Embedded(SceneSpec {
+                    Input::Embedded(SyntheticSpec {
                         size: a.scene_size,
-                        ..SceneSpec::default()
+                        ..SyntheticSpec::default()
                     })
                 }
             };

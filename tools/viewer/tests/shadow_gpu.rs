@@ -12,8 +12,8 @@ use penumbra::horizon::HorizonOptions;
 use penumbra::layout::TileId;
 use penumbra::manifest::Tileset;
 use penumbra::progress::NoProgress;
-use penumbra::scene::SceneSpec;
 use penumbra::shadow::Runs;
+use penumbra::synthetic::SyntheticSpec;
 use penumbra::tileset::Store;
 use penumbra::tiling::TileOptions;
 use penumbra_view::gpu::{Gpu, GpuError};
@@ -127,9 +127,9 @@ fn bake_small(input: Input, out: &Path, tile_size: u32, levels: Option<u8>, four
 const EMBEDDED_LEVELS: u8 = 10;
 
 fn embedded() -> Input {
-    Input::Embedded(SceneSpec {
+    Input::Embedded(SyntheticSpec {
         size: 1024,
-        ..SceneSpec::default()
+        ..SyntheticSpec::default()
     })
 }
 

@@ -11,7 +11,7 @@ use penumbra::fourier::FourierOptions;
 use penumbra::horizon::HorizonOptions;
 use penumbra::mip::MipOptions;
 use penumbra::progress::NoProgress;
-use penumbra::scene::SceneSpec;
+use penumbra::synthetic::SyntheticSpec;
 use penumbra::tiling::TileOptions;
 
 /// Whether this is a CI run (`CI` set, and not empty, `0` or `false`).
@@ -138,9 +138,9 @@ pub fn scene() -> &'static Path {
             horizon_level_at_most: None,
             keep_partial: false,
         };
-        let spec = SceneSpec {
+        let spec = SyntheticSpec {
             size: 1024,
-            ..SceneSpec::default()
+            ..SyntheticSpec::default()
         };
         baked(
             &fixtures().join("scene-1024-64"),
@@ -164,9 +164,9 @@ pub fn scene_without_horizons() -> &'static Path {
             },
             ..Plan::default()
         };
-        let spec = SceneSpec {
+        let spec = SyntheticSpec {
             size: 1024,
-            ..SceneSpec::default()
+            ..SyntheticSpec::default()
         };
         baked(
             &fixtures().join("scene-1024-64-bare"),

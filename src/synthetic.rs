@@ -10,7 +10,7 @@ use crate::dem::{Crs, DemParts, GeoRef, Samples};
 
 /// Parameters of the synthetic scene; the defaults are what `penumbra bake` uses.
 #[derive(Clone, Debug, Serialize)]
-pub struct SceneSpec {
+pub struct SyntheticSpec {
     /// Pixels per side.
     pub size: usize,
     /// Ground pixel size at the pole (m).
@@ -20,9 +20,9 @@ pub struct SceneSpec {
     pub craters: usize,
 }
 
-impl Default for SceneSpec {
+impl Default for SyntheticSpec {
     fn default() -> Self {
-        SceneSpec {
+        SyntheticSpec {
             size: 2048,
             pixel_m: 20.0,
             seed: 0x005e_ed0f_5a0d,
@@ -87,7 +87,7 @@ impl Crater {
 }
 
 /// Generate the scene as DEM parts (heights in metres above the 1737.4 km sphere).
-pub fn generate(spec: &SceneSpec) -> DemParts {
+pub fn generate(spec: &SyntheticSpec) -> DemParts {
     let n = spec.size;
     let px = spec.pixel_m;
     let extent = n as f64 * px;
@@ -190,7 +190,7 @@ mod tests {
 
     #[test]
     fn deterministic_and_lunar_like() {
-        let spec = SceneSpec {
+        let spec = SyntheticSpec {
             size: 256,
             pixel_m: 80.0,
             ..Default::default()
