@@ -11,6 +11,7 @@ use serde::Serialize;
 
 use crate::body::Body;
 use crate::dem::{self, Dem};
+pub use crate::dem::{body_for, BodyChoice};
 use crate::error::{Error, Result};
 use crate::fourier::FourierOptions;
 use crate::graph::{self, HorizonNode, Node, Ran};
@@ -41,14 +42,6 @@ pub enum Input {
     Embedded(SyntheticSpec),
     /// A DEM file and the body it belongs to as the caller chose it.
     Dem { path: PathBuf, body: BodyChoice },
-}
-
-/// The body to tile a DEM for, as the caller gave it: a preset name, a radius (which forces
-/// that radius whatever the file says), both, or neither (the body the file names).
-#[derive(Clone, Debug, Default)]
-pub struct BodyChoice {
-    pub name: Option<String>,
-    pub radius_m: Option<f64>,
 }
 
 /// What to run.
@@ -277,42 +270,5 @@ impl Node for BakeHorizon {
                 HorizonNode::new(opts, fourier, self.node.keep_raw)?.run(out, select, progress)
             }
         }
-    }
-}
-
-/// The body to tile `dem` for. A radius given by the caller is taken as it is (with the preset's
-/// name when one is named too). A preset name alone is checked against the body the file names
-/// (PDS3 TARGET_NAME): tiling Mars heights on the Moon is refused. Neither: the named body.
-pub fn body_for(dem: &Dem, given: &BodyChoice) -> Result<Body> {
-    let path = dem.sources().first().cloned().unwrap_or_default();
-    if given.radius_m.is_some() {
-        return Body::resolve(given.name.as_deref(), given.radius_m);
-    }
-    match (&given.name, dem.target()) {
-        (Some(n), t) => {
-            let b = Body::preset(n)?;
-            match t {
-                Some(t) if Body::preset(t).is_ok_and(|tb| tb.name != b.name) => {
-                    Err(Error::usage(format!(
-                        "{} is a DEM of {t} but the body {} was given: leave the body out, or give \
-                         a radius to force one",
-                        path.display(),
-                        b.name
-                    )))
-                }
-                _ => Ok(b),
-            }
-        }
-        (None, Some(t)) => Body::preset(t).map_err(|_| {
-            Error::usage(format!(
-                "{} names the body '{t}', which has no preset: name a body or give a radius",
-                path.display()
-            ))
-        }),
-        (None, None) => Err(Error::usage(format!(
-            "{} does not say which body it belongs to: name one (moon, mars, earth, …) or give a \
-             radius",
-            path.display()
-        ))),
     }
 }

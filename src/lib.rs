@@ -23,6 +23,7 @@ pub mod mip;
 pub mod progress;
 pub mod query;
 pub mod runner;
+pub mod scene;
 pub mod shadow;
 pub mod sink;
 pub mod synthetic;
