@@ -10,6 +10,7 @@ pub mod bake;
 pub mod body;
 pub mod cube;
 pub mod dem;
+pub mod ephemeris;
 pub mod error;
 pub mod exrcodec;
 pub mod format;
