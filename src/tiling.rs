@@ -497,12 +497,14 @@ pub fn tile_sources(
     );
     refuse_foreign_folder(out)?;
 
-    // Candidate tiles: every finest-level tile a footprint point of a source falls in, and
-    // their ancestors; with a wanted set, those of them in it.
+    // Candidate tiles: with a wanted set, its tiles (those without data are not written: a
+    // source's footprint points are too sparse where its pixels are larger than the tiles);
+    // otherwise every finest-level tile a footprint point of a source falls in, and their
+    // ancestors.
     let finest = levels - 1;
     let tile_ground_m = 0.4 * opts.tile_size as f64 * layout.centre_pixel_m(finest, radius);
     let mut candidates = BTreeSet::new();
-    for s in sources {
+    for s in sources.iter().filter(|_| wanted.is_none()) {
         let px_m = s.dem.pixel_size_m(radius);
         let stride = ((tile_ground_m / px_m) / 2.0).floor().max(1.0) as usize;
         for (lat, lon) in s.dem.footprint_points(stride) {
@@ -520,7 +522,7 @@ pub fn tile_sources(
         }
     }
     if let Some(w) = wanted {
-        candidates.retain(|t| w.contains(t));
+        candidates.clone_from(w);
     }
     let source_pixels: u64 = sources
         .iter()
