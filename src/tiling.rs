@@ -260,7 +260,7 @@ fn other_body(a: &Dem, b: &Dem) -> Option<String> {
     }
     if let (Some(x), Some(y)) = (a.datum_radius_m(), b.datum_radius_m()) {
         let off = (x - y).abs() / x.max(y);
-        if !(off <= 0.02) {
+        if off.is_nan() || off > 0.02 {
             return Some(format!(
                 "datum radius {} m against {} m ({:.1} % apart)",
                 crate::dem::limits::show(x),
