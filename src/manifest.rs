@@ -63,6 +63,21 @@ pub struct SourceInfo {
     pub voids_unfilled: u64,
 }
 
+/// One source of a mosaic (several DEMs tiled together, `tiling::tile_sources`): what it is
+/// and how wide its feathered seam is.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct MosaicSource {
+    pub source: SourceInfo,
+    /// Width (pixels of this source) of the zone, inward from the edge of its data, over which
+    /// it is blended into the sources below it.
+    pub feather_px: f64,
+}
+
+/// Most sources one mosaic may list.
+pub const MAX_MOSAIC_SOURCES: usize = 64;
+/// Widest feather (source pixels) a mosaic source may ask for.
+pub const MAX_FEATHER_PX: f64 = 4096.0;
+
 #[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
 pub struct Products {
     pub height: Option<HeightProduct>,
@@ -102,6 +117,10 @@ pub struct Tileset {
     pub layout: Layout,
     pub resampling: Resampling,
     pub source: SourceInfo,
+    /// Every source of a mosaic in priority order, highest first (the first is `source`);
+    /// empty (and absent from the file) when the heights come from one source.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub mosaic: Vec<MosaicSource>,
     pub products: Products,
     pub coverage: Vec<LevelCoverage>,
     /// Every parameter that shaped the output.

@@ -29,6 +29,8 @@ use crate::layout::{Layout, TileId, MAX_LEVELS};
 use crate::manifest::{self, Tileset};
 use crate::progress::Progress;
 use crate::runner::{self, StageSpec, Start};
+
+mod mosaic;
 use crate::tileset::writer::Writer;
 use crate::tileset::{Product, STATE_DIR};
 
@@ -212,7 +214,21 @@ pub struct Embedded {
     pub blake3: String,
 }
 
-/// Tile `dem` for `body` into `out`.
+/// Default feather (source pixels) of a mosaic source ([`MosaicSource::feather_px`]); with one
+/// source it changes nothing.
+pub const DEFAULT_FEATHER_PX: f64 = 4.0;
+
+/// One source of a mosaic ([`tile_sources`]).
+#[derive(Clone, Copy)]
+pub struct MosaicSource<'a> {
+    pub dem: &'a Dem,
+    /// Width, in this source's pixels, of the zone inward from the edge of its data (its
+    /// raster's border and the voids it leaves unfilled) over which it is blended into the
+    /// sources below it (0: a hard seam). Ignored for the lowest source and for one source.
+    pub feather_px: f64,
+}
+
+/// Tile `dem` for `body` into `out`: [`tile_sources`] with one source and every tile.
 pub fn tile_dem(
     dem: &Dem,
     body: &Body,
@@ -221,15 +237,170 @@ pub fn tile_dem(
     embedded: Option<&Embedded>,
     progress: &dyn Progress,
 ) -> Result<TileReport> {
+    let one = [MosaicSource {
+        dem,
+        feather_px: DEFAULT_FEATHER_PX,
+    }];
+    tile_sources(&one, body, out, opts, embedded, None, progress)
+}
+
+/// Whether two sources name different bodies (`TARGET_NAME`) or datums more than 2 % apart
+/// (the closest bodies with presets, the Moon and Io, are 4.8 % apart; datums of one body
+/// differ by far less).
+fn other_body(a: &Dem, b: &Dem) -> Option<String> {
+    let name = |t: &str| {
+        crate::body::Body::preset(t)
+            .map(|p| p.name.to_lowercase())
+            .unwrap_or_else(|_| t.trim().to_lowercase())
+    };
+    if let (Some(x), Some(y)) = (a.target(), b.target()) {
+        if name(x) != name(y) {
+            return Some(format!("target {x} against {y}"));
+        }
+    }
+    if let (Some(x), Some(y)) = (a.datum_radius_m(), b.datum_radius_m()) {
+        let off = (x - y).abs() / x.max(y);
+        if off.is_nan() || off > 0.02 {
+            return Some(format!(
+                "datum radius {} m against {} m ({:.1} % apart)",
+                crate::dem::limits::show(x),
+                crate::dem::limits::show(y),
+                100.0 * off
+            ));
+        }
+    }
+    None
+}
+
+/// A source's name for messages: its first file, or its format for one built in memory.
+fn source_name(dem: &Dem) -> String {
+    match dem.sources().first() {
+        Some(p) => p.display().to_string(),
+        None => format!("the {} terrain", dem.format()),
+    }
+}
+
+/// What a source is, for the manifest.
+fn source_info(dem: &Dem, files: Vec<manifest::SourceFile>, radius: f64) -> manifest::SourceInfo {
+    let (voids, voids_unfilled) = dem.void_counts();
+    manifest::SourceInfo {
+        files,
+        format: dem.format().to_string(),
+        width: dem.width(),
+        height: dem.height(),
+        georef: dem.georef().clone(),
+        pixel_size_m: dem.pixel_size_m(radius),
+        datum_radius_m: dem.datum_radius_m(),
+        height_shift_m: dem.datum_radius_m().map_or(0.0, |r0| r0 - radius),
+        voids,
+        voids_unfilled,
+    }
+}
+
+/// Check a wanted tile set against the layout: every tile on it, and its parent in the set.
+fn check_wanted(wanted: &BTreeSet<TileId>, layout: &Layout) -> Result<()> {
+    for t in wanted {
+        if t.level >= layout.levels
+            || t.x >= layout.tiles_per_side(t.level)
+            || t.y >= layout.tiles_per_side(t.level)
+        {
+            return Err(Error::param(
+                "wanted",
+                format!(
+                    "tile {t} is not on this tileset's grid ({} levels; level L has 2^L tiles \
+                     per face side): ask for tiles of the layout the tiling uses",
+                    layout.levels
+                ),
+            ));
+        }
+        if let Some(p) = t.parent() {
+            if !wanted.contains(&p) {
+                return Err(Error::param(
+                    "wanted",
+                    format!(
+                        "holds tile {t} but not its parent {p}: a wanted set must hold the \
+                         parent of each of its tiles (the coarser levels are made from the same \
+                         ground)"
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Tile several `sources` for `body` into `out`, mosaicked per sample: `sources` in priority
+/// order, highest first; at each sample the highest source with data wins, blended into the
+/// sources below it over its [`MosaicSource::feather_px`] (see `tiling::mosaic`). Levels (when
+/// `opts.levels` is `None`) follow the finest source. With `wanted`, only the tiles of that set
+/// (closed under parent) are cut and listed in the coverage. One source and no `wanted` give
+/// the bytes, manifest and run key of a single-DEM run. `embedded` names the primary source
+/// when it is not a file.
+pub fn tile_sources(
+    sources: &[MosaicSource],
+    body: &Body,
+    out: &Path,
+    opts: &TileOptions,
+    embedded: Option<&Embedded>,
+    wanted: Option<&BTreeSet<TileId>>,
+    progress: &dyn Progress,
+) -> Result<TileReport> {
     opts.validate()?;
+    let Some(primary) = sources.first() else {
+        return Err(Error::usage(
+            "no elevation source to tile: give at least one DEM",
+        ));
+    };
+    let dem = primary.dem;
+    if sources.len() > manifest::MAX_MOSAIC_SOURCES {
+        return Err(Error::param(
+            "sources",
+            format!(
+                "{} sources: a mosaic takes at most {}",
+                sources.len(),
+                manifest::MAX_MOSAIC_SOURCES
+            ),
+        ));
+    }
+    for s in sources {
+        if !(s.feather_px.is_finite() && (0.0..=manifest::MAX_FEATHER_PX).contains(&s.feather_px)) {
+            return Err(Error::param(
+                "feather_px",
+                format!(
+                    "{} for {} is not usable: give 0 ..= {} source pixels (default {})",
+                    s.feather_px,
+                    source_name(s.dem),
+                    manifest::MAX_FEATHER_PX,
+                    DEFAULT_FEATHER_PX
+                ),
+            ));
+        }
+    }
+    // Every source of one body, before anything else is read or written.
+    for (k, a) in sources.iter().enumerate() {
+        for b in &sources[k + 1..] {
+            if let Some(why) = other_body(a.dem, b.dem) {
+                return Err(Error::usage(format!(
+                    "{} and {} are not of the same body ({why}): a mosaic's sources must all \
+                     describe one body; drop the one that does not belong",
+                    source_name(a.dem),
+                    source_name(b.dem)
+                )));
+            }
+        }
+    }
     let albedo = match &opts.albedo {
         Some((p, west)) => Some(AlbedoSource::open(p, *west)?),
         None => None,
     };
     let radius = body.radius_m;
     let source_px_m = dem.pixel_size_m(radius);
+    let finest_px_m = sources
+        .iter()
+        .map(|s| s.dem.pixel_size_m(radius))
+        .fold(source_px_m, f64::min);
     let levels = opts.levels.unwrap_or_else(|| {
-        Layout::levels_for(opts.projection, opts.tile_size, radius, source_px_m)
+        Layout::levels_for(opts.projection, opts.tile_size, radius, finest_px_m)
     });
     let layout = Layout {
         projection: opts.projection,
@@ -237,10 +408,24 @@ pub fn tile_dem(
         halo: opts.halo,
         levels,
     };
+    if let Some(w) = wanted {
+        check_wanted(w, &layout)?;
+    }
     let height_shift = dem.datum_radius_m().map_or(0.0, |r0| r0 - radius);
     // Implausible input (heights, relief, pixel size, datum for this body) is refused before
     // `out` is touched.
-    dem.check_for_body(body, opts.allow_relief_m)?;
+    for s in sources {
+        s.dem.check_for_body(body, opts.allow_relief_m)?;
+    }
+    let layers: Vec<mosaic::Layer> = sources
+        .iter()
+        .enumerate()
+        .map(|(k, s)| {
+            let shift = s.dem.datum_radius_m().map_or(0.0, |r0| r0 - radius) - height_shift;
+            let shift = if k == 0 { 0.0 } else { shift };
+            mosaic::Layer::new(s.dem, s.feather_px, shift, k + 1 == sources.len())
+        })
+        .collect();
 
     // Identity of this run.
     let mut files = Vec::new();
@@ -254,15 +439,51 @@ pub fn tile_dem(
             blake3: e.blake3.clone(),
         });
     }
+    let mut infos = vec![source_info(dem, files.clone(), radius)];
+    for s in &sources[1..] {
+        let mut fs = Vec::new();
+        for p in s.dem.sources() {
+            fs.push(manifest::hash_file(p)?);
+        }
+        infos.push(source_info(s.dem, fs, radius));
+    }
+    let mosaic_entries: Vec<manifest::MosaicSource> = if sources.len() > 1 {
+        infos
+            .iter()
+            .zip(sources)
+            .map(|(i, s)| manifest::MosaicSource {
+                source: i.clone(),
+                feather_px: s.feather_px,
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     let albedo_file = match &albedo {
         Some(a) => Some(manifest::hash_file(&a.path)?),
         None => None,
     };
-    let parameters = serde_json::json!({
+    let mut parameters = serde_json::json!({
         "body": body,
         "options": opts,
         "levels": levels,
     });
+    // Only a mosaic or a wanted set adds keys: one whole source keeps today's parameters (and
+    // run key). serde_json's maps are sorted, so the keys' order does not depend on this.
+    if !mosaic_entries.is_empty() {
+        parameters["mosaic"] = manifest::consistency::mosaic_parameters(&mosaic_entries);
+    }
+    if let Some(w) = wanted {
+        let mut h = blake3::Hasher::new();
+        for t in w {
+            h.update(t.to_string().as_bytes());
+            h.update(b"\n");
+        }
+        parameters["wanted"] = serde_json::json!({
+            "tiles": w.len(),
+            "blake3": h.finalize().to_hex().to_string(),
+        });
+    }
     let run_key = runner::run_key(
         &STAGE,
         &[],
@@ -276,24 +497,37 @@ pub fn tile_dem(
     );
     refuse_foreign_folder(out)?;
 
-    // Candidate tiles: every finest-level tile a footprint point falls in, and their ancestors.
+    // Candidate tiles: with a wanted set, its tiles (those without data are not written: a
+    // source's footprint points are too sparse where its pixels are larger than the tiles);
+    // otherwise every finest-level tile a footprint point of a source falls in, and their
+    // ancestors.
     let finest = levels - 1;
     let tile_ground_m = 0.4 * opts.tile_size as f64 * layout.centre_pixel_m(finest, radius);
-    let stride = ((tile_ground_m / source_px_m) / 2.0).floor().max(1.0) as usize;
     let mut candidates = BTreeSet::new();
-    for (lat, lon) in dem.footprint_points(stride) {
-        let d = cube::latlon_to_dir(lat.to_radians(), lon.to_radians());
-        let mut t = layout.locate(finest, d).tile;
-        loop {
-            if !candidates.insert(t) {
-                break;
-            }
-            match t.parent() {
-                Some(p) => t = p,
-                None => break,
+    for s in sources.iter().filter(|_| wanted.is_none()) {
+        let px_m = s.dem.pixel_size_m(radius);
+        let stride = ((tile_ground_m / px_m) / 2.0).floor().max(1.0) as usize;
+        for (lat, lon) in s.dem.footprint_points(stride) {
+            let d = cube::latlon_to_dir(lat.to_radians(), lon.to_radians());
+            let mut t = layout.locate(finest, d).tile;
+            loop {
+                if !candidates.insert(t) {
+                    break;
+                }
+                match t.parent() {
+                    Some(p) => t = p,
+                    None => break,
+                }
             }
         }
     }
+    if let Some(w) = wanted {
+        candidates.clone_from(w);
+    }
+    let source_pixels: u64 = sources
+        .iter()
+        .map(|s| (s.dem.width() * s.dem.height()) as u64)
+        .sum();
     let candidates: Vec<TileId> = candidates.into_iter().collect();
     let side = layout.stored_size() as f64;
     let per_tile =
@@ -325,7 +559,7 @@ pub fn tile_dem(
                 tiles_written: 0,
                 tiles_kept: n,
                 candidates: n,
-                source_pixels: (dem.width() * dem.height()) as u64,
+                source_pixels,
                 output_pixels: 0,
                 up_to_date: true,
             });
@@ -346,7 +580,7 @@ pub fn tile_dem(
     let units = plan_units(&candidates, finest, group_depth(&layout, opts.prefilter));
     let mut results: std::collections::BTreeMap<TileId, Result<Option<TileStats>>> = units
         .par_iter()
-        .flat_map_iter(|u| run_unit(dem, &sink, u, height_shift, progress))
+        .flat_map_iter(|u| run_unit(&layers, &sink, u, height_shift, progress))
         .collect();
     progress.finish();
 
@@ -371,14 +605,25 @@ pub fn tile_dem(
         }
     }
     if present.is_empty() {
-        let msg = "covers no tile: no tile pixel falls on its data; check its georeferencing \
-                   (docs/formats.md) or use more levels";
+        let msg = match (wanted, sources.len()) {
+            (Some(_), _) => {
+                "covers none of the wanted tiles: no pixel of those tiles falls on \
+                             the sources' data; ask for tiles over the data (docs/formats.md)"
+            }
+            (None, 1) => {
+                "covers no tile: no tile pixel falls on its data; check its \
+                          georeferencing (docs/formats.md) or use more levels"
+            }
+            (None, _) => {
+                "and the other sources cover no tile: no tile pixel falls on their \
+                          data; check their georeferencing (docs/formats.md) or use more levels"
+            }
+        };
         return Err(match dem.sources().first() {
             Some(source) => Error::invalid(source, msg),
             None => Error::usage(format!("the terrain {msg}")),
         });
     }
-    let (voids, voids_unfilled) = dem.void_counts();
     let tileset = Tileset {
         format: manifest::FORMAT.into(),
         format_version: manifest::FORMAT_VERSION,
@@ -386,18 +631,8 @@ pub fn tile_dem(
         body: body.clone(),
         layout,
         resampling: opts.resampling,
-        source: manifest::SourceInfo {
-            files,
-            format: dem.format().to_string(),
-            width: dem.width(),
-            height: dem.height(),
-            georef: dem.georef().clone(),
-            pixel_size_m: source_px_m,
-            datum_radius_m: dem.datum_radius_m(),
-            height_shift_m: height_shift,
-            voids,
-            voids_unfilled,
-        },
+        source: infos.swap_remove(0),
+        mosaic: mosaic_entries,
         products: manifest::Products {
             height: Some(manifest::HeightProduct {
                 path: manifest::HEIGHT_PATTERN.into(),
@@ -434,7 +669,7 @@ pub fn tile_dem(
         tiles_written: written,
         tiles_kept: kept,
         candidates: candidates.len() as u64,
-        source_pixels: (dem.width() * dem.height()) as u64,
+        source_pixels,
         output_pixels: written * side * side,
         up_to_date: false,
     })
@@ -899,23 +1134,36 @@ pub fn render_height_tile(
     prefilter: Prefilter,
     height_shift: f64,
 ) -> HeightTile {
+    let one = [mosaic::Layer::new(dem, 0.0, 0.0, true)];
+    render_tile(&one, layout, id, resampling, prefilter, height_shift)
+}
+
+/// [`render_height_tile`] of a mosaic's `layers` (highest priority first).
+fn render_tile(
+    layers: &[mosaic::Layer],
+    layout: &Layout,
+    id: TileId,
+    resampling: Resampling,
+    prefilter: Prefilter,
+    height_shift: f64,
+) -> HeightTile {
     let k = box_samples(layout, id.level, prefilter);
     let depth = k.trailing_zeros() as u8;
     if block_fits(layout, depth) {
         // The taps are the pixel centres of the level `depth` finer: sample that level once
         // over the tile's footprint, on its own (finer) lattice, and average.
-        let s = sample_block(dem, layout, id, id.level + depth, resampling);
+        let s = sample_block(layers, layout, id, id.level + depth, resampling);
         return tile_from_samples(&s, layout, id, id.level + depth, height_shift);
     }
     // Tiles too large to hold k² samples per pixel: interpolate each tap's coordinates on this
     // level's lattice instead.
-    render_taps(dem, layout, id, resampling, k, height_shift)
+    render_taps(layers, layout, id, resampling, k, height_shift)
 }
 
 /// Tile `id` with each pixel the mean of `k × k` source samples spread over its footprint, their
 /// coordinates interpolated on the tile's own level's lattice.
 fn render_taps(
-    dem: &Dem,
+    layers: &[mosaic::Layer],
     layout: &Layout,
     id: TileId,
     resampling: Resampling,
@@ -925,7 +1173,12 @@ fn render_taps(
     let size = layout.stored_size();
     let halo = layout.halo as i64;
     let offsets: Vec<f64> = (0..k).map(|a| (a as f64 + 0.5) / k as f64 - 0.5).collect();
-    let grid = SourceGrid::new(dem, layout, id);
+    let grids: Vec<SourceGrid> = layers
+        .iter()
+        .map(|l| SourceGrid::new(l.dem, layout, id))
+        .collect();
+    let mut rows: Vec<mosaic::LayerRow> = layers.iter().map(|_| Default::default()).collect();
+    rows.iter_mut().for_each(|r| r.resize(1));
     let mut out = TileBuilder::new(size);
     for j in 0..size as i64 {
         for i in 0..size as i64 {
@@ -933,8 +1186,26 @@ fn render_taps(
             let mut acc = BoxSum::default();
             for &oj in &offsets {
                 for &oi in &offsets {
-                    let (col, row) = grid.at(gx as f64 + oi, gy as f64 + oj);
-                    let (h, mk) = dem.sample_pixel(col, row, resampling);
+                    let (gxf, gyf) = (gx as f64 + oi, gy as f64 + oj);
+                    let (h, mk) = if let [layer] = layers {
+                        let (col, row) = grids[0].at(gxf, gyf);
+                        layer.dem.sample_pixel(col, row, resampling)
+                    } else {
+                        // Each layer down to the first that settles the tap.
+                        let mut top = layers.len();
+                        for (l, ((layer, grid), r)) in
+                            layers.iter().zip(&grids).zip(rows.iter_mut()).enumerate()
+                        {
+                            let (col, row) = grid.at(gxf, gyf);
+                            (r.height[0], r.mask[0]) = layer.dem.sample_pixel(col, row, resampling);
+                            r.weigh(layer, &[(col, row)]);
+                            if mosaic::settles(r, 0) {
+                                top = l + 1;
+                                break;
+                            }
+                        }
+                        mosaic::compose(&layers[..top], &rows[..top], 0)
+                    };
                     acc.add(h, mk);
                 }
             }
@@ -1052,7 +1323,7 @@ struct SampleBlock {
 /// (halo included): the pixels every tile of the group is averaged from. Rows are sampled in
 /// parallel.
 fn sample_block(
-    dem: &Dem,
+    layers: &[mosaic::Layer],
     layout: &Layout,
     root: TileId,
     sample_level: u8,
@@ -1065,33 +1336,119 @@ fn sample_block(
         k * (root.y as i64 * n - halo),
     );
     let w = (k * (n + 2 * halo)) as usize;
-    let grid = SourceGrid::region(
-        dem,
-        layout,
-        root.face,
-        sample_level,
-        (x0 - 1, y0 - 1),
-        (w as i64 + 2, w as i64 + 2),
-    );
+    let grids: Vec<SourceGrid> = layers
+        .iter()
+        .map(|l| {
+            SourceGrid::region(
+                l.dem,
+                layout,
+                root.face,
+                sample_level,
+                (x0 - 1, y0 - 1),
+                (w as i64 + 2, w as i64 + 2),
+            )
+        })
+        .collect();
     let mut height = vec![0f32; w * w];
     let mut m = vec![0u8; w * w];
-    height
-        .par_chunks_mut(w)
-        .zip(m.par_chunks_mut(w))
-        .enumerate()
-        .for_each_init(
-            || vec![(0.0, 0.0); w],
-            |coords, (j, (hrow, mrow))| {
-                grid.row(x0, y0 + j as i64, coords);
-                dem.sample_row(coords, resampling, hrow, mrow);
-            },
-        );
+    if let ([layer], [grid]) = (layers, &grids[..]) {
+        height
+            .par_chunks_mut(w)
+            .zip(m.par_chunks_mut(w))
+            .enumerate()
+            .for_each_init(
+                || vec![(0.0, 0.0); w],
+                |coords, (j, (hrow, mrow))| {
+                    grid.row(x0, y0 + j as i64, coords);
+                    layer.dem.sample_row(coords, resampling, hrow, mrow);
+                },
+            );
+    } else {
+        height
+            .par_chunks_mut(w)
+            .zip(m.par_chunks_mut(w))
+            .enumerate()
+            .for_each_init(
+                || MosaicScratch::new(layers.len(), w),
+                |scratch, (j, (hrow, mrow))| {
+                    mosaic_row(
+                        layers,
+                        &grids,
+                        (x0, y0 + j as i64),
+                        resampling,
+                        scratch,
+                        (hrow, mrow),
+                    );
+                },
+            );
+    }
     SampleBlock {
         x0,
         y0,
         w,
         height,
         mask: m,
+    }
+}
+
+/// One worker's buffers for [`mosaic_row`].
+struct MosaicScratch {
+    coords: Vec<(f64, f64)>,
+    rows: Vec<mosaic::LayerRow>,
+    settled: Vec<bool>,
+}
+
+impl MosaicScratch {
+    fn new(layers: usize, w: usize) -> Self {
+        let mut rows: Vec<mosaic::LayerRow> = (0..layers).map(|_| Default::default()).collect();
+        rows.iter_mut().for_each(|r| r.resize(w));
+        MosaicScratch {
+            coords: vec![(0.0, 0.0); w],
+            rows,
+            settled: vec![false; w],
+        }
+    }
+}
+
+/// One row of a mosaic's samples at global pixels `g0.0 ..` of row `g0.1`: each layer sampled
+/// (on its own grid) while some pixel of the row is not yet settled by a layer above it, then
+/// every pixel composed from the layers down to the one that settles it
+/// ([`mosaic::compose`]).
+fn mosaic_row(
+    layers: &[mosaic::Layer],
+    grids: &[SourceGrid],
+    (gx0, gy): (i64, i64),
+    resampling: Resampling,
+    scratch: &mut MosaicScratch,
+    (hout, mout): (&mut [f32], &mut [u8]),
+) {
+    let MosaicScratch {
+        coords,
+        rows,
+        settled,
+    } = scratch;
+    settled.fill(false);
+    let mut sampled = 0;
+    for (k, (layer, grid)) in layers.iter().zip(grids).enumerate() {
+        if k > 0 && settled.iter().all(|&s| s) {
+            break;
+        }
+        let row = &mut rows[k];
+        grid.row(gx0, gy, coords);
+        layer
+            .dem
+            .sample_row(coords, resampling, &mut row.height, &mut row.mask);
+        row.weigh(layer, coords);
+        for (p, s) in settled.iter_mut().enumerate() {
+            *s |= mosaic::settles(row, p);
+        }
+        sampled = k + 1;
+    }
+    for (p, (h, m)) in hout.iter_mut().zip(mout.iter_mut()).enumerate() {
+        let top = (0..sampled)
+            .find(|&k| mosaic::settles(&rows[k], p))
+            .map_or(sampled, |k| k + 1);
+        (*h, *m) = mosaic::compose(&layers[..top], &rows[..top], p);
     }
 }
 
@@ -1258,7 +1615,7 @@ fn plan_units(candidates: &[TileId], finest: u8, depth: u8) -> Vec<Unit> {
 
 /// Render one unit's tiles; kept tiles of a resumed run are read, not rendered.
 fn run_unit(
-    dem: &Dem,
+    layers: &[mosaic::Layer],
     sink: &TileSink,
     unit: &Unit,
     height_shift: f64,
@@ -1271,8 +1628,8 @@ fn run_unit(
                 Some(s) => Ok(Some(s)),
                 None => sink.write(
                     *id,
-                    render_height_tile(
-                        dem,
+                    render_tile(
+                        layers,
                         sink.layout,
                         *id,
                         opts.resampling,
@@ -1293,7 +1650,7 @@ fn run_unit(
                     Some(s) => Ok(Some(s)),
                     None => {
                         let s = samples.get_or_insert_with(|| {
-                            sample_block(dem, sink.layout, *root, finest, opts.resampling)
+                            sample_block(layers, sink.layout, *root, finest, opts.resampling)
                         });
                         sink.write(
                             id,
@@ -1460,7 +1817,8 @@ mod tests {
                 x: 0,
                 y: 0,
             };
-            let s = sample_block(&dem, &layout, root, 2, Resampling::Bilinear);
+            let one = [mosaic::Layer::new(&dem, 0.0, 0.0, true)];
+            let s = sample_block(&one, &layout, root, 2, Resampling::Bilinear);
             for (x, y) in (0..4).flat_map(|y| (0..4).map(move |x| (x, y))) {
                 let g = SourceGrid::new(
                     &dem,
@@ -1491,7 +1849,8 @@ mod tests {
                         assert_eq!(bits(&g.height), bits(&own.height), "{id:?}");
                         assert_eq!(g.mask, own.mask, "{id:?}");
                         let k = box_samples(&layout, level, Prefilter::Box);
-                        let t = render_taps(&dem, &layout, id, Resampling::Bilinear, k, 0.0);
+                        let one = [mosaic::Layer::new(&dem, 0.0, 0.0, true)];
+                        let t = render_taps(&one, &layout, id, Resampling::Bilinear, k, 0.0);
                         assert_eq!(g.mask, t.mask, "{id:?}");
                         for (a, b) in g.height.iter().zip(&t.height) {
                             if level == 2 {

@@ -27,6 +27,10 @@ mod mip;
 // Horizon maps: fast sweep against brute force, analytic terrains, stiff cases, the CLI.
 mod horizon;
 
+// Several DEMs mosaicked per pixel with a feathered seam (LDEM_4 under Shoemaker), wanted tile
+// sets, sources of different bodies refused.
+mod mosaic;
+
 // tileset.json consistency: every field the docs call validated, refused by name (a table).
 mod manifest;
 

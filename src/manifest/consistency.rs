@@ -5,6 +5,8 @@
 //!
 //! - The tiling run key is recomputed from what it hashes (the tool version, `source.files`,
 //!   the albedo source, `parameters`) and compared with `run_key`.
+//! - A mosaic's sources (`mosaic`) must be the ones `parameters.mosaic` names, the first of
+//!   them `source`.
 //! - `layout`, `resampling` and `body` must be the ones in `parameters` (which the run key
 //!   covers).
 //! - Every listed product's path pattern must be the one this penumbra writes.
@@ -20,7 +22,9 @@ use crate::dem::limits::show;
 use crate::error::{Error, Result};
 use crate::format::mip::Precision;
 use crate::format::{KeyBasis, TileCompression};
-use crate::manifest::{FourierProduct, HorizonLevelDistance, HorizonProduct, MipProduct, Tileset};
+use crate::manifest::{
+    FourierProduct, HorizonLevelDistance, HorizonProduct, MipProduct, MosaicSource, Tileset,
+};
 
 const FIX: &str = "the manifest is damaged: restore it, or rerun `penumbra tile`/`bake` into a \
                    fresh folder";
@@ -79,6 +83,76 @@ pub fn tiling_key(ts: &Tileset, version: &str) -> String {
             ts.parameters.to_string().as_bytes(),
         ],
     )
+}
+
+/// What `parameters.mosaic` says (the run key covers it) for a mosaic's sources: each source's
+/// files and feather, in priority order (`tiling::tile_sources`).
+pub fn mosaic_parameters(sources: &[MosaicSource]) -> serde_json::Value {
+    serde_json::Value::Array(
+        sources
+            .iter()
+            .map(|m| serde_json::json!({ "files": m.source.files, "feather_px": m.feather_px }))
+            .collect(),
+    )
+}
+
+/// A mosaic's sources: the first is `source`, each in range, and together what `parameters`
+/// (which the run key covers) says they are.
+fn mosaic(ts: &Tileset, path: &Path) -> Result<()> {
+    let r = ts.body.radius_m;
+    let said = &ts.parameters["mosaic"];
+    if ts.mosaic.is_empty() {
+        if !said.is_null() {
+            return Err(bad(
+                path,
+                "mosaic",
+                "is absent but the tiles were made from a mosaic (parameters.mosaic)".into(),
+            ));
+        }
+        return Ok(());
+    }
+    if ts.mosaic[0].source != ts.source {
+        return Err(bad(
+            path,
+            "mosaic[0].source",
+            "is not `source`: the first source of a mosaic is its primary".into(),
+        ));
+    }
+    for (k, m) in ts.mosaic.iter().enumerate() {
+        let s = &m.source;
+        within(
+            path,
+            &format!("mosaic[{k}].source.pixel_size_m"),
+            s.pixel_size_m,
+            1e-3,
+            2.0 * std::f64::consts::PI * r,
+        )?;
+        within(
+            path,
+            &format!("mosaic[{k}].source.height_shift_m"),
+            s.height_shift_m,
+            -r,
+            r,
+        )?;
+        if let Some(d) = s.datum_radius_m {
+            within(
+                path,
+                &format!("mosaic[{k}].source.datum_radius_m"),
+                d,
+                1.0,
+                1e9,
+            )?;
+        }
+    }
+    if &mosaic_parameters(&ts.mosaic) != said {
+        return Err(bad(
+            path,
+            "mosaic",
+            "names other sources or feathers than the tiles were made from (parameters.mosaic)"
+                .into(),
+        ));
+    }
+    Ok(())
 }
 
 fn ordered(path: &Path, field: &str, lo: f64, hi: f64) -> Result<()> {
@@ -201,6 +275,7 @@ pub fn check(ts: &Tileset, path: &Path) -> Result<()> {
     if let Some(d) = src.datum_radius_m {
         within(path, "source.datum_radius_m", d, 1.0, 1e9)?;
     }
+    mosaic(ts, path)?;
 
     // Products: patterns, keys, terrain numbers.
     let p = &ts.products;

@@ -7,7 +7,9 @@ use std::path::Path;
 use super::consistency::{bad, within};
 use crate::error::{Error, Result};
 use crate::layout::MAX_LEVELS;
-use crate::manifest::{Tileset, FORMAT, FORMAT_VERSION, MANIFEST};
+use crate::manifest::{
+    Tileset, FORMAT, FORMAT_VERSION, MANIFEST, MAX_FEATHER_PX, MAX_MOSAIC_SOURCES,
+};
 
 impl Tileset {
     /// Read and validate the manifest of the tileset in `dir` (checked here).
@@ -249,6 +251,36 @@ pub fn check(ts: &Tileset, path: &Path) -> Result<()> {
     let src = &ts.source;
     finite(path, "source.pixel_size_m", src.pixel_size_m)?;
     finite(path, "source.height_shift_m", src.height_shift_m)?;
+    if ts.mosaic.len() == 1 || ts.mosaic.len() > MAX_MOSAIC_SOURCES {
+        return Err(bad(
+            path,
+            "mosaic",
+            format!(
+                "lists {} sources: a mosaic has 2 ..= {MAX_MOSAIC_SOURCES} (one source is \
+                 `source` alone, without `mosaic`)",
+                ts.mosaic.len()
+            ),
+        ));
+    }
+    for (k, m) in ts.mosaic.iter().enumerate() {
+        finite(
+            path,
+            &format!("mosaic[{k}].source.pixel_size_m"),
+            m.source.pixel_size_m,
+        )?;
+        finite(
+            path,
+            &format!("mosaic[{k}].source.height_shift_m"),
+            m.source.height_shift_m,
+        )?;
+        within(
+            path,
+            &format!("mosaic[{k}].feather_px"),
+            m.feather_px,
+            0.0,
+            MAX_FEATHER_PX,
+        )?;
+    }
     // What the manifest says twice agrees, run keys are hashes, terrain numbers are ordered.
     super::consistency::check(ts, path)?;
 
