@@ -374,14 +374,14 @@ fn orient(a: (f64, f64), b: (f64, f64), c: (f64, f64)) -> f64 {
     (b.0 - a.0) * (c.1 - a.1) - (b.1 - a.1) * (c.0 - a.0)
 }
 
-fn len2(a: (f64, f64), b: (f64, f64)) -> f64 {
+fn dist(a: (f64, f64), b: (f64, f64)) -> f64 {
     ((b.0 - a.0).powi(2) + (b.1 - a.1).powi(2)).sqrt()
 }
 
 /// Whether segments ab and cd meet, counting near misses (within `tol`) as meeting.
 fn segments_meet(a: (f64, f64), b: (f64, f64), c: (f64, f64), d: (f64, f64), tol: f64) -> bool {
-    let e_cd = tol * (len2(c, d) + tol);
-    let e_ab = tol * (len2(a, b) + tol);
+    let e_cd = tol * (dist(c, d) + tol);
+    let e_ab = tol * (dist(a, b) + tol);
     let (d1, d2) = (orient(c, d, a), orient(c, d, b));
     let (d3, d4) = (orient(a, b, c), orient(a, b, d));
     if (d1 > e_cd && d2 > e_cd) || (d1 < -e_cd && d2 < -e_cd) {
@@ -732,7 +732,6 @@ pub const MAX_PATH_SAMPLES: usize = 4_000_000;
 /// the highest terrain where the step starts and d the distance at which a texel of
 /// `max_level` spans `max_texel_px` (nearer than d every tile is at `max_level` already):
 /// a step is at most a quarter of the height at either of its ends (docs/regions.md).
-#[allow(clippy::too_many_arguments)]
 pub fn path_tiles(
     points: &[PathPoint],
     layout: &Layout,
@@ -1571,5 +1570,77 @@ mod tests {
             height_m: 1000.0,
         };
         assert!(err(&[p, anti], t, &v).contains("antipodal"));
+    }
+
+    /// The numbers of docs/regions.md ("Cost"): run with
+    /// `cargo test --release -p penumbra --lib -- --ignored region_costs --nocapture`.
+    #[test]
+    #[ignore = "a measurement: prints timings, asserts nothing about them"]
+    fn region_costs() {
+        let per_level = |s: &BTreeSet<TileId>| {
+            let mut n = std::collections::BTreeMap::new();
+            for t in s {
+                *n.entry(t.level).or_insert(0usize) += 1;
+            }
+            n
+        };
+        let lay = Layout {
+            projection: Projection::Gnomonic,
+            tile_size: 512,
+            halo: 8,
+            levels: 15,
+        };
+        let cap = Shape::Cap {
+            lat_deg: -89.5,
+            lon_deg: 45.0,
+            radius_m: 5_000.0,
+        };
+        let t = std::time::Instant::now();
+        let got = tiles_touching(&cap, &lay, R, 14).unwrap();
+        eprintln!(
+            "tiles_touching 5 km cap at level 14: {} tiles in {:.3} ms",
+            got.len(),
+            t.elapsed().as_secs_f64() * 1e3
+        );
+        let lay = Layout { levels: 13, ..lay };
+        // A descent over the south pole: 1000 points from 84°S, 100 km up, to 89.9°S on the
+        // ground (height falling as the square of the remaining way).
+        let points: Vec<PathPoint> = (0..1000)
+            .map(|k| {
+                let f = k as f64 / 999.0;
+                PathPoint {
+                    lat_deg: -84.0 - 5.9 * f,
+                    lon_deg: 0.0,
+                    height_m: 100_000.0 * (1.0 - f) * (1.0 - f),
+                }
+            })
+            .collect();
+        let view = PathView {
+            frame: (1920, 1080),
+            fov_deg: 60.0,
+            max_texel_px: 1.0,
+            max_level: 12,
+        };
+        let terrain = (-9_200.0, 10_800.0);
+        let t = std::time::Instant::now();
+        let eyes = path_samples(&points, &lay, R, terrain.1, &view).unwrap();
+        let tiles = path_tiles(&points, &lay, R, terrain, &view, None).unwrap();
+        eprintln!(
+            "path_tiles 1000-point descent, 1920×1080, 60°, 1 texel/px, max level 12: {} \
+             positions, {} tiles in {:.3} s ({} threads); per level {:?}",
+            eyes.len(),
+            tiles.len(),
+            t.elapsed().as_secs_f64(),
+            rayon::current_num_threads(),
+            per_level(&tiles)
+        );
+        let t = std::time::Instant::now();
+        let one = path_tiles(&points[999..], &lay, R, terrain, &view, None).unwrap();
+        eprintln!(
+            "the last point alone: {} tiles in {:.1} ms; per level {:?}",
+            one.len(),
+            t.elapsed().as_secs_f64() * 1e3,
+            per_level(&one)
+        );
     }
 }
