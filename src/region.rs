@@ -889,16 +889,19 @@ fn path_samples(
             };
             eye(d, p.height_m + f * dh)
         };
+        // Positions strictly between the two points (none for a zero-length segment).
         let mut f = 0.0;
-        while length > 0.0 {
-            f += step_at(p.height_m + f * dh) / length;
-            if f >= 1.0 {
-                break;
+        if length > 0.0 {
+            loop {
+                f += step_at(p.height_m + f * dh) / length;
+                if f >= 1.0 {
+                    break;
+                }
+                if out.len() >= MAX_PATH_SAMPLES {
+                    return Err(too_many());
+                }
+                out.push(at(f));
             }
-            if out.len() >= MAX_PATH_SAMPLES {
-                return Err(too_many());
-            }
-            out.push(at(f));
         }
         if out.len() >= MAX_PATH_SAMPLES {
             return Err(too_many());
