@@ -125,7 +125,7 @@ const CAMERA_PROBE_TILES: usize = 16;
 pub fn default_camera(store: &Store) -> Camera {
     let ts = store.manifest();
     let r = ts.body.radius_m;
-    let q = crate::lod::Quadtree::new(ts);
+    let q = crate::lod::quadtree(ts);
     let level = q
         .levels()
         .into_iter()
@@ -206,7 +206,7 @@ impl Core {
                 sun.lon_deg = lon;
             }
             None => {
-                let q = crate::lod::Quadtree::new(ts);
+                let q = crate::lod::quadtree(ts);
                 let mid = r + (q.terrain_m.0 + q.terrain_m.1) / 2.0;
                 let (az, el) = DEFAULT_SUN_AZ_EL;
                 sun.set_local(camera.target(mid), az, el);
@@ -250,8 +250,7 @@ impl Core {
 
     /// The near plane for the current eye.
     pub fn near(&self) -> f64 {
-        let alt = norm(self.camera.eye) - self.scene.radius_m() - self.scene.quadtree.terrain_m.1;
-        Camera::near_m(alt)
+        self.scene.quadtree.near_for(self.camera.eye)
     }
 
     /// The tiles the camera needs for a `width × height` frame.
@@ -261,6 +260,7 @@ impl Core {
             width,
             height,
             near: self.near(),
+            all_directions: false,
         };
         self.scene
             .quadtree
@@ -283,7 +283,7 @@ impl Core {
         let aspect = targets.width as f64 / targets.height as f64;
         let frame = FrameParams {
             eye: self.camera.eye,
-            view_proj: self.camera.view_proj(aspect, self.near()),
+            view_proj: crate::camera::view_proj(&self.camera, aspect, self.near()),
             sun_dir: self.scene.sun().sun().dir,
             shadows: self.shadows_on,
         };

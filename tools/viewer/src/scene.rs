@@ -42,7 +42,7 @@ pub struct Scene {
 
 impl Scene {
     pub fn new(store: Store, method: GpuMethod, sun: SunPos, max_margin_px: u64) -> Scene {
-        let quadtree = Quadtree::new(store.manifest());
+        let quadtree = crate::lod::quadtree(store.manifest());
         Scene {
             store,
             quadtree,
