@@ -51,7 +51,7 @@ pub const MARGIN_DEG: f64 = 0.1;
 /// Radius of the per-pixel near field (plane pixels of the tile's level; a power of two).
 pub const NEAR_PX: usize = 16;
 /// Side of the far field's observer blocks (pixels).
-pub const BLOCK_PX: usize = 16;
+pub const BLOCK_PX: usize = 8;
 /// A texel is not refined once its angular radius is at most this share of its least distance.
 const REFINE: f64 = 0.125;
 /// Bytes of mipmaps a [`MipCache`] keeps before it starts again.
@@ -178,36 +178,42 @@ pub fn near_bound(ctx: &Context, rect: Rect, tmin: f64, near_px: usize) -> Optio
             gc[y * w + x] = (gx * gx + gy * gy).sqrt();
         }
     }
-    // The least angle per plane pixel around the observers: 1/(1 + u² + v²) plane units per
-    // radian at the box's farthest corner from the face centre.
-    let s = ctx.face_pixels;
-    let m = (near_px + 2) as f64;
-    let r2 = [
-        (rect.x0 as f64 - m, rect.y0 as f64 - m),
-        ((rect.x0 + rect.w) as f64 + m, rect.y0 as f64 - m),
-        (rect.x0 as f64 - m, (rect.y0 + rect.h) as f64 + m),
-        ((rect.x0 + rect.w) as f64 + m, (rect.y0 + rect.h) as f64 + m),
-    ]
-    .iter()
-    .map(|&(x, y)| {
-        let (u, v) = ctx.uv(x, y);
-        u * u + v * v
-    })
-    .fold(0.0, f64::max);
-    let per_px = 2.0 / s;
-    let c = per_px / (1.0 + r2);
+    // The least angle per plane pixel within `m` pixels of (x, y): 1/(1 + u² + v²) plane units
+    // per radian at the box's farthest corner from the face centre (the gnomonic plane's
+    // radial scale, its least).
+    let per_px = 2.0 / ctx.face_pixels;
+    let least = |x: f64, y: f64, m: f64| -> f64 {
+        let r2 = [
+            (x - m, y - m),
+            (x + m, y - m),
+            (x - m, y + m),
+            (x + m, y + m),
+        ]
+        .iter()
+        .map(|&(x, y)| {
+            let (u, v) = ctx.uv(x, y);
+            u * u + v * v
+        })
+        .fold(0.0, f64::max);
+        per_px / (1.0 + r2)
+    };
     let theta_max = (near_px + 1) as f64 * per_px;
     // tan(elevation) ≤ rise / ((R + H)·sin θ) with rise ≤ G·d, θ ≥ c·d, sin θ ≥ θ(1 − θ²/6).
-    let slope_per_g = 1.0 / ((radius + tmin) * c * (1.0 - theta_max * theta_max / 6.0));
+    let slope_per_gc = 1.0 / ((radius + tmin) * (1.0 - theta_max * theta_max / 6.0));
     let mut bands = Vec::new();
     let (mut inner, mut outer) = (0usize, 1usize);
     while outer <= near_px {
         let mx = box_max(&hm, w, h, outer + 1, f64::NEG_INFINITY);
         let gx = box_max(&gc, w, h, outer + 1, f64::INFINITY);
-        bands.push((inner as f64 * c, mx, gx));
+        bands.push((inner as f64, outer as f64 + 2.0, mx, gx));
         inner = outer;
         outer *= 2;
     }
+    let c = least(
+        rect.x0 as f64 + rect.w as f64 / 2.0,
+        rect.y0 as f64 + rect.h as f64 / 2.0,
+        (rect.w.max(rect.h) / 2 + near_px + 2) as f64,
+    );
     let mut best: Option<f64> = None;
     for j in rect.y0..rect.y0 + rect.h {
         for i in rect.x0..rect.x0 + rect.w {
@@ -218,9 +224,11 @@ pub fn near_bound(ctx: &Context, rect: Rect, tmin: f64, near_px: usize) -> Optio
             let h0 = h0 as f64;
             let k = j * w + i;
             let mut el = -FRAC_PI_2;
-            for (theta_lo, mx, gx) in &bands {
-                let a = max_elevation_beyond(radius, h0, mx[k], *theta_lo);
-                let b = (gx[k] * slope_per_g).atan();
+            for (inner, reach, mx, gx) in &bands {
+                // The band's rays stay within `reach` pixels of the pixel.
+                let cb = least(i as f64, j as f64, *reach);
+                let a = max_elevation_beyond(radius, h0, mx[k], inner * cb);
+                let b = (gx[k] * slope_per_gc / cb).atan();
                 el = el.max(a.min(b));
             }
             best = Some(best.map_or(el, |b: f64| b.max(el)));
@@ -240,9 +248,12 @@ pub struct FarLevel {
 #[derive(Default)]
 pub struct MipCache {
     tiles: HashMap<TileId, Arc<Levels>>,
-    faces: HashMap<(u8, Face, Option<(u32, u32)>), Option<Arc<Levels>>>,
+    faces: HashMap<FaceKey, Option<Arc<Levels>>>,
     bytes: usize,
 }
+
+/// A face pyramid (tile level, face) or a chunk of one.
+type FaceKey = (u8, Face, Option<(u32, u32)>);
 
 /// A pyramid's `max` channel: level sizes (largest first) and texels.
 struct Levels {
@@ -430,6 +441,8 @@ struct Block {
     centre: Vec3,
     rho: f64,
     hmin: f64,
+    /// Least central angle to terrain beyond the near field on the tile's own level.
+    near_rad: f64,
 }
 
 /// The far field's descent for one block over one level's pyramids, raising `best` (radians)
@@ -607,7 +620,7 @@ pub fn tile_bound_deg(
     let ts = store.manifest();
     let radius = ts.body.radius_m;
     let stop = stop_deg.map_or(f64::INFINITY, |d| (d - MARGIN_DEG).to_radians());
-    let Some((mut best, per_px)) = near_bound(near, rect, tmin, NEAR_PX) else {
+    let Some((mut best, _)) = near_bound(near, rect, tmin, NEAR_PX) else {
         return Ok(f32::NAN);
     };
     // The readers' floor at the lowest observer: the tangent to the lowest terrain's sphere.
@@ -646,20 +659,46 @@ pub fn tile_bound_deg(
             let (x0, y0) = (gx0 + bi as f64 + 0.5, gy0 + bj as f64 + 0.5);
             let (x1, y1) = (gx0 + i1 as f64 - 0.5, gy0 + j1 as f64 - 0.5);
             let (centre, rho) = cap(id.face, s, x0, y0, x1, y1);
-            blocks.push(Block { centre, rho, hmin });
+            // A ray's first NEAR_PX plane pixels stay within that of the block, where the
+            // plane's least scale is 1/(1 + u² + v²) at the farthest corner.
+            let m = NEAR_PX as f64;
+            let r2 = [
+                (x0 - m, y0 - m),
+                (x1 + m, y0 - m),
+                (x0 - m, y1 + m),
+                (x1 + m, y1 + m),
+            ]
+            .iter()
+            .map(|&(x, y)| {
+                let (u, v) = (-1.0 + 2.0 * x / s, 1.0 - 2.0 * y / s);
+                u * u + v * v
+            })
+            .fold(0.0, f64::max);
+            let near_rad = m * (2.0 / s) / (1.0 + r2);
+            blocks.push(Block {
+                centre,
+                rho,
+                hmin,
+                near_rad,
+            });
         }
     }
     // The tile's own level beyond the near field, then the far rings' levels.
     let own = FarLevel {
         level: id.level,
-        floor_rad: NEAR_PX as f64 * per_px,
+        floor_rad: f64::NAN,
     };
     for fl in std::iter::once(&own).chain(far) {
         for b in &blocks {
             if best >= stop {
                 break;
             }
-            descend(store, cache, fl.level, fl.floor_rad, b, &mut best, stop)?;
+            let floor = if fl.floor_rad.is_nan() {
+                b.near_rad
+            } else {
+                fl.floor_rad
+            };
+            descend(store, cache, fl.level, floor, b, &mut best, stop)?;
         }
     }
     let deg = best.to_degrees() + MARGIN_DEG;

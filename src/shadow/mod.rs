@@ -448,7 +448,7 @@ pub fn tile_shadows(
                     low = low.min(Frame::at(tile.face, u, v).elevation_deg(s_dir) - radius_deg);
                 }
             }
-            let lit = !(low < rec.lower_limb_deg);
+            let lit = low >= rec.lower_limb_deg;
             if !lit && matches!(method, ShadowMethod::Horizon(..)) {
                 return Err(rec.refuse(tile, low));
             }
