@@ -486,7 +486,8 @@ fn damaged_pruned_lists_are_refused() {
         .as_object()
         .unwrap();
     let (k0, _) = tiles.iter().next().unwrap();
-    let edits: Vec<(&str, Box<dyn Fn(&mut serde_json::Value)>)> = vec![
+    type Edit = Box<dyn Fn(&mut serde_json::Value)>;
+    let edits: Vec<(&str, Edit)> = vec![
         (
             "a key that is no tile",
             Box::new(|m| {
