@@ -23,10 +23,15 @@ pub struct HorizonTile<'a> {
     pub id: TileId,
     /// The run key of the horizon run (a streamed product's run key: its files' identity).
     pub run_key: &'a str,
-    /// `A` planes of n² elevations (degrees), plane k at plane azimuth 360·k/A.
+    /// `A` planes of n² elevations (degrees), plane k at plane azimuth 360·k/A; empty when
+    /// the tile was left out (`pruned`).
     pub planes: &'a [f32],
     /// The tile's heights (halo included).
     pub height: &'a HeightTile,
+    /// Left out by the run's `lit_above_deg` (the horizon was not computed): the upper bound
+    /// of its horizon elevation (degrees, below the threshold). The tile is fully lit for every
+    /// sun whose lower limb is at or above the threshold.
+    pub pruned: Option<f32>,
 }
 
 /// How the horizons a sink consumed were made (what a product built from them records).
@@ -44,6 +49,8 @@ pub struct HorizonSource {
     /// What the run key of the run that made them hashes besides its inputs' (a streamed
     /// product's `run_key_basis`).
     pub basis: crate::format::KeyBasis,
+    /// The threshold tiles were left out below (`HorizonOptions::lit_above_deg`).
+    pub lit_above_deg: Option<f64>,
 }
 
 /// A consumer of horizon maps, set up by the graph.
@@ -59,13 +66,15 @@ pub trait HorizonSink: Sync {
     /// Check its options for horizons of `azimuths` samples.
     fn check(&self, azimuths: usize) -> Result<()>;
     /// Check it against the tileset and the run's `tiles`, and set up a run whose horizons
-    /// are bounded below by `terrain_min_m`.
+    /// are bounded below by `terrain_min_m` and which leaves out the tiles whose horizon never
+    /// reaches `lit_above_deg` (handed over as [`HorizonTile::pruned`]).
     fn prepare(
         &self,
         ts: &Tileset,
         tiles: usize,
         azimuths: usize,
         terrain_min_m: f64,
+        lit_above_deg: Option<f64>,
     ) -> Result<Box<dyn SinkRun>>;
 }
 

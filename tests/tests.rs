@@ -61,3 +61,8 @@ mod graph;
 // /dev/zero or sparse-padded is refused by its readers (exit 2, named, fast, small) and flagged
 // by `penumbra verify`; non-file manifests; format-1 tilesets.
 mod integrity;
+
+// Tiles a scene's sun never needs: the per-tile horizon bound holds every computed horizon
+// (analytic terrains, real DEMs), a pruned run renders the full run's lit fractions by every
+// CPU shadow method, damaged lists of pruned tiles are refused.
+mod prune;

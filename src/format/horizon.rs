@@ -339,6 +339,12 @@ pub struct HorizonProduct {
     /// largest tile maximum) and the context margin actually searched (px), with the number
     /// of tiles whose margin was capped by `max_margin_px`.
     pub distances: Vec<HorizonLevelDistance>,
+    /// Tiles left out because their horizon can never reach a sun above the run's
+    /// `lit_above_deg` (docs/horizons.md, "Tiles a scene's sun never needs"): they have no
+    /// file and are fully lit for every sun whose lower limb is at or above the threshold;
+    /// absent when the run was not given one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pruned: Option<HorizonPruned>,
     /// Hash of the tool version, the height tiles' run key and the horizon options.
     pub run_key: String,
     /// What `run_key` hashes besides the run keys of the products it was made from (the tool
@@ -346,6 +352,56 @@ pub struct HorizonProduct {
     /// recomputes it; absent in tilesets written before it was recorded.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub run_key_basis: Option<super::KeyBasis>,
+}
+
+/// The tiles a horizon run left out, and why (`products.horizon.pruned`).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct HorizonPruned {
+    /// The threshold the run was given (degrees): a scene's lowest sun elevation less the
+    /// sun's angular radius. A pruned tile is fully lit for a sun whose lower limb is at or
+    /// above it, and has no answer for a lower one.
+    pub lit_above_deg: f64,
+    /// Each pruned tile (`level/face/x/y`) with the upper bound of its horizon elevation over
+    /// every pixel and azimuth (degrees, below `lit_above_deg`).
+    pub tiles: std::collections::BTreeMap<String, f32>,
+}
+
+impl HorizonPruned {
+    /// The bound of tile `id` when it was pruned.
+    pub fn bound(&self, id: TileId) -> Option<f32> {
+        self.tiles.get(&pruned_key(id)).copied()
+    }
+}
+
+impl HorizonProduct {
+    /// Tile `id`'s threshold and bound when the run left it out (no file).
+    pub fn pruned_tile(&self, id: TileId) -> Option<(f64, f32)> {
+        let p = self.pruned.as_ref()?;
+        p.bound(id).map(|b| (p.lit_above_deg, b))
+    }
+}
+
+/// The key of tile `id` in `products.horizon.pruned.tiles`: `level/face/x/y`.
+pub fn pruned_key(id: TileId) -> String {
+    format!("{}/{}/{}/{}", id.level, id.face.name(), id.x, id.y)
+}
+
+/// The tile a key of `products.horizon.pruned.tiles` names; None when it names none.
+pub fn parse_pruned_key(key: &str) -> Option<TileId> {
+    let mut it = key.split('/');
+    let level = it.next()?.parse().ok()?;
+    let face = it.next()?;
+    let face = crate::cube::Face::ALL
+        .iter()
+        .copied()
+        .find(|f| f.name() == face)?;
+    let x = it.next()?.parse().ok()?;
+    let y = it.next()?.parse().ok()?;
+    if it.next().is_some() {
+        return None;
+    }
+    let id = TileId { level, face, x, y };
+    (pruned_key(id) == key).then_some(id)
 }
 
 /// A horizon method's measured error against the reference (degrees, before the maps are

@@ -136,12 +136,44 @@ pub fn sun_distance(distance_au: Option<f64>, body: &str) -> Result<f64> {
     })
 }
 
-/// Checks of the options against a tileset: a sun radius must be known for `min_sun_el_deg`.
-pub fn check_tileset(opts: &FourierOptions, ts: &Tileset) -> Result<()> {
-    if opts.min_sun_el_deg.is_some() {
-        sun_radius_deg(opts.sun_distance_au, &ts.body.name)?;
+/// Checks of the options against a tileset: a sun radius must be known for `min_sun_el_deg`
+/// and for horizons left out below `lit_above_deg` (a pruned horizon run), and then a
+/// `min_sun_el_deg` asked must not promise suns those tiles have no horizon for.
+pub fn check_tileset(
+    opts: &FourierOptions,
+    ts: &Tileset,
+    lit_above_deg: Option<f64>,
+) -> Result<()> {
+    if opts.min_sun_el_deg.is_some() || lit_above_deg.is_some() {
+        let r = sun_radius_deg(opts.sun_distance_au, &ts.body.name)?;
+        effective_min_sun_el(opts.min_sun_el_deg, lit_above_deg, r)
+            .map_err(|m| Error::param("min_sun_el", m))?;
     }
     Ok(())
+}
+
+/// The `min_sun_el_deg` a Fourier product records (tiles marked fully lit are lit for every
+/// sun whose centre is at or above it): the one asked; with horizons left out below
+/// `lit_above_deg` (whose tiles are written fully lit), `lit_above_deg` plus the sun's radius
+/// unless a higher one was asked. A lower one is refused: the tiles left out keep no horizon
+/// for suns below the threshold.
+pub fn effective_min_sun_el(
+    asked: Option<f64>,
+    lit_above_deg: Option<f64>,
+    sun_radius_deg: f64,
+) -> std::result::Result<Option<f64>, String> {
+    match (asked, lit_above_deg) {
+        (a, None) => Ok(a),
+        (None, Some(t)) => Ok(Some(t + sun_radius_deg)),
+        (Some(a), Some(t)) if a >= t + sun_radius_deg => Ok(Some(a)),
+        (Some(a), Some(t)) => Err(format!(
+            "{a}° is below the sun the horizons were computed for: tiles were left out whose \
+             horizon never reaches {t}° (the lowest sun less its radius, {sun_radius_deg:.4}°), \
+             so their pyramids are fully lit only for suns at or above {:.4}°; ask at least \
+             that, or compute the horizons without leaving tiles out",
+            t + sun_radius_deg
+        )),
+    }
 }
 
 /// The sun's apparent radius (degrees) seen from `body`: from the distance given, else the
@@ -171,6 +203,24 @@ pub struct Encoder {
     /// For `min_sun_el_deg` (0 unless a distance is set; [`Encoder::new`] takes the body's).
     sun_radius_deg: f64,
     transform: Transform,
+}
+
+impl Encoder {
+    /// The pyramid of a tile whose horizons were left out (never rising above `bound_deg`,
+    /// below the run's `lit_above_deg`): marked fully lit, no coefficients.
+    pub fn encode_pruned(&self, bound_deg: f32) -> (Pyramid, TileStats) {
+        let o = &self.opts;
+        let p = Pyramid::fully_lit(self.n, self.a, o.layout, o.encoding, o.sigma, bound_deg);
+        let bytes = p.file_bytes() as u64;
+        (
+            p,
+            TileStats {
+                k: 0,
+                fully_lit: true,
+                bytes,
+            },
+        )
+    }
 }
 
 impl Encoder {
@@ -417,6 +467,8 @@ pub struct Source<'a> {
     pub error: Option<HorizonError>,
     pub terrain: (f64, f64),
     pub distances: Vec<HorizonLevelDistance>,
+    /// The threshold the horizons left tiles out below, if any.
+    pub lit_above_deg: Option<f64>,
 }
 
 /// The manifest entry of a finished run.
@@ -432,6 +484,12 @@ pub fn product(
     run_key_basis: KeyBasis,
 ) -> FourierProduct {
     let n = ts.layout.tile_size as usize;
+    let lit_above = source.lit_above_deg;
+    let radius = (opts.min_sun_el_deg.is_some() || lit_above.is_some())
+        .then(|| sun_radius_deg(opts.sun_distance_au, &ts.body.name).ok())
+        .flatten();
+    let min_sun_el =
+        effective_min_sun_el(opts.min_sun_el_deg, lit_above, radius.unwrap_or(0.0)).unwrap_or(None);
     FourierProduct {
         path: PATTERN.into(),
         format: FORMAT.into(),
@@ -448,10 +506,8 @@ pub fn product(
         floor: FLOOR.into(),
         max_error_deg: opts.max_error_deg,
         tile_coefficients: opts.max_error_deg.map(|_| tally.k),
-        min_sun_el_deg: opts.min_sun_el_deg,
-        sun_radius_deg: opts
-            .min_sun_el_deg
-            .and_then(|_| sun_radius_deg(opts.sun_distance_au, &ts.body.name).ok()),
+        min_sun_el_deg: min_sun_el,
+        sun_radius_deg: min_sun_el.and(radius),
         tiles_fully_lit: tally.fully_lit,
         source: source.kind.into(),
         horizon_method: source.method.into(),
@@ -570,7 +626,7 @@ impl Stage for FourierStage {
             )
         })?;
         check_options(opts, h.azimuths)?;
-        check_tileset(opts, ts)?;
+        check_tileset(opts, ts, h.pruned.as_ref().map(|p| p.lit_above_deg))?;
         let levels = match &opts.levels {
             None => h.levels.clone(),
             Some(l) => {
@@ -609,20 +665,22 @@ impl Stage for FourierStage {
 
     fn units(&self, ts: &Tileset, plan: &FourierPlan) -> Result<Vec<Unit>> {
         let n = ts.layout.tile_size as usize;
+        let h = ts.products.horizon.as_ref().expect("checked");
         Ok(plan
             .tiles
             .iter()
             .map(|&id| {
-                let reads = vec![
-                    Reads::Tile {
-                        product: Product::Height,
-                        tile: id,
-                    },
-                    Reads::Tile {
+                let mut reads = vec![Reads::Tile {
+                    product: Product::Height,
+                    tile: id,
+                }];
+                // A tile the horizon run left out has no maps.
+                if h.pruned_tile(id).is_none() {
+                    reads.push(Reads::Tile {
                         product: Product::Horizon,
                         tile: id,
-                    },
-                ];
+                    });
+                }
                 Unit::tile(id, reads, (n * n * plan.azimuths) as f64)
             })
             .collect())
@@ -637,9 +695,21 @@ impl Stage for FourierStage {
 
     fn run_unit(&self, cx: &Cx<FourierPlan>, unit: &Unit, _: &mut ()) -> Result<TileStats> {
         let id = unit.tile;
-        let tile = cx.store.height(id)?.expect("listed tiles exist");
-        let elev = cx.store.horizon(id)?;
-        let (p, stats) = cx.plan.encoder.encode(&elev, &tile);
+        let h = cx
+            .store
+            .manifest()
+            .products
+            .horizon
+            .as_ref()
+            .expect("checked");
+        let (p, stats) = match h.pruned_tile(id) {
+            Some((_, bound)) => cx.plan.encoder.encode_pruned(bound),
+            None => {
+                let tile = cx.store.height(id)?.expect("listed tiles exist");
+                let elev = cx.store.horizon(id)?;
+                cx.plan.encoder.encode(&elev, &tile)
+            }
+        };
         let identity = crate::format::Identity::tile(pyramid::ID, id, cx.key);
         pyramid::write(&tile_path(cx.out, id), &p, &identity)?;
         Ok(stats)
@@ -681,6 +751,7 @@ impl Stage for FourierStage {
                 error: h.error.clone(),
                 terrain: (h.terrain_min_m, h.terrain_max_m),
                 distances: h.distances.clone(),
+                lit_above_deg: h.pruned.as_ref().map(|p| p.lit_above_deg),
             },
             cx.key.to_string(),
             self.basis(),

@@ -66,8 +66,9 @@ impl HorizonSink for FourierSink {
         tiles: usize,
         azimuths: usize,
         terrain_min_m: f64,
+        lit_above_deg: Option<f64>,
     ) -> Result<Box<dyn SinkRun>> {
-        check_tileset(&self.opts, ts)?;
+        check_tileset(&self.opts, ts, lit_above_deg)?;
         check_output_size(&self.opts, tiles, ts.layout.tile_size as usize)?;
         Ok(Box::new(FourierRun {
             opts: self.opts.clone(),
@@ -101,7 +102,10 @@ impl FourierRun {
 
 impl SinkRun for FourierRun {
     fn accept(&self, out: &Path, tile: HorizonTile) -> Result<serde_json::Value> {
-        let (p, stats) = self.encoder.encode(tile.planes, tile.height);
+        let (p, stats) = match tile.pruned {
+            Some(bound) => self.encoder.encode_pruned(bound),
+            None => self.encoder.encode(tile.planes, tile.height),
+        };
         let identity = crate::format::Identity::tile(pyramid::ID, tile.id, tile.run_key);
         pyramid::write(&tile_path(out, tile.id), &p, &identity)?;
         Ok(serde_json::to_value(stats).expect("stats serialise"))
@@ -139,6 +143,7 @@ impl SinkRun for FourierRun {
                 error: source.error.clone(),
                 terrain: (source.terrain_min_m, source.terrain_max_m),
                 distances: source.distances.clone(),
+                lit_above_deg: source.lit_above_deg,
             },
             run_key.to_string(),
             source.basis.clone(),

@@ -8,6 +8,7 @@
 //! `near` field, per-azimuth upper-hull `sweep` beyond). `stage` builds those rasters from
 //! a tileset and stores the raw maps (the point query is `crate::query::horizon`).
 
+pub mod bound;
 mod budget;
 mod far;
 mod geometry;
@@ -27,8 +28,9 @@ pub use self::method::{
 };
 pub use self::near::{DEFAULT_NEAR_PX, MAX_NEAR_PX};
 pub use self::stage::{
-    build_horizons, context_for, default_fine_margin_px, reach_rad, terrain_range, HorizonOptions,
-    HorizonReport, HorizonStage, Reach, FINE_MARGIN_PX, STAGE,
+    build_horizons, context_for, default_fine_margin_px, prune_candidates, prune_candidates_with,
+    reach_rad, terrain_range, tile_bounds, HorizonOptions, HorizonReport, HorizonStage, Reach,
+    FINE_MARGIN_PX, STAGE,
 };
 pub use crate::format::horizon::{
     read_horizon_exr, tile_path, write_horizon_exr, HorizonPrecision, AZIMUTH_CONVENTION, PATTERN,

@@ -2,6 +2,7 @@
 //! the neighbouring faces as far as any terrain could rise above the horizon), the horizons of
 //! its pixels, and the raw maps on disk; plus the on-demand query of one point.
 
+use super::bound::{self, FarLevel, MipCache, NEAR_PX};
 use super::budget::Tally;
 use std::borrow::Cow;
 use std::collections::{BTreeMap, HashMap};
@@ -20,7 +21,8 @@ use crate::error::{Error, Result};
 use crate::format::height::HeightTile;
 use crate::format::horizon::ID as HORIZON_ID;
 use crate::format::horizon::{
-    tile_path, write_horizon_exr, HorizonPrecision, AZIMUTH_CONVENTION, FORMAT, LAYOUT, PATTERN,
+    tile_path, write_horizon_exr, HorizonPrecision, HorizonPruned, AZIMUTH_CONVENTION, FORMAT,
+    LAYOUT, PATTERN,
 };
 use crate::format::TileCompression;
 use crate::format::{Identity, KeyBasis};
@@ -81,6 +83,12 @@ pub struct HorizonOptions {
     /// it, out to the whole reach, far rings of coarser levels ([`FarRing`]). None:
     /// [`default_fine_margin_px`].
     pub fine_margin_px: Option<u64>,
+    /// Leave out the tiles whose horizon can never rise to this elevation (degrees: a scene's
+    /// lowest sun less the sun's angular radius) by a conservative bound
+    /// ([`super::bound::tile_bound_deg`]): they are recorded fully lit and not computed.
+    /// None: every tile is computed (and the run key is what it was before the option).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lit_above_deg: Option<f64>,
 }
 
 impl Default for HorizonOptions {
@@ -95,6 +103,7 @@ impl Default for HorizonOptions {
             max_output_gib: 8.0,
             near_px: DEFAULT_NEAR_PX,
             fine_margin_px: None,
+            lit_above_deg: None,
         }
     }
 }
@@ -122,6 +131,10 @@ pub struct HorizonReport {
     /// this run's tiles).
     pub horizon_s: f64,
     pub compress_s: f64,
+    /// With `lit_above_deg`: tiles left out (this run's and kept ones), and the seconds this
+    /// run spent bounding tiles.
+    pub tiles_pruned: u64,
+    pub bound_s: f64,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -402,6 +415,185 @@ pub(crate) fn tile_rasters(
     Ok((ctx, rect, rings))
 }
 
+/// The upper bound (degrees, [`bound::tile_bound_deg`]) of tile `id`'s horizons as a run with
+/// `opts` (its method and margins; `fine_margin` in effect) over the terrain `range` computes
+/// them: the tile's own level beyond its near field, and, for the fast and sweep methods, the
+/// far rings' coarser levels beyond the finer rasters, planned as [`tile_rasters`] plans them.
+/// `stop`: see [`bound::tile_bound_deg`]. NaN for a tile without data.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn tile_bound(
+    store: &Store,
+    id: TileId,
+    opts: &HorizonOptions,
+    fine_margin: u64,
+    range: (f64, f64),
+    covers: &mut Covers,
+    mips: &mut MipCache,
+    stop: Option<f64>,
+) -> Result<f32> {
+    let ts = store.manifest();
+    let lay = ts.layout;
+    let n = lay.tile_size as i64;
+    let tile = store.height(id)?.expect("listed tiles exist");
+    let Some(top) = interior_max(&tile, lay.halo as usize, n as usize) else {
+        return Ok(f32::NAN);
+    };
+    let rad = reach_rad(ts.body.radius_m, range.0, range.1, top as f64);
+    let reach = margin_for(ts, id, rad, opts.max_margin_px);
+    let cover = *covers
+        .entry((id.level, id.face))
+        .or_insert_with(|| coverage_box(ts, id.level, id.face));
+    let (near, rect) = context_for(store, id, (NEAR_PX + 2) as u64, cover)?;
+    let mut far = Vec::new();
+    let fine = reach.margin_px.min(fine_margin);
+    if opts.method.sees_far_rings() && fine < reach.needed_px {
+        let (tx, ty) = (id.x as i64 * n, id.y as i64 * n);
+        let win = window(
+            store,
+            id.level,
+            (tx, ty, tx + n, ty + n),
+            fine as i64,
+            cover,
+        );
+        let s = lay.face_pixels(id.level) as f64;
+        let tile_box = (tx as f64, ty as f64, (tx + n) as f64, (ty + n) as f64);
+        for r in far_rings(store, id, win, fine, reach.needed_px, fine_margin, covers) {
+            // A ring holds terrain only outside what the finer window before it holds (in
+            // pixels of the level above the ring's), less the ring pixels that straddle its
+            // border and the cell the ring's surface reaches from them (3 ring pixels).
+            let sp = lay.face_pixels(r.level + 1) as f64;
+            let p = r.prev;
+            let gap = bound::gap_to_outside(
+                id.face,
+                s,
+                tile_box,
+                sp,
+                (p.0 as f64, p.1 as f64, p.2 as f64, p.3 as f64),
+            );
+            let ring_px = 2.0 / lay.face_pixels(r.level) as f64;
+            far.push(FarLevel {
+                level: r.level,
+                floor_rad: (gap - 3.0 * ring_px).max(0.0),
+            });
+        }
+    }
+    bound::tile_bound_deg(store, id, &near, rect, &far, range.0, mips, stop)
+}
+
+/// Whether a run with `opts` (its `lit_above_deg` set) leaves tile `id` out: its bound when it
+/// is below the threshold. The stage's decision and [`prune_candidates`]'s.
+#[allow(clippy::too_many_arguments)]
+fn prune_decision(
+    store: &Store,
+    id: TileId,
+    opts: &HorizonOptions,
+    fine_margin: u64,
+    range: (f64, f64),
+    covers: &mut Covers,
+    mips: &mut MipCache,
+) -> Result<Option<f32>> {
+    let Some(t) = opts.lit_above_deg else {
+        return Ok(None);
+    };
+    let b = tile_bound(store, id, opts, fine_margin, range, covers, mips, Some(t))?;
+    Ok(((b as f64) < t).then_some(b))
+}
+
+/// The tiles of `levels` that a horizon run given `lit_above_deg` (and otherwise the default
+/// options) would leave out, with their bounds (degrees): the stage's own decision, for a
+/// planner to count before horizons are baked. Needs the heights and the mipmaps.
+pub fn prune_candidates(
+    store: &Store,
+    levels: &[u8],
+    lit_above_deg: f64,
+) -> Result<Vec<(TileId, f32)>> {
+    prune_candidates_with(
+        store,
+        &HorizonOptions {
+            levels: Some(levels.to_vec()),
+            lit_above_deg: Some(lit_above_deg),
+            ..Default::default()
+        },
+    )
+}
+
+/// [`prune_candidates`] for a run with `opts` (method, margins, levels, `lit_above_deg`).
+pub fn prune_candidates_with(store: &Store, opts: &HorizonOptions) -> Result<Vec<(TileId, f32)>> {
+    check_options(opts)?;
+    if opts.lit_above_deg.is_none() {
+        return Err(Error::param(
+            "lit_above_deg",
+            "is needed: it is the threshold tiles are pruned below",
+        ));
+    }
+    let ts = store.manifest();
+    check_layout(store.dir(), ts)?;
+    check_prunable(store.dir(), ts)?;
+    let range = terrain_range(ts).ok_or_else(|| {
+        Error::invalid(
+            store.dir().join(manifest::MANIFEST),
+            "tileset records no height range",
+        )
+    })?;
+    let levels = pick_levels(ts, &opts.levels)?;
+    let fine = opts
+        .fine_margin_px
+        .unwrap_or_else(|| default_fine_margin_px(ts.layout.tile_size));
+    let (mut covers, mut mips) = (HashMap::new(), MipCache::default());
+    let mut out = Vec::new();
+    for id in ts
+        .tile_set()
+        .into_iter()
+        .filter(|t| levels.contains(&t.level))
+    {
+        if let Some(b) = prune_decision(store, id, opts, fine, range, &mut covers, &mut mips)? {
+            out.push((id, b));
+        }
+    }
+    Ok(out)
+}
+
+/// Every tile of `opts`'s levels with the whole upper bound of its horizon (degrees, NaN for a
+/// tile without data) for a run with `opts` (method, margins), not stopped at any threshold:
+/// what [`prune_candidates`] compares with `lit_above_deg`. Needs the heights and the mipmaps.
+pub fn tile_bounds(store: &Store, opts: &HorizonOptions) -> Result<Vec<(TileId, f32)>> {
+    check_options(opts)?;
+    let ts = store.manifest();
+    check_layout(store.dir(), ts)?;
+    check_prunable(store.dir(), ts)?;
+    let range = terrain_range(ts).ok_or_else(|| {
+        Error::invalid(
+            store.dir().join(manifest::MANIFEST),
+            "tileset records no height range",
+        )
+    })?;
+    let levels = pick_levels(ts, &opts.levels)?;
+    let fine = opts
+        .fine_margin_px
+        .unwrap_or_else(|| default_fine_margin_px(ts.layout.tile_size));
+    let (mut covers, mut mips) = (HashMap::new(), MipCache::default());
+    ts.tile_set()
+        .into_iter()
+        .filter(|t| levels.contains(&t.level))
+        .map(|id| {
+            let b = tile_bound(store, id, opts, fine, range, &mut covers, &mut mips, None)?;
+            Ok((id, b))
+        })
+        .collect()
+}
+
+/// Pruning bounds tiles from the mipmaps: refuse a tileset without them.
+fn check_prunable(dir: &Path, ts: &Tileset) -> Result<()> {
+    if ts.products.mip.is_none() {
+        return Err(Error::invalid(
+            dir.join(manifest::MANIFEST),
+            "leaving out tiles whose horizon never reaches the sun (lit_above_deg) bounds them \
+             from the maximum mipmaps, and this tileset has none: run `penumbra mip` first",
+        ));
+    }
+    Ok(())
+}
+
 /// The horizons of `rect` over `ctx` with `method` (as [`horizons_with`]), raised to what
 /// the far rings `rings` (from [`tile_rasters`]) add: each ring is read, used and dropped
 /// before the next ([`FarHorizons`]). The nearest rings' tiles stay cached for the next tile,
@@ -592,6 +784,14 @@ pub(crate) fn check_options(opts: &HorizonOptions) -> Result<()> {
             ),
         ));
     }
+    if let Some(t) = opts.lit_above_deg {
+        if !(t.is_finite() && (-90.0..=90.0).contains(&t)) {
+            return Err(Error::param(
+                "lit_above_deg",
+                format!("{t} is not an elevation in −90..=90 degrees"),
+            ));
+        }
+    }
     if !(0.0..=MAX_NEAR_PX).contains(&opts.near_px) {
         return Err(Error::param(
             "near_px",
@@ -698,6 +898,16 @@ pub struct TileDone {
     /// The sweep method's differences against the reference on the tile's checked pixels.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     budget: Option<Tally>,
+    /// Left out (`lit_above_deg`): the bound of its horizon, f32 bits.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pruned: Option<u32>,
+    /// Seconds spent bounding the tile.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    bound_s: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 #[derive(Serialize, Deserialize)]
@@ -713,6 +923,8 @@ struct ReachDone {
 /// What one worker keeps from tile to tile.
 pub struct HorizonScratch {
     covers: Covers,
+    /// Maximum mipmaps read for bounds (`lit_above_deg`).
+    mips: MipCache,
     /// The tile cache's clock at the previous tile.
     mark: u64,
 }
@@ -806,6 +1018,9 @@ impl Stage for HorizonStage<'_> {
         }
         let range = terrain_range(ts)
             .ok_or_else(|| Error::invalid(&manifest_path, "tileset records no height range"))?;
+        if opts.lit_above_deg.is_some() {
+            check_prunable(dir, ts)?;
+        }
         let levels = pick_levels(ts, &opts.levels)?;
         let tiles: Vec<TileId> = ts
             .tile_set()
@@ -819,7 +1034,7 @@ impl Stage for HorizonStage<'_> {
         let sinks = self
             .sinks
             .iter()
-            .map(|s| s.prepare(ts, tiles.len(), opts.azimuths, range.0))
+            .map(|s| s.prepare(ts, tiles.len(), opts.azimuths, range.0, opts.lit_above_deg))
             .collect::<Result<Vec<_>>>()?;
         Ok(HorizonPlan {
             levels,
@@ -872,6 +1087,7 @@ impl Stage for HorizonStage<'_> {
     fn scratch(&self, _plan: &HorizonPlan) -> HorizonScratch {
         HorizonScratch {
             covers: HashMap::new(),
+            mips: MipCache::default(),
             mark: 0,
         }
     }
@@ -898,10 +1114,31 @@ impl Stage for HorizonStage<'_> {
             let rad = reach_rad(ts.body.radius_m, tmin, tmax, top as f64);
             (rad, margin_for(ts, id, rad, opts.max_margin_px))
         });
+        let tb = std::time::Instant::now();
+        let pruned = if reach.is_some() {
+            prune_decision(
+                store,
+                id,
+                opts,
+                plan.fine_margin,
+                plan.range,
+                &mut scratch.covers,
+                &mut scratch.mips,
+            )?
+        } else {
+            None
+        };
+        let bound_s = if opts.lit_above_deg.is_some() {
+            tb.elapsed().as_secs_f64()
+        } else {
+            0.0
+        };
         let t0 = std::time::Instant::now();
         let mut pixaz = 0;
         let mut budget = None;
-        let elev = if let Some((_, reach)) = reach {
+        let elev = if pruned.is_some() {
+            Vec::new()
+        } else if let Some((_, reach)) = reach {
             let (ctx, rect, rings) = tile_rasters(
                 store,
                 id,
@@ -927,7 +1164,7 @@ impl Stage for HorizonStage<'_> {
             vec![f32::NAN; n * n * opts.azimuths]
         };
         let horizon_s = t0.elapsed().as_secs_f64();
-        if self.raw {
+        if self.raw && pruned.is_none() {
             write_horizon_exr(
                 &tile_path(cx.out, id),
                 n,
@@ -950,6 +1187,7 @@ impl Stage for HorizonStage<'_> {
                         run_key: cx.key,
                         planes: &elev,
                         height: &tile,
+                        pruned,
                     },
                 )
             })
@@ -975,6 +1213,8 @@ impl Stage for HorizonStage<'_> {
             horizon_s,
             sink_s: t1.elapsed().as_secs_f64(),
             budget,
+            pruned: pruned.map(f32::to_bits),
+            bound_s,
         })
     }
 
@@ -1002,11 +1242,17 @@ impl Stage for HorizonStage<'_> {
         let mut report = self.up_to_date(cx.store, plan, &[]);
         report.up_to_date = false;
         report.tiles_kept = 0;
+        report.tiles_pruned = 0;
         let mut records: Vec<Vec<(TileId, serde_json::Value, bool)>> =
             plan.sinks.iter().map(|_| Vec::new()).collect();
         let mut budget = Tally::default();
+        let mut pruned = std::collections::BTreeMap::new();
         for f in done {
             let id = f.unit.tile;
+            if let Some(b) = f.done.pruned {
+                pruned.insert(crate::format::horizon::pruned_key(id), f32::from_bits(b));
+                report.tiles_pruned += 1;
+            }
             if let Some(b) = &f.done.budget {
                 budget.add(b);
             }
@@ -1023,6 +1269,7 @@ impl Stage for HorizonStage<'_> {
                 report.pixel_azimuths += f.done.pixel_azimuths;
                 report.horizon_s += f.done.horizon_s;
                 report.compress_s += f.done.sink_s;
+                report.bound_s += f.done.bound_s;
             } else {
                 report.tiles_kept += 1;
             }
@@ -1041,6 +1288,7 @@ impl Stage for HorizonStage<'_> {
             terrain_max_m: tmax,
             distances: dist.clone(),
             basis: self.basis(ts, plan),
+            lit_above_deg: opts.lit_above_deg,
         };
         let mut manifest = ts.clone();
         for ((sink, run), rec) in self.sinks.iter().zip(&plan.sinks).zip(records) {
@@ -1062,6 +1310,10 @@ impl Stage for HorizonStage<'_> {
                 terrain_min_m: tmin,
                 terrain_max_m: tmax,
                 distances: dist.clone(),
+                pruned: opts.lit_above_deg.map(|t| HorizonPruned {
+                    lit_above_deg: t,
+                    tiles: pruned,
+                }),
                 run_key: cx.key.to_string(),
                 run_key_basis: Some(source.basis.clone()),
             });
@@ -1100,6 +1352,12 @@ impl Stage for HorizonStage<'_> {
             streamed,
             horizon_s: 0.0,
             compress_s: 0.0,
+            tiles_pruned: products
+                .horizon
+                .as_ref()
+                .and_then(|h| h.pruned.as_ref())
+                .map_or(0, |p| p.tiles.len() as u64),
+            bound_s: 0.0,
         }
     }
 }

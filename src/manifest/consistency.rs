@@ -655,6 +655,9 @@ struct HorizonLabels<'a> {
     terrain: (f64, f64),
     /// The raw maps' precision (a raw horizon entry only).
     precision: Option<&'a str>,
+    /// The threshold the raw maps' entry says tiles were left out below (a raw horizon entry
+    /// only).
+    lit_above: Option<Option<f64>>,
 }
 
 /// The horizon stage's basis (the height pattern, its options, "tmin tmax", "fine margin N")
@@ -739,6 +742,15 @@ fn horizon_run(
             &by,
         )?;
     }
+    if let Some(t) = l.lit_above {
+        agree(
+            path,
+            &format!("{f}.pruned.lit_above_deg"),
+            json(&t),
+            &opts["lit_above_deg"],
+            &by,
+        )?;
+    }
     Ok(opts)
 }
 
@@ -754,6 +766,7 @@ fn horizon_key(ts: &Tileset, h: &HorizonProduct, path: &Path) -> Result<()> {
         levels: &h.levels,
         terrain: (h.terrain_min_m, h.terrain_max_m),
         precision: Some(&h.precision),
+        lit_above: Some(h.pruned.as_ref().map(|p| p.lit_above_deg)),
     };
     recomputed(
         path,
@@ -771,7 +784,7 @@ fn fourier_key(ts: &Tileset, f: &FourierProduct, path: &Path) -> Result<()> {
     };
     let field = "products.fourier";
     let by = "`products.fourier.run_key_basis`";
-    let opts = if f.source == "raw" {
+    let (opts, lit_above) = if f.source == "raw" {
         let h = ts.products.horizon.as_ref().ok_or_else(|| {
             bad(
                 path,
@@ -845,7 +858,7 @@ fn fourier_key(ts: &Tileset, f: &FourierProduct, path: &Path) -> Result<()> {
             &h.levels,
             by,
         )?;
-        opts
+        (opts, h.pruned.as_ref().map(|p| p.lit_above_deg))
     } else {
         recomputed(
             path,
@@ -862,6 +875,7 @@ fn fourier_key(ts: &Tileset, f: &FourierProduct, path: &Path) -> Result<()> {
             levels: &f.levels,
             terrain: (f.terrain_min_m, f.terrain_max_m),
             precision: None,
+            lit_above: None,
         };
         let hopts = horizon_run(ts, path, b, &l)?;
         let opts = hopts
@@ -877,7 +891,7 @@ fn fourier_key(ts: &Tileset, f: &FourierProduct, path: &Path) -> Result<()> {
                         .into(),
                 )
             })?;
-        opts
+        (opts, hopts["lit_above_deg"].as_f64())
     };
     for (name, label) in [
         ("coefficients", json(&f.coefficients)),
@@ -886,9 +900,23 @@ fn fourier_key(ts: &Tileset, f: &FourierProduct, path: &Path) -> Result<()> {
         ("sigma", json(&f.sigma)),
         ("reduce", json(&f.reduce)),
         ("max_error_deg", json(&f.max_error_deg)),
-        ("min_sun_el_deg", json(&f.min_sun_el_deg)),
     ] {
         agree(path, &format!("{field}.{name}"), label, &opts[name], by)?;
     }
-    Ok(())
+    // The threshold the pyramids marked fully lit: the one asked, or, with horizons left out,
+    // the threshold plus the sun's radius (`fourier::stage::effective_min_sun_el`).
+    let asked = opts["min_sun_el_deg"].as_f64();
+    let want = crate::fourier::stage::effective_min_sun_el(
+        asked,
+        lit_above,
+        f.sun_radius_deg.unwrap_or(0.0),
+    )
+    .map_err(|m| bad(path, &format!("{field}.min_sun_el_deg"), m))?;
+    agree(
+        path,
+        &format!("{field}.min_sun_el_deg"),
+        json(&f.min_sun_el_deg),
+        &json(&want),
+        by,
+    )
 }

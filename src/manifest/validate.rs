@@ -449,6 +449,9 @@ pub fn check(ts: &Tileset, path: &Path) -> Result<()> {
             -b.radius_m,
             b.radius_m,
         )?;
+        if let Some(pr) = &h.pruned {
+            pruned(path, ts, h, pr)?;
+        }
     }
     if let Some(f) = &p.fourier {
         fourier(path, ts, f)?;
@@ -459,6 +462,52 @@ pub fn check(ts: &Tileset, path: &Path) -> Result<()> {
     // The stage products' run keys and labels against what their runs hashed, once every
     // value is known to be in range.
     super::consistency::check_keys(ts, path)
+}
+
+/// The tiles a horizon run left out: a threshold that is an elevation, and each key a tile of
+/// the entry's levels in the coverage whose bound is an elevation below the threshold (a tile
+/// whose bound is not could not have been left out: a reader would call it lit for suns its
+/// horizon may hide).
+fn pruned(
+    path: &Path,
+    ts: &Tileset,
+    h: &crate::manifest::HorizonProduct,
+    pr: &crate::format::horizon::HorizonPruned,
+) -> Result<()> {
+    let t = pr.lit_above_deg;
+    within(
+        path,
+        "products.horizon.pruned.lit_above_deg",
+        t,
+        -90.0,
+        90.0,
+    )?;
+    let field = "products.horizon.pruned.tiles";
+    for (k, &b) in &pr.tiles {
+        let id = crate::format::horizon::parse_pruned_key(k);
+        if !id.is_some_and(|id| h.levels.contains(&id.level) && ts.has_tile(id)) {
+            return Err(bad(
+                path,
+                field,
+                format!(
+                    "'{k}' is not a tile (level/face/x/y) of the horizon's levels {:?} in the \
+                     coverage",
+                    h.levels
+                ),
+            ));
+        }
+        if !(b.is_finite() && b >= -90.0 && (b as f64) < t) {
+            return Err(bad(
+                path,
+                field,
+                format!(
+                    "tile {k}'s horizon bound {b}° is not an elevation below lit_above_deg \
+                     {t}°: such a tile is not left out"
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Most products the registry does not list, and most names in one's `dirs` or `reads`.

@@ -16,6 +16,7 @@ use crate::horizon::stage::{
 use crate::horizon::{compass_azimuth_deg, plane_azimuth, Method, Rect};
 use crate::layout::TileId;
 use crate::manifest;
+use crate::shadow::HorizonSource;
 use crate::tileset::Store;
 
 /// Where a queried horizon comes from.
@@ -212,11 +213,13 @@ fn profile(
     };
     // Stored maps of the same method, azimuth count and (fast) near field.
     let near = (method == Method::Fast).then_some(opts.near_px);
+    // A tile the run left out has none: computed on demand (`Raw` refuses, below).
     let stored = ts.products.horizon.as_ref().filter(|p| {
         p.azimuths == azimuths
             && p.method == method.name()
             && p.near_px == near
             && p.levels.contains(&level)
+            && p.pruned_tile(px.tile).is_none()
     });
     let stored = match from {
         HorizonFrom::Raw => {
@@ -475,6 +478,13 @@ pub fn shadow(
         let (ctx, rect) = crate::shadow::shadow_context(&store, px.tile, low, opts.max_margin_px)?;
         let margin = (rect.x0.max(rect.y0)) as u64;
         let tmin = terrain_range(ts).map_or(0.0, |t| t.0);
+        // A tile recorded fully lit is lit for every sun that clears its threshold.
+        if let Some(rec) = crate::shadow::recorded_lit(&store, px.tile, None)? {
+            if rec.lights(sun_el, sun.radius_deg) {
+                let src = format!("{} (tile recorded fully lit)", m.label());
+                return Ok(answer(rec.bound_deg, 1.0, &src, None, margin));
+            }
+        }
         let (x, y) = (rect.x0 + px.i, rect.y0 + px.j);
         if let ShadowMethod::Trace(m) = m {
             let tracer = crate::shadow::Tracer::new(&ctx, tmin);
@@ -492,19 +502,41 @@ pub fn shadow(
         let map = crate::shadow::smap::SMap::build(&ctx, sun.dir, one, tmin);
         return Ok(answer(f64::NAN, map.lit(&ctx, x, y), "smap", None, margin));
     }
-    // A tile stored as fully lit answers for suns at or above its threshold without a horizon.
-    if from == HorizonFrom::Fourier {
-        if let Some(f) = &ts.products.fourier {
-            if f.levels.contains(&px.level) {
-                let p = store.fourier(px.tile)?;
-                if p.fully_lit && f.min_sun_el_deg.is_some_and(|m| sun_el >= m) {
-                    return Ok(answer(
-                        p.max_horizon_deg as f64,
-                        1.0,
-                        "fourier (tile stored fully lit)",
-                        Some(Method::Fast),
-                        0,
-                    ));
+    // A tile stored as fully lit (a Fourier pyramid marked so, or left out of the raw maps)
+    // answers for suns whose lower limb clears its threshold without a horizon; read from the
+    // raw maps, a lower sun is refused (the Fourier pyramid refuses it when it is read; `Auto`
+    // computes the horizon on demand).
+    let (recorded_from, label) = match from {
+        HorizonFrom::Fourier => (
+            Some(HorizonSource::Fourier),
+            "fourier (tile stored fully lit)",
+        ),
+        HorizonFrom::Raw | HorizonFrom::Auto => (
+            Some(HorizonSource::Raw),
+            "stored (tile left out: fully lit)",
+        ),
+        HorizonFrom::Reference => (None, ""),
+    };
+    if let Some(src) = recorded_from {
+        let level_has = match src {
+            HorizonSource::Fourier => ts.products.fourier.as_ref().map(|f| &f.levels),
+            HorizonSource::Raw => ts.products.horizon.as_ref().map(|h| &h.levels),
+        }
+        .is_some_and(|l| l.contains(&px.level));
+        if level_has {
+            if let Some(rec) = crate::shadow::recorded_lit(&store, px.tile, Some(src))? {
+                let method = match src {
+                    HorizonSource::Fourier => {
+                        ts.products.fourier.as_ref().map(|f| &f.horizon_method)
+                    }
+                    HorizonSource::Raw => ts.products.horizon.as_ref().map(|h| &h.method),
+                }
+                .and_then(|m| m.parse().ok());
+                if rec.lights(sun_el, sun.radius_deg) {
+                    return Ok(answer(rec.bound_deg, 1.0, label, method, 0));
+                }
+                if from == HorizonFrom::Raw {
+                    return Err(rec.refuse(px.tile, sun_el - sun.radius_deg));
                 }
             }
         }

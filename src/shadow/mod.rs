@@ -272,8 +272,87 @@ pub fn check_subsolar(sun_lat: f64, sun_lon: f64) -> Result<()> {
     Ok(())
 }
 
+/// A tile the tileset records as fully lit for every sun high enough: left out of the horizon
+/// computation (`products.horizon.pruned`, docs/horizons.md) or stored as a Fourier pyramid
+/// marked fully lit (`products.fourier.min_sun_el_deg`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RecordedLit {
+    /// The tile is fully lit for a sun whose lower limb is at or above this (degrees).
+    pub lower_limb_deg: f64,
+    /// An upper bound of the tile's horizon elevation (degrees).
+    pub bound_deg: f64,
+    /// `pruned` (the raw maps' list) or `fourier` (a pyramid marked fully lit).
+    pub source: &'static str,
+}
+
+impl RecordedLit {
+    /// Whether a sun at elevation `el_deg` (its centre) of radius `radius_deg` is above it.
+    pub fn lights(&self, el_deg: f64, radius_deg: f64) -> bool {
+        el_deg - radius_deg >= self.lower_limb_deg
+    }
+
+    /// The refusal for a sun whose lower limb reaches `low_deg`, below the threshold: the tile
+    /// keeps no horizon for it.
+    pub fn refuse(&self, tile: TileId, low_deg: f64) -> Error {
+        Error::usage(format!(
+            "tile {tile} is recorded fully lit for suns whose lower limb is at or above {:.4}° \
+             (its horizon never rises above {:.4}°; {}), and keeps no horizon below that; the \
+             sun here reaches down to {low_deg:.4}°, which is not a sun the tileset was made \
+             for: use a ray-marching method, or recompute the horizons without leaving tiles out",
+            self.lower_limb_deg,
+            self.bound_deg,
+            match self.source {
+                "pruned" => "the horizon stage left it out",
+                _ => "its Fourier pyramid is marked fully lit",
+            }
+        ))
+    }
+}
+
+/// Whether `tile` is recorded fully lit ([`RecordedLit`]) where `from` reads its horizon: the
+/// raw maps' list of tiles left out, the Fourier pyramid's mark, or (None: a method that needs
+/// no horizon) either.
+pub fn recorded_lit(
+    store: &Store,
+    tile: TileId,
+    from: Option<HorizonSource>,
+) -> Result<Option<RecordedLit>> {
+    let p = &store.manifest().products;
+    if from != Some(HorizonSource::Fourier) {
+        if let Some((t, b)) = p.horizon.as_ref().and_then(|h| h.pruned_tile(tile)) {
+            return Ok(Some(RecordedLit {
+                lower_limb_deg: t,
+                bound_deg: b as f64,
+                source: "pruned",
+            }));
+        }
+    }
+    if from != Some(HorizonSource::Raw) {
+        if let Some(f) = p
+            .fourier
+            .as_ref()
+            .filter(|f| f.levels.contains(&tile.level))
+        {
+            if let Some(m) = f.min_sun_el_deg {
+                let pyr = store.fourier(tile)?;
+                if pyr.fully_lit {
+                    // Marked where the horizon is at most min_sun_el − the recorded radius.
+                    return Ok(Some(RecordedLit {
+                        lower_limb_deg: m - f.sun_radius_deg.unwrap_or(0.0),
+                        bound_deg: pyr.max_horizon_deg as f64,
+                        source: "fourier",
+                    }));
+                }
+            }
+        }
+    }
+    Ok(None)
+}
+
 /// The per-pixel lit fraction of one method over one tile.
 enum Source<'a> {
+    /// Fully lit for this sun ([`RecordedLit`]).
+    Lit,
     Raw(Vec<f32>, usize),
     Fourier(crate::fourier::Pyramid),
     Trace(Tracer<'a>, Rect, &'a trace::Method),
@@ -344,7 +423,41 @@ pub fn tile_shadows(
     };
     let ctx_rect;
     let mut smap_stats = None;
+    let heights = store.height(tile)?.expect("covered");
+    let halo = lay.halo as usize;
+    // A tile recorded fully lit: lit wherever the sun's lower limb clears the threshold; a
+    // horizon lookup has nothing to answer below it.
+    let recorded = recorded_lit(
+        &store,
+        tile,
+        match method {
+            ShadowMethod::Horizon(src, _) => Some(*src),
+            _ => None,
+        },
+    )?;
+    let all_lit = match recorded {
+        Some(rec) => {
+            let mut low = f64::INFINITY;
+            for j in 0..n {
+                for i in 0..n {
+                    if heights.height[(j + halo) * heights.size + i + halo].is_nan() {
+                        continue;
+                    }
+                    let (s, t) = lay.pixel_st(tile, i as i64, j as i64);
+                    let (u, v) = (lay.projection.s_to_u(s), lay.projection.s_to_u(t));
+                    low = low.min(Frame::at(tile.face, u, v).elevation_deg(s_dir) - radius_deg);
+                }
+            }
+            let lit = low >= rec.lower_limb_deg;
+            if !lit && matches!(method, ShadowMethod::Horizon(..)) {
+                return Err(rec.refuse(tile, low));
+            }
+            lit
+        }
+        None => false,
+    };
     let source = match method {
+        _ if all_lit => Source::Lit,
         ShadowMethod::Horizon(HorizonSource::Raw, _) => {
             let e = store.horizon(tile)?;
             let a = e.len() / (n * n);
@@ -353,9 +466,10 @@ pub fn tile_shadows(
         ShadowMethod::Horizon(HorizonSource::Fourier, _) => {
             let p = store.fourier(tile)?;
             if p.fully_lit {
+                // Marked without a threshold in the manifest (refused when it is read).
                 return Err(Error::usage(format!(
                     "tile {tile} is stored as fully lit (no horizon kept): rebuild the pyramids \
-                     without --min-sun-el to render it, or use a ray-marching method"
+                     without a minimum sun elevation to render it, or use a ray-marching method"
                 )));
             }
             Source::Fourier(p)
@@ -378,8 +492,6 @@ pub fn tile_shadows(
         ShadowMethod::Horizon(_, m) => *m,
         ShadowMethod::Trace(_) | ShadowMethod::SMap => Model::Exact,
     };
-    let heights = store.height(tile)?.expect("covered");
-    let halo = lay.halo as usize;
     // Position of a stored pixel (halo included) in metres, body frame.
     let size = heights.size as i64;
     let pos = |i: i64, j: i64| -> Option<Vec3> {
@@ -421,6 +533,8 @@ pub fn tile_shadows(
                 el_range[0] = el_range[0].min(el);
                 el_range[1] = el_range[1].max(el);
                 let f = match source {
+                    _ if recorded.is_some_and(|r| r.lights(el, radius_deg)) => 1.0,
+                    Source::Lit => 1.0,
                     Source::Fourier(pyr) => {
                         pyr.coefficients_at(i as f64 + 0.5, j as f64 + 0.5, &mut coef);
                         let c = &coef;

@@ -454,6 +454,13 @@ impl Store {
         let h = self.ts.products.horizon.as_ref().ok_or_else(|| {
             self.missing("tileset has no horizon maps: compute them with the horizon stage")
         })?;
+        if let Some((t, b)) = h.pruned_tile(id) {
+            return Err(Error::usage(format!(
+                "tile {id} has no horizon maps: the run left it out, its horizon never rising \
+                 above {b}° (below the {t}° it was given: a scene's lowest sun less the sun's \
+                 radius); it is fully lit for suns whose lower limb is at or above {t}°"
+            )));
+        }
         let p = tile_path(&self.dir, &h.path, id);
         let n = self.ts.layout.tile_size as usize;
         let bytes = self.read_product_file(

@@ -28,7 +28,8 @@ pub struct Finding {
     /// The product whose index lists it (or whose coverage expects it).
     pub product: String,
     /// What kind of problem: `missing`, `not-a-file`, `outside-link`, `size`, `hash`,
-    /// `identity`, `label`, `unreadable`, `unlisted`, `no-index`.
+    /// `identity`, `label`, `unreadable`, `unlisted`, `no-index`, `pruned` (the index lists
+    /// horizon maps of a tile the manifest says the run left out).
     pub problem: String,
     /// What was found and what was expected, in words.
     pub detail: String,
@@ -331,7 +332,11 @@ fn expected_files(ts: &Tileset, product: Product) -> Vec<String> {
         }
         Product::Horizon => {
             if let Some(h) = &p.horizon {
-                for &id in tiles.iter().filter(|id| h.levels.contains(&id.level)) {
+                // Tiles the run left out have no file.
+                for &id in tiles
+                    .iter()
+                    .filter(|id| h.levels.contains(&id.level) && h.pruned_tile(**id).is_none())
+                {
                     out.push(rel(&h.path, id));
                 }
             }
@@ -407,6 +412,33 @@ pub fn verify(dir: &Path) -> Result<VerifyReport> {
             sum.identities += compared as u64;
             sum.problems += f.len() as u64;
             findings.extend(f);
+        }
+        // Horizon maps of tiles the manifest lists as left out: the list or the index is wrong.
+        if let (Product::Horizon, Some(h)) = (product, &ts.products.horizon) {
+            if let Some(pr) = &h.pruned {
+                for k in pr.tiles.keys() {
+                    let Some(id) = format::horizon::parse_pruned_key(k) else {
+                        continue;
+                    };
+                    let rel = format::tile_path(Path::new(""), &h.path, id)
+                        .to_string_lossy()
+                        .replace('\\', "/");
+                    if index.files.contains_key(&rel) {
+                        sum.problems += 1;
+                        findings.push(Finding {
+                            path: rel,
+                            product: product.name().into(),
+                            problem: "pruned".into(),
+                            detail: format!(
+                                "the manifest's `products.horizon.pruned` says the run left tile \
+                                 {k} out (no maps), but {} lists its maps: the list or the \
+                                 index was edited; rerun the horizon stage",
+                                index.path.display()
+                            ),
+                        });
+                    }
+                }
+            }
         }
         // Tiles the coverage lists that the index does not.
         for rel in expected_files(ts, product) {

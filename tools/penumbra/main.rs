@@ -74,6 +74,11 @@ enum Command {
         /// With --fourier: also write the raw maps.
         #[arg(long)]
         keep_raw: bool,
+        /// Leave out the tiles whose horizon can never rise to DEG degrees (a scene's lowest sun
+        /// less the sun's radius), by a conservative bound from the mipmaps: they are recorded
+        /// fully lit (no maps; fully-lit pyramids with --fourier) and not computed.
+        #[arg(long, value_name = "DEG", allow_hyphen_values = true)]
+        lit_above: Option<f64>,
         #[command(flatten)]
         fourier_flags: FourierFlags,
         #[command(flatten)]
@@ -805,6 +810,7 @@ fn run(cli: Cli) -> Result<()> {
             max_output_gib,
             fourier,
             keep_raw,
+            lit_above,
             fourier_flags,
             shard,
             json,
@@ -819,6 +825,7 @@ fn run(cli: Cli) -> Result<()> {
                 max_output_gib,
                 near_px: flags.near_px()?,
                 fine_margin_px: flags.fine_margin_px()?,
+                lit_above_deg: lit_above,
             };
             let fourier = fourier
                 .then(|| fourier_flags.options(None, penumbra::runner::DEFAULT_MAX_OUTPUT_GIB));
