@@ -37,11 +37,13 @@ pub enum Stage {
 }
 
 /// Where the terrain comes from.
-pub enum Input {
+pub enum Input<'a> {
     /// The embedded synthetic south-pole scene on the Moon.
     Embedded(SyntheticSpec),
     /// A DEM file and the body it belongs to as the caller chose it.
     Dem { path: PathBuf, body: BodyChoice },
+    /// A scene's planned tiles, cut from its sources' mosaic.
+    Scene(&'a crate::scene::plan::Plan),
 }
 
 /// What to run.
@@ -94,7 +96,12 @@ pub struct BakeReport {
 /// had, the error is [`Error::AfterCommit`], naming the failed stage, the committed ones and
 /// what became of the folder: removed when this bake created it (unless
 /// [`Plan::keep_partial`]), else kept, valid, with the committed stages' products.
-pub fn bake(input: &Input, out: &Path, plan: &Plan, progress: &dyn Progress) -> Result<BakeReport> {
+pub fn bake(
+    input: &Input<'_>,
+    out: &Path,
+    plan: &Plan,
+    progress: &dyn Progress,
+) -> Result<BakeReport> {
     // Options alone are checked before any file is read or folder made.
     if plan.stages.contains(&Stage::Tile) {
         plan.tile.validate()?;
@@ -201,7 +208,7 @@ fn after_commit(
 /// The tiling stage as a node of the graph: it makes the tileset from a DEM or the embedded
 /// scene.
 struct TileNode<'a> {
-    input: &'a Input,
+    input: &'a Input<'a>,
     opts: &'a TileOptions,
 }
 
@@ -236,6 +243,26 @@ impl Node for TileNode<'_> {
                 let dem = dem::open(path, self.opts.max_fill_px)?;
                 let body = body_for(&dem, body)?;
                 tiling::tile_dem(&dem, &body, out, self.opts, None, progress)?
+            }
+            Input::Scene(plan) => {
+                let sources: Vec<tiling::MosaicSource> = plan
+                    .sources
+                    .iter()
+                    .map(|s| tiling::MosaicSource {
+                        dem: &s.dem,
+                        feather_px: s.feather_px,
+                    })
+                    .collect();
+                let embedded = plan.sources.iter().find_map(|s| s.embedded.clone());
+                tiling::tile_sources(
+                    &sources,
+                    &plan.body,
+                    out,
+                    self.opts,
+                    embedded.as_ref(),
+                    plan.wanted(),
+                    progress,
+                )?
             }
         };
         Ok(Ran::Tile(r))

@@ -66,3 +66,7 @@ mod integrity;
 // (analytic terrains, real DEMs), a pruned run renders the full run's lit fractions by every
 // CPU shadow method, damaged lists of pruned tiles are refused.
 mod prune;
+
+// Scene files, `plan` and `bake SCENE`: bad scenes refused by line and key with nothing
+// written; the plan's counts against what the bake writes.
+mod scenes;

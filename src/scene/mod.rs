@@ -5,7 +5,8 @@
 //! docs/scenes.md documents the format with examples; [`EMBEDDED`] is the scene `penumbra bake`
 //! bakes when given none.
 
-// pub mod plan;
+pub mod bake;
+pub mod plan;
 
 use std::path::{Path, PathBuf};
 
@@ -809,8 +810,11 @@ fn check(raw: File, here: &Here) -> Result<Scene> {
             horizon.prune = *p.get_ref();
         }
     }
+    // The default K, or all the azimuths give when they are fewer.
     let mut fourier = FourierSpec {
-        coefficients: crate::fourier::FourierOptions::default().coefficients,
+        coefficients: crate::fourier::FourierOptions::default()
+            .coefficients
+            .min(horizon.azimuths / 2 + 1),
         keep_raw: false,
     };
     if let Some(f) = &raw.fourier {
@@ -1007,7 +1011,7 @@ fn check_region(here: &Here, i: usize, r: &Spanned<RegionTable>) -> Result<Regio
             None => (1920, 1080),
         };
         let fov_deg = match &t.fov_deg {
-            Some(f) => finite(here, f, &key("fov_deg"), 1.0, 170.0)?,
+            Some(f) => finite(here, f, &key("fov_deg"), 1.0, 120.0)?,
             None => 60.0,
         };
         let texel_px = match &t.texel_px {

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Result;
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand};
 
 use penumbra::bake::{self, BodyChoice, Input, Plan, Stage};
 use penumbra::body::Body;
@@ -44,10 +44,25 @@ struct Cli {
 enum Command {
     /// Cut a DEM into cube-face tiles.
     Tile(TileArgs),
-    /// Run every stage a scene needs (the embedded default scene when no --dem is given):
-    /// tiling, then mipmaps, then horizons compressed into Fourier pyramids for
-    /// --horizon-levels (the embedded scene: level 6 unless told).
+    /// Make exactly what a scene file plans (docs/scenes.md): its regions' tiles from its
+    /// sources' mosaic, and the products its renderer's methods read. With no scene, the
+    /// embedded one; with --dem, one DEM whole: tiling, then mipmaps, then horizons compressed
+    /// into Fourier pyramids for --horizon-levels.
     Bake(BakeArgs),
+    /// Show what baking a scene would make and leave out, per product and level, with bytes and
+    /// estimated CPU time, before anything is written (docs/scenes.md).
+    Plan {
+        /// Scene file (TOML); default: the embedded scene `penumbra bake` bakes.
+        scene: Option<PathBuf>,
+        /// A tileset holding this scene's heights and mipmaps (a bake of it, or one stopped
+        /// after the mip stage): count the horizons the sun rule leaves out exactly, as the
+        /// horizon stage will decide (without it the stage decides after the mipmaps).
+        #[arg(long)]
+        tileset: Option<PathBuf>,
+        /// Print the plan as JSON.
+        #[arg(long)]
+        json: bool,
+    },
     /// Compute the raw horizon maps of a tileset: per pixel the horizon elevation in A azimuths,
     /// seeing across tiles and faces as far as any terrain could rise above it.
     Horizon {
@@ -626,7 +641,10 @@ struct TileArgs {
 
 #[derive(Args)]
 struct BakeArgs {
-    /// A DEM to bake instead of the embedded scene.
+    /// Scene file (TOML, docs/scenes.md) to bake; default: the embedded scene.
+    #[arg(conflicts_with_all = ["dem", "scene_size", "horizon_levels", "no_horizons", "no_fourier", "keep_raw"])]
+    scene: Option<PathBuf>,
+    /// A DEM to bake whole instead of a scene.
     #[arg(long)]
     dem: Option<PathBuf>,
     #[command(flatten)]
@@ -721,7 +739,7 @@ fn body_arg(b: &BodyArgs) -> Result<BodyChoice> {
     })
 }
 
-fn run(cli: Cli) -> Result<()> {
+fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
     penumbra_cli::set_threads(cli.threads)?;
     let progress = output::Bars::new(cli.quiet);
     match cli.command {
@@ -743,6 +761,33 @@ fn run(cli: Cli) -> Result<()> {
             let t0 = std::time::Instant::now();
             let report = bake::bake(&input, &a.out, &plan, &progress)?;
             output::print_bake(&report, t0.elapsed().as_secs_f64(), a.flags.json)?;
+        }
+        Command::Bake(a) if a.scene.is_some() || !legacy_bake => {
+            let plan = match &a.scene {
+                Some(p) => penumbra::scene::plan::plan_file(p)?,
+                None => penumbra::scene::plan::plan(&penumbra::scene::embedded())?,
+            };
+            let how = penumbra::scene::bake::BakeOptions {
+                keep_partial: a.keep_partial,
+            };
+            let t0 = std::time::Instant::now();
+            let report = penumbra::scene::bake::bake_scene(&plan, &a.out, &how, &progress)?;
+            output::print_bake(&report, t0.elapsed().as_secs_f64(), a.flags.json)?;
+        }
+        Command::Plan {
+            scene,
+            tileset,
+            json,
+        } => {
+            let t0 = std::time::Instant::now();
+            let mut plan = match &scene {
+                Some(p) => penumbra::scene::plan::plan_file(p)?,
+                None => penumbra::scene::plan::plan(&penumbra::scene::embedded())?,
+            };
+            if let Some(dir) = &tileset {
+                penumbra::scene::plan::decide_pruning(&mut plan, dir)?;
+            }
+            output::print_plan(&plan, t0.elapsed().as_secs_f64(), json)?;
         }
         Command::Bake(a) => {
             let mut plan = Plan {
@@ -1045,5 +1090,24 @@ fn run(cli: Cli) -> Result<()> {
 }
 
 fn main() -> ExitCode {
-    penumbra_cli::exit_code("penumbra", run(Cli::parse()))
+    let matches = Cli::command().get_matches();
+    let legacy = legacy_bake(&matches);
+    let result = Cli::from_arg_matches(&matches)
+        .map_err(anyhow::Error::from)
+        .and_then(|cli| run(cli, legacy));
+    penumbra_cli::exit_code("penumbra", result)
+}
+
+/// Whether `bake` was given flags of the one-DEM (or sized embedded) bake rather than a scene:
+/// then it runs as before scenes existed; otherwise it bakes the scene (the embedded one when
+/// none is named), which makes the same files.
+fn legacy_bake(m: &clap::ArgMatches) -> bool {
+    const SCENE_FLAGS: &[&str] = &["scene", "out", "keep_partial", "json", "quiet", "threads"];
+    let Some(("bake", b)) = m.subcommand() else {
+        return false;
+    };
+    b.ids().any(|id| {
+        !SCENE_FLAGS.contains(&id.as_str())
+            && b.value_source(id.as_str()) == Some(clap::parser::ValueSource::CommandLine)
+    })
 }

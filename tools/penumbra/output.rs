@@ -678,3 +678,113 @@ pub fn print_height(a: &HeightAnswer, json: bool) -> Result<()> {
     )?;
     Ok(())
 }
+
+/// Tiles per level as `L:count` pairs.
+fn per_level(m: &std::collections::BTreeMap<u8, u64>) -> String {
+    m.iter()
+        .map(|(l, n)| format!("{l}:{n}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+fn mb(bytes: u64) -> String {
+    format!("{:.1}", bytes as f64 / 1.0e6)
+}
+
+/// `penumbra plan`: the stage graph, per product and level the tiles to make, what is left out
+/// by which rule, bytes and estimated CPU time.
+pub fn print_plan(plan: &penumbra::scene::plan::Plan, wall_s: f64, json: bool) -> Result<()> {
+    let r = plan.report();
+    if json {
+        let mut v = serde_json::to_value(&r)?;
+        v["plan_wall_s"] = serde_json::json!(wall_s);
+        return print_json(&v);
+    }
+    let mut out = std::io::stdout().lock();
+    let lay = r.layout;
+    writeln!(
+        out,
+        "scene \"{}\" ({}) on {} (R = {} m)",
+        r.scene, r.file, r.body.name, r.body.radius_m
+    )?;
+    writeln!(
+        out,
+        "layout: {} levels of {}² tiles, halo {}, {}",
+        lay.levels,
+        lay.tile_size,
+        lay.halo,
+        lay.projection.name()
+    )?;
+    writeln!(out, "sources, highest priority first:")?;
+    for s in &r.sources {
+        writeln!(
+            out,
+            "  {}: {:.2} m/px, resolves level {} (oversampled up to {}), feather {} px",
+            s.label, s.pixel_m, s.native_level, s.max_level, s.feather_px
+        )?;
+    }
+    writeln!(out, "stages: {}", r.stages.join(" → "))?;
+    if !r.horizon_levels.is_empty() && r.stages.len() > 2 {
+        writeln!(out, "horizon levels: {:?}", r.horizon_levels)?;
+    }
+    if let (Some(lo), Some(rad)) = (r.sun_lowest_deg, r.sun_radius_deg) {
+        writeln!(
+            out,
+            "lowest sun {lo:.2}°, radius {rad:.3}°: horizons below {:.2}° cannot occlude it",
+            lo - rad
+        )?;
+    }
+    writeln!(
+        out,
+        "\n{:<8} {:>5} {:>7} {:>10} {:>12} {:>10}  tiles per level; why",
+        "product", "made", "tiles", "raw MB", "disk MB est", "CPU s est"
+    )?;
+    for p in r.products {
+        writeln!(
+            out,
+            "{:<8} {:>5} {:>7} {:>10} {:>12} {:>10.1}  {}; {}",
+            p.product,
+            if p.made { "yes" } else { "no" },
+            p.tiles.values().sum::<u64>(),
+            mb(p.raw_bytes),
+            mb(p.disk_bytes_est),
+            p.cpu_s_est,
+            per_level(&p.tiles),
+            p.why.join(", ")
+        )?;
+    }
+    if !r.left_out.is_empty() {
+        writeln!(
+            out,
+            "\nleft out:\n{:<20} {:>7} {:>10} {:>10}  tiles per level; what",
+            "rule", "tiles", "raw MB", "CPU s est"
+        )?;
+        for l in r.left_out {
+            writeln!(
+                out,
+                "{:<20} {:>7} {:>10} {:>10.1}  {}; {}",
+                l.rule.name(),
+                l.tiles.values().sum::<u64>(),
+                mb(l.raw_bytes),
+                l.cpu_s_est,
+                per_level(&l.tiles),
+                l.what
+            )?;
+        }
+    }
+    writeln!(
+        out,
+        "\nmade: {} tiles, {} MB raw (≈ {} MB on disk), ≈ {:.1} CPU s; left out: {} tiles, {} MB \
+         raw, ≈ {:.1} CPU s",
+        r.made.tiles,
+        mb(r.made.raw_bytes),
+        mb(r.made.disk_bytes_est),
+        r.made.cpu_s_est,
+        r.left_out_total.tiles,
+        mb(r.left_out_total.raw_bytes),
+        r.left_out_total.cpu_s_est
+    )?;
+    writeln!(out, "rates: {}", r.rates.source)?;
+    writeln!(out, "planned in {wall_s:.2} s")?;
+    Ok(())
+}

@@ -126,7 +126,7 @@ fn bake_small(input: Input, out: &Path, tile_size: u32, levels: Option<u8>, four
 /// more (the levels the source's resolution asks for go finer, and take longer to bake).
 const EMBEDDED_LEVELS: u8 = 10;
 
-fn embedded() -> Input {
+fn embedded() -> Input<'static> {
     Input::Embedded(SyntheticSpec {
         size: 1024,
         ..SyntheticSpec::default()

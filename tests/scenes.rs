@@ -1,0 +1,251 @@
+//! Scenes (docs/scenes.md): bad scene files exit 2 naming the line and the key and write
+//! nothing; `plan` counts what `bake SCENE` writes; the embedded scene's plan.
+
+use std::path::{Path, PathBuf};
+
+use crate::util::{penumbra_bin, shared_data};
+
+/// A small embedded-terrain scene (512² px at 20 m, 128-px tiles) with `extra` appended.
+fn small_scene(extra: &str) -> String {
+    format!(
+        "[scene]\nname = \"small\"\nbody = \"moon\"\n\n[layout]\ntile_size = 128\n\n\
+         [[source]]\nembedded = \"south-pole\"\nsize = 512\n{extra}"
+    )
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// `penumbra bake SCENE --out OUT` must exit 2 with a message holding every one of `want`, and
+/// leave OUT absent.
+fn refused(scene: &Path, want: &[&str]) {
+    let out = scene.with_extension("out");
+    let o = penumbra_bin()
+        .args(["bake"])
+        .arg(scene)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{}: {err}", scene.display());
+    for w in want {
+        assert!(
+            err.contains(w),
+            "{}: expected {w:?} in: {err}",
+            scene.display()
+        );
+    }
+    assert!(
+        !out.exists(),
+        "{}: bake wrote {}",
+        scene.display(),
+        out.display()
+    );
+    // `plan` refuses it the same way.
+    let o = penumbra_bin().arg("plan").arg(scene).output().unwrap();
+    assert_eq!(o.status.code(), Some(2), "plan {}", scene.display());
+}
+
+const REGION: &str = "\n[[region]]\nname = \"all\"\nbody = true\n";
+const RENDERER: &str = "\n[renderer]\nmethods = [\"dp\"]\n";
+
+#[test]
+fn bad_scene_files_exit_2_naming_line_and_key() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let cases: Vec<(&str, String, Vec<&str>)> = vec![
+        (
+            "unknown-key",
+            small_scene(&format!("{REGION}levl = 3\n{RENDERER}")),
+            vec!["line 15", "levl", "unknown field"],
+        ),
+        (
+            "wrong-type",
+            small_scene(&format!("{REGION}level = \"fine\"\n{RENDERER}")),
+            vec!["line 15", "region[0].level"],
+        ),
+        (
+            "missing-source",
+            format!(
+                "[scene]\nname = \"x\"\n[[source]]\npath = \"nowhere/dem.tif\"\n{REGION}{RENDERER}"
+            ),
+            vec!["line 4", "source[0].path", "nowhere/dem.tif"],
+        ),
+        (
+            "sun-above-90",
+            small_scene(&format!(
+                "{REGION}{RENDERER}\n[sun]\nelevation_deg = [10.0, 95.0]\n"
+            )),
+            vec!["sun.elevation_deg", "95"],
+        ),
+        (
+            "region-outside",
+            small_scene(&format!(
+                "\n[[region]]\nname = \"equator\"\ncap = {{ lat_deg = 0.0, lon_deg = 0.0, \
+                 radius_m = 5000.0 }}\n{RENDERER}"
+            )),
+            vec!["line 12", "region[0]", "outside every source"],
+        ),
+        (
+            "level-past-resolution",
+            small_scene(&format!(
+                "\n[[region]]\nname = \"all\"\nbody = true\nlevel = 16\n{RENDERER}"
+            )),
+            vec!["region[0].level", "finer than any source"],
+        ),
+        (
+            "no-method",
+            small_scene(REGION),
+            vec!["renderer.methods", "names no shadow method"],
+        ),
+        (
+            "two-shapes",
+            small_scene(&format!(
+                "{REGION}cap = {{ lat_deg = -90.0, lon_deg = 0.0, radius_m = 5.0 }}\n{RENDERER}"
+            )),
+            vec!["region[0]", "exactly one shape"],
+        ),
+        ("not-toml", "[scene\nname = ".into(), vec!["line 1"]),
+    ];
+    for (name, text, want) in &cases {
+        let p = write(d, &format!("{name}.toml"), text);
+        refused(&p, want);
+    }
+    // An empty camera path (the header alone).
+    write(d, "empty.csv", "lat_deg,lon_deg,height_m\n");
+    let p = write(
+        d,
+        "empty-path.toml",
+        &small_scene(&format!(
+            "\n[[region]]\nname = \"descent\"\npath = \"empty.csv\"\nlevel = 3\n{RENDERER}"
+        )),
+    );
+    refused(&p, &["empty.csv", "descent"]);
+    // A scene file that is not a file, or too big.
+    refused(d, &["not a regular file"]);
+    let big = write(d, "big.toml", &"#".repeat(2 << 20));
+    refused(&big, &["bytes"]);
+}
+
+#[test]
+fn sources_of_different_bodies_are_refused() {
+    let Some(data) = shared_data() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let text = format!(
+        "[scene]\nname = \"mixed\"\n\n[[source]]\npath = \"{}\"\n\n[[source]]\npath = \"{}\"\n\
+         {REGION}level = 0\n{RENDERER}",
+        data.join("lola_ldem4/LDEM_4.LBL").display(),
+        data.join("mola_megt90n000cb/megt90n000cb.lbl").display()
+    );
+    let p = write(tmp.path(), "mixed.toml", &text);
+    refused(&p, &["source[1]", "mars", "moon"]);
+}
+
+#[test]
+fn embedded_scene_plan() {
+    let o = penumbra_bin().args(["plan", "--json"]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(
+        v["stages"],
+        serde_json::json!(["tile", "mip", "horizon → fourier"])
+    );
+    assert_eq!(v["horizon_levels"], serde_json::json!([6]));
+    assert_eq!(v["layout"]["levels"], 10);
+    let products: Vec<&str> = v["products"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["made"] == true)
+        .map(|p| p["product"].as_str().unwrap())
+        .collect();
+    assert_eq!(products, ["height", "mip", "fourier"]);
+}
+
+/// Every tile file a bake wrote, per product folder and level.
+fn written(out: &Path, product: &str) -> std::collections::BTreeMap<u8, u64> {
+    let mut m = std::collections::BTreeMap::new();
+    let root = out.join(product);
+    if !root.is_dir() {
+        return m;
+    }
+    for e in walk(&root) {
+        let rel = e.strip_prefix(&root).unwrap();
+        let level: u8 = rel
+            .components()
+            .next()
+            .and_then(|c| c.as_os_str().to_str())
+            .and_then(|s| {
+                s.trim_start_matches(|c: char| !c.is_ascii_digit())
+                    .parse()
+                    .ok()
+            })
+            .unwrap_or(255);
+        *m.entry(level).or_insert(0) += 1;
+    }
+    m
+}
+
+fn walk(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            out.extend(walk(&p));
+        } else {
+            out.push(p);
+        }
+    }
+    out
+}
+
+#[test]
+fn plan_counts_what_bake_writes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = write(
+        tmp.path(),
+        "s.toml",
+        &small_scene(
+            "\n[[region]]\nname = \"all\"\nbody = true\n\n[renderer]\nmethods = [\"dp\", \
+             \"fourier\"]\n\n[horizon]\nlevels = [3]\nazimuths = 16\n",
+        ),
+    );
+    let o = penumbra_bin()
+        .args(["plan", "--json"])
+        .arg(&scene)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let plan: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let out = tmp.path().join("t");
+    let o = penumbra_bin()
+        .arg("bake")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for p in plan["products"].as_array().unwrap() {
+        let name = p["product"].as_str().unwrap();
+        let planned: std::collections::BTreeMap<u8, u64> =
+            serde_json::from_value(p["tiles"].clone()).unwrap();
+        let folder = match name {
+            "mip" => "maxmip",
+            other => other,
+        };
+        assert_eq!(
+            written(&out, folder),
+            if p["made"] == true {
+                planned
+            } else {
+                Default::default()
+            },
+            "{name}: planned per level vs files written"
+        );
+    }
+}
