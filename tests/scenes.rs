@@ -249,3 +249,108 @@ fn plan_counts_what_bake_writes() {
         );
     }
 }
+
+/// The equatorial scene of docs/scenes/ (LDEM_4, a 60° box, suns at 30–60°) baked with the sun
+/// rule and without it: every pixel of every horizon tile (the pruned ones and the others)
+/// lit the same by every method the scene lists, at suns within the scene's range.
+#[test]
+fn pruned_scene_renders_the_full_scenes_lit_fractions() {
+    use penumbra::fourier::sun::Model;
+    use penumbra::shadow::trace::Method as T;
+    use penumbra::shadow::{HorizonSource, Runs, ShadowMethod};
+    let Some(data) = shared_data() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let text = std::fs::read_to_string(repo.join("docs/scenes/equatorial.toml"))
+        .unwrap()
+        .replace(
+            "../../../shared/data",
+            data.to_str().expect("a UTF-8 path to the shared data"),
+        );
+    let pruned_scene = write(tmp.path(), "pruned.toml", &text);
+    let full_scene = write(
+        tmp.path(),
+        "full.toml",
+        &format!("{text}\n[horizon]\nprune = false\n"),
+    );
+    let bake = |scene: &Path, out: &Path| {
+        let o = penumbra_bin()
+            .arg("bake")
+            .arg(scene)
+            .arg("--out")
+            .arg(out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    let (pruned, full) = (tmp.path().join("pruned"), tmp.path().join("full"));
+    bake(&pruned_scene, &pruned);
+    bake(&full_scene, &full);
+    let ts = penumbra::manifest::Tileset::load(&pruned).unwrap();
+    // The pyramids were streamed: the left-out tiles are the fully lit ones.
+    let left_out = ts.products.fourier.as_ref().unwrap().tiles_fully_lit;
+    assert!(
+        left_out > 0,
+        "the 30° sun leaves some of LDEM_4's horizons out"
+    );
+    let methods = [
+        ShadowMethod::Trace(T::Dp {
+            runs: Runs::Auto,
+            dda: false,
+        }),
+        ShadowMethod::Trace(T::Extrema),
+        ShadowMethod::Horizon(HorizonSource::Fourier, Model::Exact),
+    ];
+    let horizon_levels: Vec<u8> = ts.tile_set().iter().map(|t| t.level).collect();
+    let mut compared = 0usize;
+    for t in ts.tile_set() {
+        if !horizon_levels.contains(&t.level) || t.level < 2 {
+            continue;
+        }
+        // A sun east of the tile whose elevation over the tile's outline (where it is
+        // extreme: the subsolar point is off the tile) stays within 30.5–59.5°.
+        let lay = ts.layout;
+        let n = lay.tile_size as i64;
+        let (lat, lon) = penumbra::cube::dir_to_latlon(lay.pixel_dir(t, n / 2, n / 2));
+        let (lat, lon) = (lat.to_degrees(), lon.to_degrees());
+        let phi = lat.to_radians();
+        let outline: Vec<_> = (0..n)
+            .flat_map(|k| [(k, 0), (k, n - 1), (0, k), (n - 1, k)])
+            .map(|(i, j)| lay.pixel_dir(t, i, j))
+            .collect();
+        let sun_lon = (300..=520)
+            .map(|d| {
+                let c = ((d as f64 / 10.0).to_radians().cos() - phi.sin().powi(2))
+                    / phi.cos().powi(2);
+                lon + c.clamp(-1.0, 1.0).acos().to_degrees()
+            })
+            .find(|&sl| {
+                let s = penumbra::cube::latlon_to_dir(lat.to_radians(), sl.to_radians());
+                outline.iter().all(|d| {
+                    let el = 90.0 - penumbra::cube::angle_between(*d, s).to_degrees();
+                    (30.5..=59.5).contains(&el)
+                })
+            })
+            .unwrap_or_else(|| panic!("tile {t}: no sun keeps it within 30–60°"));
+        for m in &methods {
+            let a = penumbra::shadow::tile_shadows(&pruned, t, lat, sun_lon, None, m).unwrap();
+            assert!(
+                a.sun_elevation_deg[0] >= 30.0 && a.sun_elevation_deg[1] <= 60.0,
+                "tile {t}: the sun's elevations {:?} leave the scene's 30–60°",
+                a.sun_elevation_deg
+            );
+            let b = penumbra::shadow::tile_shadows(&full, t, lat, sun_lon, None, m).unwrap();
+            let same = a
+                .lit
+                .iter()
+                .zip(&b.lit)
+                .all(|(x, y)| x.to_bits() == y.to_bits() || (x - y).abs() <= 1e-6);
+            assert!(same, "tile {t}, {}: pruned and full sets differ", m.label());
+            compared += a.lit.len();
+        }
+    }
+    assert!(compared > 0);
+    eprintln!(
+        "{left_out} of the scene's horizon tiles left out; {compared} lit fractions compared"
+    );
+}

@@ -12,7 +12,7 @@ use std::path::Path;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::{Finest, RegionShape, RegionSpec, Scene, SourceKind, SunSpec};
+use super::{Finest, RegionShape, RegionSpec, Scene, SourceKind, SunSpec, PRODUCTS};
 use crate::body::Body;
 use crate::cube;
 use crate::dem::{self, mask, Dem};
@@ -89,23 +89,28 @@ pub struct Rates {
 impl Default for Rates {
     fn default() -> Self {
         Rates {
-            tile_ns_per_px: 160.0,
-            mip_ns_per_px: 40.0,
+            tile_ns_per_px: 300.0,
+            mip_ns_per_px: 100.0,
             horizon_ns_per_px_az: 450.0,
-            fourier_ns_per_px_az: 12.0,
-            source: "docs/scenes.md, \"Estimates\": core-ns per pixel measured on the embedded \
-                     scene's bake (2 cores, 2026-12-05); horizons: the fast method's 393–479 \
-                     core-ns per pixel·azimuth on real DEMs (docs/benchmarks.md)",
+            fourier_ns_per_px_az: 6.0,
+            source: "core-ns per pixel: horizons the fast method's 393–479 per pixel·azimuth on \
+                     real DEMs (docs/benchmarks.md); tiling and mipmaps from this machine's \
+                     bakes, 2026-12-05. Horizon cost varies with the terrain: measured 135 \
+                     (synthetic scene) to 1042 (Shoemaker descent) (docs/scenes.md, \
+                     \"Estimates\")",
         }
     }
 }
 
-/// Estimated bytes on disk per stored pixel of each product (compressed), from the embedded
-/// scene's and LDEM_4's bakes; the exact uncompressed sizes are reported beside them.
+/// Bytes on disk per byte before compression of the height and mip products, the larger of
+/// those measured on the embedded scene's bake (smooth synthetic terrain: height 0.37, mip 0.25)
+/// and the Shoemaker descent scene's (LDEM_4 tiles oversampled 2–4×, whose f32 mantissas are
+/// noise to deflate: height 0.83, mip 0.79), 2026-12-05: an estimate from the safe side. The
+/// Fourier pyramids are stored as they are (their size is exact).
 const DISK_RATIO: [(Product, f64); 4] = [
-    (Product::Height, 0.55),
-    (Product::Mip, 0.45),
-    (Product::Horizon, 0.55),
+    (Product::Height, 0.83),
+    (Product::Mip, 0.79),
+    (Product::Horizon, 0.9),
     (Product::Fourier, 1.0),
 ];
 
@@ -133,6 +138,12 @@ pub struct LeftOut {
     pub tiles: BTreeMap<u8, u64>,
     pub raw_bytes: u64,
     pub cpu_s_est: f64,
+}
+
+/// Core-seconds of the horizons of one tile of `layout` at `az` azimuths (fast method).
+fn horizon_core_s(rates: &Rates, layout: &Layout, az: u64) -> f64 {
+    let n = layout.tile_size as f64;
+    n * n * az as f64 * rates.horizon_ns_per_px_az * 1e-9
 }
 
 /// A scene's plan.
@@ -485,22 +496,23 @@ pub fn plan(scene: &Scene) -> Result<Plan> {
     let k = scene.fourier.coefficients as u64;
     let cost = |p: Product| -> (u64, f64) {
         match p {
+            // f32 heights and a u8 mask per stored pixel.
             Product::Height => (
                 side * side * 5,
                 side as f64 * side as f64 * rates.tile_ns_per_px * 1e-9,
             ),
             Product::Albedo => (side * side * 3, 0.0),
-            // Both pyramids: max (f16) and min/max (2 × f16), 4/3 for the levels.
+            // The maximum (f32) and (min, max) (2 × f32) pyramids, 4/3 for their levels.
             Product::Mip => (
-                side * side * 6 * 4 / 3,
+                side * side * 12 * 4 / 3,
                 side as f64 * side as f64 * rates.mip_ns_per_px * 1e-9,
             ),
-            Product::Horizon => (
-                n * n * az * 2,
-                (n * n * az) as f64 * rates.horizon_ns_per_px_az * 1e-9,
-            ),
+            // f16 per pixel and azimuth.
+            Product::Horizon => (n * n * az * 2, horizon_core_s(&rates, &layout, az)),
+            // The multires pyramid: 4/3 · K bytes per pixel (K f16 coefficients, reduced
+            // groups), measured 21.27 B/px at K = 16 against 21.33.
             Product::Fourier => (
-                n * n * (2 * k - 1) * 2 * 4 / 3,
+                n * n * k * 4 / 3,
                 (n * n * az) as f64 * rates.fourier_ns_per_px_az * 1e-9,
             ),
             Product::Other(_) => (0, 0.0),
@@ -567,9 +579,32 @@ pub fn plan(scene: &Scene) -> Result<Plan> {
             }),
         }
     }
+    // What a tile left out would have cost: its heights and every product made of it (the
+    // horizons and pyramids at the horizon levels only).
+    let made_products: Vec<Product> = products
+        .iter()
+        .filter(|p| p.made)
+        .filter_map(|p| PRODUCTS.iter().find(|(n, _)| *n == p.product).map(|(_, q)| *q))
+        .collect();
     let height_cost = |set: &BTreeSet<TileId>| {
-        let (raw1, cpu1) = cost(Product::Height);
-        (set.len() as u64 * raw1, set.len() as f64 * cpu1)
+        let (mut raw, mut cpu) = (0u64, 0.0f64);
+        for t in set {
+            for &p in &made_products {
+                if matches!(p, Product::Horizon | Product::Fourier)
+                    && !horizon_levels.contains(&t.level)
+                {
+                    continue;
+                }
+                let (r, c) = cost(p);
+                raw += r;
+                cpu += c + if p == Product::Fourier {
+                    cost(Product::Horizon).1
+                } else {
+                    0.0
+                };
+            }
+        }
+        (raw, cpu)
     };
     for (rule, what, set) in [
         (
@@ -605,16 +640,27 @@ pub fn plan(scene: &Scene) -> Result<Plan> {
         && finer_than_region.is_empty()
         && present.iter().all(|t| native.contains(t));
     if !oversampled.is_empty() {
-        let n: u64 = oversampled.values().sum();
-        let (raw1, cpu1) = cost(Product::Height);
+        // Per level: a tile's heights and products, times the count.
+        let (mut raw, mut cpu) = (0u64, 0.0f64);
+        for (&level, &n) in &oversampled {
+            let one = TileId {
+                level,
+                face: cube::Face::Px,
+                x: 0,
+                y: 0,
+            };
+            let (r, c) = height_cost(&BTreeSet::from([one]));
+            raw = raw.saturating_add(n.saturating_mul(r));
+            cpu += n as f64 * c;
+        }
         left_out.push(LeftOut {
             rule: Rule::Oversampled,
             what: "tiles of a region finer than any source there resolves within \
                    max_oversampling (counted from the sources' deepest tiles in it)"
                 .into(),
             tiles: oversampled,
-            raw_bytes: n.saturating_mul(raw1),
-            cpu_s_est: n as f64 * cpu1,
+            raw_bytes: raw,
+            cpu_s_est: cpu,
         });
     }
     Ok(Plan {
@@ -663,12 +709,16 @@ pub fn decide_pruning(plan: &mut Plan, dir: &Path) -> Result<()> {
         if total == 0 {
             continue;
         }
-        for (l, c) in &tiles {
-            if let Some(v) = p.tiles.get_mut(l) {
-                *v -= (*c).min(*v);
+        // Raw maps are not written for a left-out tile; its Fourier file is the small
+        // fully-lit record.
+        let keep = (total - n.min(total)) as f64 / total as f64;
+        if p.product == "horizon" {
+            for (l, c) in &tiles {
+                if let Some(v) = p.tiles.get_mut(l) {
+                    *v -= (*c).min(*v);
+                }
             }
         }
-        let keep = p.tiles.values().sum::<u64>() as f64 / total as f64;
         let cpu = p.cpu_s_est * (1.0 - keep);
         freed = (
             freed
@@ -690,7 +740,6 @@ pub fn decide_pruning(plan: &mut Plan, dir: &Path) -> Result<()> {
         raw_bytes: freed.0,
         cpu_s_est: freed.1,
     });
-    let _ = n;
     plan.pruned = Some(pruned);
     Ok(())
 }
