@@ -320,8 +320,8 @@ fn pruned_scene_renders_the_full_scenes_lit_fractions() {
             .collect();
         let sun_lon = (300..=520)
             .map(|d| {
-                let c = ((d as f64 / 10.0).to_radians().cos() - phi.sin().powi(2))
-                    / phi.cos().powi(2);
+                let c =
+                    ((d as f64 / 10.0).to_radians().cos() - phi.sin().powi(2)) / phi.cos().powi(2);
                 lon + c.clamp(-1.0, 1.0).acos().to_degrees()
             })
             .find(|&sl| {

@@ -584,7 +584,12 @@ pub fn plan(scene: &Scene) -> Result<Plan> {
     let made_products: Vec<Product> = products
         .iter()
         .filter(|p| p.made)
-        .filter_map(|p| PRODUCTS.iter().find(|(n, _)| *n == p.product).map(|(_, q)| *q))
+        .filter_map(|p| {
+            PRODUCTS
+                .iter()
+                .find(|(n, _)| *n == p.product)
+                .map(|(_, q)| *q)
+        })
         .collect();
     let height_cost = |set: &BTreeSet<TileId>| {
         let (mut raw, mut cpu) = (0u64, 0.0f64);
