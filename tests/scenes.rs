@@ -354,3 +354,31 @@ fn pruned_scene_renders_the_full_scenes_lit_fractions() {
         "{left_out} of the scene's horizon tiles left out; {compared} lit fractions compared"
     );
 }
+
+/// Ten `kill -9` at random moments of a scene's bake (a wanted set from a cap region finer than
+/// the body's, the mosaic path, mipmaps, horizons streamed into pyramids with the sun rule),
+/// each rerun to completion: the bytes of an uninterrupted bake.
+#[test]
+fn killed_scene_bake_resumes_to_the_uninterrupted_bytes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = write(
+        tmp.path(),
+        "k.toml",
+        "[scene]\nname = \"killed\"\nbody = \"moon\"\n\n[layout]\ntile_size = 32\n\n\
+         [[source]]\nembedded = \"south-pole\"\nsize = 1024\n\n\
+         [[region]]\nname = \"all\"\nbody = true\nlevel = 8\n\n\
+         [[region]]\nname = \"crater\"\ncap = { lat_deg = -89.8, lon_deg = 0.0, radius_m = 4000.0 }\n\n\
+         [renderer]\nmethods = [\"dp\", \"fourier\"]\n\n[sun]\nelevation_deg = [8.0, 20.0]\n\n\
+         [horizon]\nlevels = [8]\nazimuths = 16\n",
+    );
+    crate::store::kill_trials(
+        "bake SCENE",
+        None,
+        &|out| {
+            let mut c = penumbra_bin();
+            c.arg("bake").arg(&scene).arg("--out").arg(out);
+            c
+        },
+        0x5ce4_e5ca_1e00_0035,
+    );
+}

@@ -98,7 +98,12 @@ const DEEP: &[&str] = &[
 /// Ten `kill -9` at random moments of `cmd` (each on a fresh copy of `start`, or from nothing),
 /// each followed by a rerun of `cmd` to completion: the result must equal an uninterrupted
 /// run's bytes, `tileset.json` and the indexes included, with no temp file or staged run left.
-fn kill_trials(label: &str, start: Option<&Path>, cmd: &dyn Fn(&Path) -> Command, seed: u64) {
+pub(crate) fn kill_trials(
+    label: &str,
+    start: Option<&Path>,
+    cmd: &dyn Fn(&Path) -> Command,
+    seed: u64,
+) {
     let tmp = tempfile::tempdir().unwrap();
     let fresh = |dir: &Path| {
         let _ = std::fs::remove_dir_all(dir);

@@ -158,6 +158,9 @@ pub struct Plan {
     /// The tiles are every tile the sources give at their own resolution (no region leaves
     /// any out): the tiling stage then needs no list of wanted tiles.
     pub whole: bool,
+    /// The tiles the tiling stage tries (closed under parent): [`Plan::tiles`] and those of
+    /// their ancestors without data, which it leaves unwritten.
+    pub candidates: BTreeSet<TileId>,
     /// Levels that get horizons (or Fourier pyramids).
     pub horizon_levels: Vec<u8>,
     pub products: Vec<ProductPlan>,
@@ -674,6 +677,11 @@ pub fn plan(scene: &Scene) -> Result<Plan> {
         sources,
         layout,
         whole,
+        candidates: wanted
+            .iter()
+            .filter(|t| t.level < levels)
+            .copied()
+            .collect(),
         tiles: present,
         horizon_levels,
         products,
@@ -767,9 +775,9 @@ impl Plan {
         s
     }
 
-    /// The tiles the tiling stage is to cut, or None for all it finds ([`Plan::whole`]).
+    /// The tiles the tiling stage is to try, or None for all it finds ([`Plan::whole`]).
     pub fn wanted(&self) -> Option<&BTreeSet<TileId>> {
-        (!self.whole).then_some(&self.tiles)
+        (!self.whole).then_some(&self.candidates)
     }
 
     /// The horizon stage's options: the plan's levels, the scene's azimuths and method, the
