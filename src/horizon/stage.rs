@@ -519,44 +519,32 @@ pub fn prune_candidates(
 
 /// [`prune_candidates`] for a run with `opts` (method, margins, levels, `lit_above_deg`).
 pub fn prune_candidates_with(store: &Store, opts: &HorizonOptions) -> Result<Vec<(TileId, f32)>> {
-    check_options(opts)?;
-    if opts.lit_above_deg.is_none() {
+    let Some(t) = opts.lit_above_deg else {
         return Err(Error::param(
             "lit_above_deg",
             "is needed: it is the threshold tiles are pruned below",
         ));
-    }
-    let ts = store.manifest();
-    check_layout(store.dir(), ts)?;
-    check_prunable(store.dir(), ts)?;
-    let range = terrain_range(ts).ok_or_else(|| {
-        Error::invalid(
-            store.dir().join(manifest::MANIFEST),
-            "tileset records no height range",
-        )
-    })?;
-    let levels = pick_levels(ts, &opts.levels)?;
-    let fine = opts
-        .fine_margin_px
-        .unwrap_or_else(|| default_fine_margin_px(ts.layout.tile_size));
-    let (mut covers, mut mips) = (HashMap::new(), MipCache::default());
-    let mut out = Vec::new();
-    for id in ts
-        .tile_set()
+    };
+    Ok(bounds_of(store, opts, Some(t))?
         .into_iter()
-        .filter(|t| levels.contains(&t.level))
-    {
-        if let Some(b) = prune_decision(store, id, opts, fine, range, &mut covers, &mut mips)? {
-            out.push((id, b));
-        }
-    }
-    Ok(out)
+        .filter(|(_, b)| (*b as f64) < t)
+        .collect())
 }
 
 /// Every tile of `opts`'s levels with the whole upper bound of its horizon (degrees, NaN for a
 /// tile without data) for a run with `opts` (method, margins), not stopped at any threshold:
 /// what [`prune_candidates`] compares with `lit_above_deg`. Needs the heights and the mipmaps.
 pub fn tile_bounds(store: &Store, opts: &HorizonOptions) -> Result<Vec<(TileId, f32)>> {
+    bounds_of(store, opts, None)
+}
+
+/// The bound of every tile of `opts`'s levels, each bounding stopped once it reaches `stop`
+/// (as the stage's [`prune_decision`] does).
+fn bounds_of(
+    store: &Store,
+    opts: &HorizonOptions,
+    stop: Option<f64>,
+) -> Result<Vec<(TileId, f32)>> {
     check_options(opts)?;
     let ts = store.manifest();
     check_layout(store.dir(), ts)?;
@@ -576,7 +564,7 @@ pub fn tile_bounds(store: &Store, opts: &HorizonOptions) -> Result<Vec<(TileId, 
         .into_iter()
         .filter(|t| levels.contains(&t.level))
         .map(|id| {
-            let b = tile_bound(store, id, opts, fine, range, &mut covers, &mut mips, None)?;
+            let b = tile_bound(store, id, opts, fine, range, &mut covers, &mut mips, stop)?;
             Ok((id, b))
         })
         .collect()

@@ -110,6 +110,7 @@ impl Default for Rates {
 const DISK_RATIO: [(Product, f64); 4] = [
     (Product::Height, 0.83),
     (Product::Mip, 0.79),
+    // Raw horizon maps: not measured here (f16 maps of real terrain deflate little).
     (Product::Horizon, 0.9),
     (Product::Fourier, 1.0),
 ];
@@ -153,6 +154,8 @@ pub struct Plan {
     /// In priority order, highest first.
     pub sources: Vec<PlannedSource>,
     pub layout: Layout,
+    /// Each region's finest level and tile count.
+    pub regions: Vec<RegionReport>,
     /// The tiles to cut (closed under parent where their ancestors have data).
     pub tiles: BTreeSet<TileId>,
     /// The tiles are every tile the sources give at their own resolution (no region leaves
@@ -212,7 +215,7 @@ pub struct SourceReport {
     pub feather_px: f64,
 }
 
-#[derive(Serialize)]
+#[derive(Clone, Serialize)]
 pub struct RegionReport {
     pub name: String,
     pub finest_level: u8,
@@ -676,6 +679,7 @@ pub fn plan(scene: &Scene) -> Result<Plan> {
         body,
         sources,
         layout,
+        regions: region_reports,
         whole,
         candidates: wanted
             .iter()
@@ -848,7 +852,7 @@ impl Plan {
                     feather_px: s.feather_px,
                 })
                 .collect(),
-            regions: Vec::new(),
+            regions: self.regions.clone(),
             stages: self.stages(),
             tiles,
             horizon_levels: &self.horizon_levels,

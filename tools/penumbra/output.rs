@@ -723,6 +723,13 @@ pub fn print_plan(plan: &penumbra::scene::plan::Plan, wall_s: f64, json: bool) -
             s.label, s.pixel_m, s.native_level, s.max_level, s.feather_px
         )?;
     }
+    for g in &r.regions {
+        writeln!(
+            out,
+            "region \"{}\": finest level {}, {} tiles",
+            g.name, g.finest_level, g.tiles
+        )?;
+    }
     writeln!(out, "stages: {}", r.stages.join(" → "))?;
     if !r.horizon_levels.is_empty() && r.stages.len() > 2 {
         writeln!(out, "horizon levels: {:?}", r.horizon_levels)?;
