@@ -123,6 +123,10 @@ pub struct Tileset {
     pub mosaic: Vec<MosaicSource>,
     pub products: Products,
     pub coverage: Vec<LevelCoverage>,
+    /// Tiles a scene's bake asked for and cut that hold no data (levels with none left out;
+    /// absent from the file when empty): a later bake of the same tiles knows them tried.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub no_data: Vec<LevelCoverage>,
     /// Every parameter that shaped the output.
     pub parameters: serde_json::Value,
     /// Hash of the tool version, the source hashes and the parameters: equal keys mean
@@ -132,24 +136,36 @@ pub struct Tileset {
 
 impl Tileset {
     pub fn tile_set(&self) -> BTreeSet<TileId> {
-        let mut set = BTreeSet::new();
-        for lc in &self.coverage {
-            for (face, runs) in &lc.faces {
-                for r in runs {
-                    for x in r[1]..=r[2] {
-                        set.insert(TileId {
-                            level: lc.level,
-                            face: *face,
-                            x,
-                            y: r[0],
-                        });
-                    }
+        tiles_of(&self.coverage)
+    }
+
+    /// The tiles [`Tileset::no_data`] lists.
+    pub fn no_data_set(&self) -> BTreeSet<TileId> {
+        tiles_of(&self.no_data)
+    }
+}
+
+/// The tiles a coverage lists.
+pub fn tiles_of(coverage: &[LevelCoverage]) -> BTreeSet<TileId> {
+    let mut set = BTreeSet::new();
+    for lc in coverage {
+        for (face, runs) in &lc.faces {
+            for r in runs {
+                for x in r[1]..=r[2] {
+                    set.insert(TileId {
+                        level: lc.level,
+                        face: *face,
+                        x,
+                        y: r[0],
+                    });
                 }
             }
         }
-        set
     }
+    set
+}
 
+impl Tileset {
     pub fn has_tile(&self, id: TileId) -> bool {
         self.coverage.iter().any(|lc| {
             lc.level == id.level

@@ -21,6 +21,7 @@ use crate::error::{Error, Result};
 use crate::layout::TileId;
 use crate::manifest::Tileset;
 use crate::progress::Progress;
+use crate::tileset::deps::Dep;
 use crate::tileset::writer::{Staging, Writer};
 use crate::tileset::{Product, Store};
 
@@ -83,10 +84,25 @@ pub fn start(
     key: &str,
     current: Option<&Tileset>,
 ) -> Result<Start> {
+    start_units(writer, spec, key, current, true)
+}
+
+/// [`start`], where `units_current` says whether the product's units are those this run
+/// would make (false: the same run key over another selection of tiles, or inputs changed
+/// under some units; the run goes ahead, reusing what it can, and what was derived from the
+/// product is not invalidated by the key).
+pub fn start_units(
+    writer: Writer,
+    spec: StageSpec,
+    key: &str,
+    current: Option<&Tileset>,
+    units_current: bool,
+) -> Result<Start> {
     let primary = spec.writes[0];
     let changed = current.and_then(|ts| primary.recorded_key(ts)) != Some(key);
     if let Some(ts) = current {
-        if primary.recorded_key(ts) == Some(key)
+        if units_current
+            && primary.recorded_key(ts) == Some(key)
             && spec
                 .writes
                 .iter()
@@ -121,6 +137,12 @@ impl Run {
     /// The tileset's folder.
     pub fn dir(&self) -> &Path {
         self.writer.dir()
+    }
+
+    /// Put the committed file `from` at `rel` in the run's staging folder, kept rather than
+    /// made again ([`Staging::link`]).
+    pub fn staging_link(&self, from: &Path, rel: &str, hash: &blake3::Hash) -> Result<()> {
+        self.staging.link(from, rel, hash)
     }
 
     /// Leave the staged run uncommitted for a later run of the same key to complete.
@@ -357,6 +379,98 @@ pub trait Stage: Sync {
     ) -> Result<(Tileset, Self::Report)>;
     /// The report of a run that found its output up to date.
     fn up_to_date(&self, store: &Store, plan: &Self::Plan, units: &[Unit]) -> Self::Report;
+    /// Recompute, on the tileset as it is now, a value one of this stage's units recorded as
+    /// a dependency ([`Dep::Value`]) by its name; None: not a name this stage records (the
+    /// unit is redone).
+    fn revalue(&self, _store: &Store, _plan: &Self::Plan, _name: &str) -> Option<String> {
+        None
+    }
+}
+
+/// A unit's record: what it read and what it reported to the finish. Kept in the staging
+/// folder's unit log while a run lasts (for a resume) and, once it commits, in
+/// `.penumbra/index/<product>.units.json` with the run key (for the next run's reuse).
+#[derive(Serialize, serde::Deserialize)]
+struct UnitRecord {
+    deps: Vec<Dep>,
+    done: serde_json::Value,
+}
+
+/// The unit records a committed run left: its run key and each unit's record, by unit name.
+#[derive(Serialize, serde::Deserialize)]
+struct UnitRecords {
+    key: String,
+    units: std::collections::BTreeMap<String, UnitRecord>,
+}
+
+/// Largest unit-records file read (a record is a few hundred bytes; 10⁶ units).
+const MAX_UNIT_RECORDS_BYTES: u64 = 1 << 30;
+
+fn unit_records_path(dir: &Path, product: Product) -> std::path::PathBuf {
+    crate::tileset::index::index_path(
+        dir,
+        &format!("{}{}", product.name(), crate::tileset::writer::UNITS_SUFFIX),
+    )
+}
+
+/// The unit records of `product`'s last committed run, when there are any and they read back
+/// (a damaged file only costs the reuse).
+fn load_unit_records(dir: &Path, product: Product) -> Option<UnitRecords> {
+    let p = unit_records_path(dir, product);
+    let bytes =
+        crate::fsio::read_capped(&p, MAX_UNIT_RECORDS_BYTES, "a stage's unit records").ok()?;
+    serde_json::from_slice(&bytes).ok()
+}
+
+/// Whether every dependency a unit recorded holds for the tileset as it is now.
+fn deps_hold<S: Stage>(stage: &S, store: &Store, plan: &S::Plan, deps: &[Dep]) -> bool {
+    deps.iter().all(|d| match store.dep_holds(d) {
+        Some(h) => h,
+        None => match d {
+            Dep::Value { name, value } => stage.revalue(store, plan, name).as_ref() == Some(value),
+            _ => false,
+        },
+    })
+}
+
+/// The committed files of each tile of the products `writes` (per-tile files only, at
+/// `<dir>/<level>/<face>/<y>/<x>.<ext>`), from their indexes: what a reused unit keeps.
+fn tile_files(
+    store: &Store,
+    writes: &[Product],
+) -> Result<std::collections::HashMap<TileId, Vec<(String, blake3::Hash)>>> {
+    let mut out: std::collections::HashMap<TileId, Vec<(String, blake3::Hash)>> =
+        Default::default();
+    for &p in writes {
+        let Some(ix) = store.index(p)? else { continue };
+        for (rel, (_, h)) in &ix.files {
+            let parts: Vec<&str> = rel.split('/').collect();
+            let [d, level, face, y, file] = parts[..] else {
+                continue;
+            };
+            if !p.dirs().contains(&d) {
+                continue;
+            }
+            let Some((x, _ext)) = file.split_once('.') else {
+                continue;
+            };
+            let (Ok(level), Ok(y), Ok(x)) = (level.parse(), y.parse(), x.parse()) else {
+                continue;
+            };
+            let Some(face) = crate::cube::Face::ALL.iter().find(|f| f.name() == face) else {
+                continue;
+            };
+            out.entry(TileId {
+                level,
+                face: *face,
+                x,
+                y,
+            })
+            .or_default()
+            .push((rel.clone(), blake3::Hash::from(*h)));
+        }
+    }
+    Ok(out)
 }
 
 /// What [`execute`] did.
@@ -405,36 +519,85 @@ pub fn execute<S: Stage>(
             spec.name
         )));
     }
-    let run = match start(writer, spec.clone(), &key, Some(ts))? {
+    // What the last committed run of this key made and read: a unit whose every input is
+    // as it was then is kept, not redone.
+    let primary = spec.writes[0];
+    let previous = load_unit_records(dir, primary);
+    let prev = previous.as_ref().filter(|r| r.key == key);
+    let holds = |r: &UnitRecord| deps_hold(stage, &store, &plan, &r.deps);
+    let reusable: Vec<Option<&UnitRecord>> = units
+        .iter()
+        .map(|u| {
+            prev.and_then(|p| p.units.get(&record_name(u)))
+                .filter(|r| holds(r))
+        })
+        .collect();
+    let units_current = match prev {
+        // No records (a tileset made before them, or another key): the key decides.
+        None => true,
+        Some(p) => p.units.len() == units.len() && reusable.iter().all(Option::is_some),
+    };
+    let run = match start_units(writer, spec.clone(), &key, Some(ts), units_current)? {
         Start::UpToDate => return Ok(Outcome::Done(stage.up_to_date(&store, &plan, &units))),
         Start::Run(run) => run,
     };
     let out = run.out().to_path_buf();
-    // Units an earlier run of this key finished (its records are written after its files).
-    let records = if run.resume() {
+    // Units an earlier run of this key finished (its records are written after its files),
+    // when what they read is still what the tileset holds.
+    let staged = if run.resume() {
         run.staging.read_records()?
     } else {
         Default::default()
     };
-    let recorded = |u: &Unit| -> Option<S::Done> {
-        serde_json::from_slice(records.get(&record_name(u))?).ok()
-    };
-    let mut done: Vec<Option<(S::Done, bool)>> = units
+    let decode =
+        |r: &UnitRecord| -> Option<S::Done> { serde_json::from_value(r.done.clone()).ok() };
+    let mut done: Vec<Option<(S::Done, bool, UnitRecord)>> = units
         .iter()
         .map(|u| {
-            if run.resume() {
-                recorded(u).map(|d| (d, false))
-            } else {
-                None
+            let r: UnitRecord = serde_json::from_slice(staged.get(&record_name(u))?).ok()?;
+            if !holds(&r) {
+                return None;
             }
+            decode(&r).map(|d| (d, false, r))
         })
         .collect();
+    let log = run.staging.record_log()?;
+    // Units a committed run made: their files linked into the staging folder, their records
+    // logged as if done here (a kill after this keeps them).
+    if reusable.iter().any(Option::is_some) {
+        let files = tile_files(&store, &spec.writes)?;
+        for (i, u) in units.iter().enumerate() {
+            let Some(r) = reusable[i] else { continue };
+            if done[i].is_some() {
+                continue;
+            }
+            let Some(d) = decode(r) else { continue };
+            let linked = u.writes.iter().all(|t| {
+                files
+                    .get(t)
+                    .into_iter()
+                    .flatten()
+                    .all(|(rel, h)| run.staging.link(&dir.join(rel), rel, h).is_ok())
+            });
+            if !linked {
+                continue;
+            }
+            let record = UnitRecord {
+                deps: r.deps.clone(),
+                done: r.done.clone(),
+            };
+            log.append(
+                &record_name(u),
+                &serde_json::to_vec(&record).expect("unit records serialise"),
+            )?;
+            done[i] = Some((d, false, record));
+        }
+    }
     let todo: Vec<usize> = picked
         .iter()
         .copied()
         .filter(|&i| done[i].is_none())
         .collect();
-    let log = run.staging.record_log()?;
     let cx = Cx {
         store: &store,
         out: &out,
@@ -442,15 +605,25 @@ pub fn execute<S: Stage>(
         key: &key,
         progress,
     };
-    let one = |i: usize, scratch: &mut S::Scratch| -> Result<S::Done> {
-        let d = stage.run_unit(&cx, &units[i], scratch)?;
-        let bytes = serde_json::to_vec(&d).expect("unit records serialise");
+    let order = stage.order();
+    let one = |i: usize, scratch: &mut S::Scratch| -> Result<(S::Done, UnitRecord)> {
+        let unit = || stage.run_unit(&cx, &units[i], scratch);
+        let (d, deps) = match order {
+            Order::Parallel => store.deps().on_this_thread(unit),
+            Order::Sequential => store.deps().tileset_wide(unit),
+        };
+        let d = d?;
+        let record = UnitRecord {
+            deps,
+            done: serde_json::to_value(&d).expect("unit records serialise"),
+        };
+        let bytes = serde_json::to_vec(&record).expect("unit records serialise");
         log.append(&record_name(&units[i]), &bytes)?;
         progress.inc(1);
-        Ok(d)
+        Ok((d, record))
     };
     progress.start(spec.name, todo.len() as u64);
-    let results: Vec<(usize, Result<S::Done>)> = match stage.order() {
+    let results: Vec<(usize, Result<(S::Done, UnitRecord)>)> = match order {
         Order::Parallel => todo
             .par_iter()
             .map_init(|| stage.scratch(&plan), |s, &i| (i, one(i, s)))
@@ -472,7 +645,8 @@ pub fn execute<S: Stage>(
     progress.finish();
     let ran = results.len();
     for (i, r) in results {
-        done[i] = Some((r?, true));
+        let (d, record) = r?;
+        done[i] = Some((d, true, record));
     }
     let finished = done.iter().filter(|d| d.is_some()).count();
     if finished < units.len() {
@@ -483,15 +657,31 @@ pub fn execute<S: Stage>(
             total: units.len(),
         });
     }
+    let mut records = UnitRecords {
+        key: key.clone(),
+        units: Default::default(),
+    };
     let done: Vec<Finished<S::Done>> = units
         .into_iter()
         .zip(done)
         .map(|(unit, d)| {
-            let (done, here) = d.expect("every unit done");
+            let (done, here, record) = d.expect("every unit done");
+            records.units.insert(record_name(&unit), record);
             Finished { unit, done, here }
         })
         .collect();
     let (manifest, report) = stage.finish(&cx, done)?;
+    // Beside the product's index in the staging folder; the commit moves it in with it.
+    let index = out.join("index");
+    std::fs::create_dir_all(&index).map_err(|e| Error::io(&index, e))?;
+    crate::fsio::write_atomic_bytes(
+        &index.join(format!(
+            "{}{}.json",
+            primary.name(),
+            crate::tileset::writer::UNITS_SUFFIX
+        )),
+        &serde_json::to_vec(&records).expect("unit records serialise"),
+    )?;
     run.commit(manifest)?;
     Ok(Outcome::Done(report))
 }

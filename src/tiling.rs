@@ -100,6 +100,11 @@ pub struct TileOptions {
     /// heights outside this range. Not part of the run's identity: it changes no byte.
     #[serde(skip)]
     pub allow_relief_m: Option<(f64, f64)>,
+    /// With a wanted set: keep only its tiles, removing those earlier bakes into the same
+    /// tileset added (another scene's). False: a bake adds its tiles to what is there. Not
+    /// part of the run's identity (a tile's bytes do not depend on which others are cut).
+    #[serde(skip)]
+    pub prune: bool,
 }
 
 impl Default for TileOptions {
@@ -116,6 +121,7 @@ impl Default for TileOptions {
             albedo: None,
             max_output_gib: runner::DEFAULT_MAX_OUTPUT_GIB,
             allow_relief_m: None,
+            prune: false,
         }
     }
 }
@@ -468,21 +474,13 @@ pub fn tile_sources(
         "options": opts,
         "levels": levels,
     });
-    // Only a mosaic or a wanted set adds keys: one whole source keeps today's parameters (and
-    // run key). serde_json's maps are sorted, so the keys' order does not depend on this.
+    // Only a mosaic adds keys: one source keeps today's parameters (and run key). serde_json's
+    // maps are sorted, so the keys' order does not depend on this. A wanted set is not part of
+    // the key: a tile's bytes do not depend on which other tiles are cut (tiles cut in a group
+    // equal tiles cut alone, bit for bit), so tiles of one run stay valid in the next whatever
+    // it selects; the coverage says which there are.
     if !mosaic_entries.is_empty() {
         parameters["mosaic"] = manifest::consistency::mosaic_parameters(&mosaic_entries);
-    }
-    if let Some(w) = wanted {
-        let mut h = blake3::Hasher::new();
-        for t in w {
-            h.update(t.to_string().as_bytes());
-            h.update(b"\n");
-        }
-        parameters["wanted"] = serde_json::json!({
-            "tiles": w.len(),
-            "blake3": h.finalize().to_hex().to_string(),
-        });
     }
     let run_key = runner::run_key(
         &STAGE,
@@ -521,8 +519,22 @@ pub fn tile_sources(
             }
         }
     }
+    // With a wanted set, the tiles an earlier run of this key made stay (and are kept, not
+    // cut again) unless pruned; tiles it found without data are not tried again.
+    let previous = Tileset::load(out).ok().filter(|e| e.run_key == run_key);
+    let (old_present, old_empty) = previous
+        .as_ref()
+        .map(|e| (e.tile_set(), e.no_data_set()))
+        .unwrap_or_default();
+    let mut units_current = true;
     if let Some(w) = wanted {
-        candidates.clone_from(w);
+        candidates = w.difference(&old_empty).copied().collect();
+        if !opts.prune {
+            candidates.extend(old_present.iter().copied());
+        }
+        units_current = previous.is_none()
+            || (candidates.is_subset(&old_present)
+                && (!opts.prune || old_present.is_subset(&candidates)));
     }
     let source_pixels: u64 = sources
         .iter()
@@ -550,7 +562,8 @@ pub fn tile_sources(
     // Only now, with the input read and the plan known, touch the output folder.
     let writer = Writer::begin(out)?;
     let existing = Tileset::load(out).ok();
-    let run = match runner::start(writer, STAGE, &run_key, existing.as_ref())? {
+    let run = match runner::start_units(writer, STAGE, &run_key, existing.as_ref(), units_current)?
+    {
         Start::UpToDate => {
             let n = existing.map_or(0, |e| e.coverage.iter().map(|c| c.tiles).sum());
             return Ok(TileReport {
@@ -566,7 +579,31 @@ pub fn tile_sources(
         }
         Start::Run(run) => run,
     };
-    let (stage_out, resume) = (run.out().to_path_buf(), run.resume());
+    let (stage_out, mut resume) = (run.out().to_path_buf(), run.resume());
+    if wanted.is_some() && previous.is_some() {
+        // The committed tiles this run keeps, linked into its staging folder (the sink then
+        // keeps them as it keeps a resumed run's).
+        let store = crate::tileset::Store::open_unlocked(out)?;
+        for p in [
+            crate::tileset::Product::Height,
+            crate::tileset::Product::Albedo,
+        ] {
+            let Some(ix) = store.index(p)? else { continue };
+            let pattern = match p {
+                crate::tileset::Product::Height => manifest::HEIGHT_PATTERN,
+                _ => manifest::ALBEDO_PATTERN,
+            };
+            for id in candidates.iter().filter(|t| old_present.contains(t)) {
+                let path = crate::tileset::tile_path(out, pattern, *id);
+                let rel = crate::tileset::tile_path(Path::new(""), pattern, *id);
+                let rel = rel.to_string_lossy().replace('\\', "/");
+                if let Some((_, h)) = ix.files.get(&rel) {
+                    run.staging_link(&path, &rel, &blake3::Hash::from(*h))?;
+                }
+            }
+        }
+        resume = true;
+    }
 
     progress.start("tiling", candidates.len() as u64);
     let sink = TileSink {
@@ -652,12 +689,32 @@ pub fn tile_sources(
                     channels: a.channels as u8,
                     west_lon_deg: a.west_lon_deg,
                 }),
-            mip: None,
-            horizon: None,
-            fourier: None,
-            extra: Default::default(),
+            // Products made from an earlier run of this key stay (their stages redo only the
+            // tiles whose inputs this run changed); a new key drops them at the commit.
+            mip: previous.as_ref().and_then(|p| p.products.mip.clone()),
+            horizon: previous.as_ref().and_then(|p| p.products.horizon.clone()),
+            fourier: previous.as_ref().and_then(|p| p.products.fourier.clone()),
+            extra: previous
+                .as_ref()
+                .map(|p| p.products.extra.clone())
+                .unwrap_or_default(),
         },
         coverage: manifest::coverage_of(&present, levels),
+        no_data: match wanted {
+            Some(w) => {
+                let mut empty: BTreeSet<TileId> = candidates
+                    .iter()
+                    .filter(|t| !present.contains(t))
+                    .copied()
+                    .collect();
+                empty.extend(old_empty.iter().filter(|t| !opts.prune || w.contains(t)));
+                manifest::coverage_of(&empty, levels)
+                    .into_iter()
+                    .filter(|c| c.tiles > 0)
+                    .collect()
+            }
+            None => Vec::new(),
+        },
         parameters,
         run_key,
     };

@@ -289,6 +289,15 @@ impl MipCache {
 
     fn tile(&mut self, store: &Store, id: TileId) -> Result<Arc<Levels>> {
         if let Some(l) = self.tiles.get(&id) {
+            // Read by an earlier unit: noted for this one as read.
+            if store.deps().active() {
+                if let Some(m) = store.manifest().products.mip.as_ref() {
+                    store.note_file(
+                        crate::tileset::Product::Mip,
+                        &tileset::tile_path(store.dir(), &m.max_path, id),
+                    );
+                }
+            }
             return Ok(l.clone());
         }
         let m = store.mip(id, true)?;
@@ -308,8 +317,9 @@ impl MipCache {
         face: Face,
         chunk: Option<(u32, u32)>,
     ) -> Result<Option<Arc<Levels>>> {
-        if let Some(l) = self.faces.get(&(level, face, chunk)) {
-            return Ok(l.clone());
+        let cached = self.faces.get(&(level, face, chunk)).cloned();
+        if cached.is_some() && !store.deps().active() {
+            return Ok(cached.flatten());
         }
         let mp = store
             .manifest()
@@ -323,6 +333,12 @@ impl MipCache {
             }
             _ => tileset::face_file_path(store.dir(), &mp.face_path, level, face),
         };
+        if let Some(l) = cached {
+            // Read (or found absent) by an earlier unit: noted for this one.
+            store.note_file(crate::tileset::Product::Mip, &path);
+            return Ok(l);
+        }
+        store.note_file(crate::tileset::Product::Mip, &path);
         let l = if path.exists() {
             let f = store.face_mip(&path, level, face, chunk)?;
             let l = Arc::new(Levels::of(f, &path)?);
@@ -544,7 +560,7 @@ fn descend(
                     x,
                     y,
                 };
-                if !ts.has_tile(id) {
+                if !store.has_tile(id) {
                     continue;
                 }
                 let l = cache.tile(store, id)?;

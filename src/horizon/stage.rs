@@ -89,6 +89,13 @@ pub struct HorizonOptions {
     /// None: every tile is computed (and the run key is what it was before the option).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub lit_above_deg: Option<f64>,
+    /// The terrain range (metres, lowest and highest) the search distance and the encoders
+    /// assume, widened to the tileset's own where that is larger. None: the tileset's. A scene
+    /// bake gives its sources' range, so that tiles added later leave it as it was and the
+    /// horizons already made stay valid (an incremental bake redoes only what the new tiles
+    /// change).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub terrain_range_m: Option<(f64, f64)>,
 }
 
 impl Default for HorizonOptions {
@@ -104,6 +111,7 @@ impl Default for HorizonOptions {
             near_px: DEFAULT_NEAR_PX,
             fine_margin_px: None,
             lit_above_deg: None,
+            terrain_range_m: None,
         }
     }
 }
@@ -156,6 +164,25 @@ pub fn terrain_range(ts: &Tileset) -> Option<(f64, f64)> {
         return Some((m.global_min_m, m.global_max_m));
     }
     ts.products.height.as_ref().map(|h| (h.min_m, h.max_m))
+}
+
+/// The terrain range a run with `opts` assumes: the tileset's, widened to
+/// [`HorizonOptions::terrain_range_m`].
+fn run_range(ts: &Tileset, opts: &HorizonOptions, manifest_path: &Path) -> Result<(f64, f64)> {
+    let range = terrain_range(ts)
+        .ok_or_else(|| Error::invalid(manifest_path, "tileset records no height range"))?;
+    Ok(match opts.terrain_range_m {
+        Some((lo, hi)) => {
+            if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+                return Err(Error::param(
+                    "terrain_range_m",
+                    format!("({lo}, {hi}) is not a range of heights: give lowest ≤ highest"),
+                ));
+            }
+            (lo.min(range.0), hi.max(range.1))
+        }
+        None => range,
+    })
 }
 
 /// The distance beyond which no terrain can rise above the horizon of a pixel at most
@@ -295,6 +322,7 @@ pub fn context_for(
     let win = window(
         src,
         id.level,
+        id.face,
         (tx, ty, tx + n, ty + n),
         margin as i64,
         cover,
@@ -369,7 +397,7 @@ pub(crate) fn far_rings(
         let cover = *covers
             .entry((level, id.face))
             .or_insert_with(|| coverage_box(ts, level, id.face));
-        let win = window(src, level, foot, margin, cover);
+        let win = window(src, level, id.face, foot, margin, cover);
         reach = reach.max((margin * f) as u64);
         rings.push(RingSpec {
             level,
@@ -451,6 +479,7 @@ pub(crate) fn tile_bound(
         let win = window(
             store,
             id.level,
+            id.face,
             (tx, ty, tx + n, ty + n),
             fine as i64,
             cover,
@@ -549,12 +578,7 @@ fn bounds_of(
     let ts = store.manifest();
     check_layout(store.dir(), ts)?;
     check_prunable(store.dir(), ts)?;
-    let range = terrain_range(ts).ok_or_else(|| {
-        Error::invalid(
-            store.dir().join(manifest::MANIFEST),
-            "tileset records no height range",
-        )
-    })?;
+    let range = run_range(ts, opts, &store.dir().join(manifest::MANIFEST))?;
     let levels = pick_levels(ts, &opts.levels)?;
     let fine = opts
         .fine_margin_px
@@ -625,6 +649,34 @@ pub(crate) fn horizons_seeing_rings(
 /// `foot`, clipped to the coverage box `cover` (never into the footprint) and to |u|, |v| ≤
 /// [`PLANE_LIMIT`].
 fn window(
+    src: &Store,
+    level: u8,
+    face: Face,
+    foot: (i64, i64, i64, i64),
+    margin: i64,
+    cover: Option<(i64, i64, i64, i64)>,
+) -> (i64, i64, i64, i64) {
+    let w = window_in(src, level, foot, margin, cover);
+    // The window depends on the level's coverage (the cover): a unit reading it is redone
+    // when its window would differ ([`HorizonStage`]'s `revalue`).
+    if cover.is_some() && src.deps().active() {
+        src.deps().note(crate::tileset::deps::Dep::Value {
+            name: format!(
+                "window {level} {} {} {} {} {} {margin}",
+                face.name(),
+                foot.0,
+                foot.1,
+                foot.2,
+                foot.3
+            ),
+            value: format!("{} {} {} {}", w.0, w.1, w.2, w.3),
+        });
+    }
+    w
+}
+
+/// [`window`] itself, not recorded.
+fn window_in(
     src: &Store,
     level: u8,
     foot: (i64, i64, i64, i64),
@@ -871,6 +923,8 @@ pub struct HorizonPlan {
     range: (f64, f64),
     fine_margin: u64,
     sinks: Vec<Box<dyn SinkRun>>,
+    /// Coverage boxes for recomputing recorded windows (`revalue`).
+    covers: std::sync::Mutex<Covers>,
 }
 
 /// What one tile's unit did (floats as bits: the record round-trips exactly).
@@ -1004,8 +1058,7 @@ impl Stage for HorizonStage<'_> {
                 "tileset has no height product to compute horizons from",
             ));
         }
-        let range = terrain_range(ts)
-            .ok_or_else(|| Error::invalid(&manifest_path, "tileset records no height range"))?;
+        let range = run_range(ts, opts, &manifest_path)?;
         if opts.lit_above_deg.is_some() {
             check_prunable(dir, ts)?;
         }
@@ -1032,6 +1085,7 @@ impl Stage for HorizonStage<'_> {
                 .fine_margin_px
                 .unwrap_or_else(|| default_fine_margin_px(ts.layout.tile_size)),
             sinks,
+            covers: Default::default(),
         })
     }
 
@@ -1308,6 +1362,30 @@ impl Stage for HorizonStage<'_> {
         }
         report.distances = dist;
         Ok((manifest, report))
+    }
+
+    /// A context window a unit recorded (`window L FACE x0 y0 x1 y1 MARGIN`), on the level's
+    /// coverage as it is now.
+    fn revalue(&self, store: &Store, plan: &HorizonPlan, name: &str) -> Option<String> {
+        let mut it = name.split(' ');
+        if it.next()? != "window" {
+            return None;
+        }
+        let level: u8 = it.next()?.parse().ok()?;
+        let face = it.next()?;
+        let face = *Face::ALL.iter().find(|f| f.name() == face)?;
+        let mut num = || it.next()?.parse::<i64>().ok();
+        let foot = (num()?, num()?, num()?, num()?);
+        let margin = num()?;
+        let cover = *plan
+            .covers
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .entry((level, face))
+            .or_insert_with(|| coverage_box(store.manifest(), level, face));
+        cover?;
+        let w = window_in(store, level, foot, margin, cover);
+        Some(format!("{} {} {} {}", w.0, w.1, w.2, w.3))
     }
 
     fn up_to_date(&self, store: &Store, plan: &HorizonPlan, _units: &[Unit]) -> HorizonReport {

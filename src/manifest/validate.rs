@@ -217,33 +217,31 @@ pub fn check(ts: &Tileset, path: &Path) -> Result<()> {
                 format!("is {}, expected {i}", lc.level),
             ));
         }
-        let per = lay.tiles_per_side(lc.level) as u64;
-        if lc.tiles_per_face != per * per {
+        check_runs(path, &f, lc, lay)?;
+    }
+    // Tiles tried without data: levels in order, on the layout, none of them present.
+    let mut last = None;
+    for (i, lc) in ts.no_data.iter().enumerate() {
+        let f = format!("no_data[{i}]");
+        if lc.level >= lay.levels || last.is_some_and(|l| lc.level <= l) {
             return Err(bad(
                 path,
-                &format!("{f}.tiles_per_face"),
-                format!("is {}, expected {}", lc.tiles_per_face, per * per),
+                &format!("{f}.level"),
+                format!(
+                    "is {}: levels must rise and stay below layout.levels {}",
+                    lc.level, lay.levels
+                ),
             ));
         }
-        let mut count = 0u64;
-        for (face, runs) in &lc.faces {
-            for (k, r) in runs.iter().enumerate() {
-                let [y, x0, x1] = *r;
-                if (y as u64) >= per || (x1 as u64) >= per || x0 > x1 {
-                    return Err(bad(
-                        path,
-                        &format!("{f}.faces.{face}[{k}]"),
-                        format!("run {r:?} is not [y, x_first, x_last] within 0..{per}"),
-                    ));
-                }
-                count += (x1 - x0 + 1) as u64;
-            }
-        }
-        if count != lc.tiles {
+        last = Some(lc.level);
+        check_runs(path, &f, lc, lay)?;
+    }
+    if !ts.no_data.is_empty() {
+        if let Some(t) = ts.no_data_set().intersection(&ts.tile_set()).next() {
             return Err(bad(
                 path,
-                &format!("{f}.tiles"),
-                format!("is {} but its runs hold {count} tiles", lc.tiles),
+                "no_data",
+                format!("lists tile {t}, which the coverage holds: a tile has data or not"),
             ));
         }
     }
@@ -694,5 +692,44 @@ fn fourier(path: &Path, ts: &Tileset, f: &crate::manifest::FourierProduct) -> Re
         -b.radius_m,
         b.radius_m,
     )?;
+    Ok(())
+}
+
+/// One level's row runs (`field`: where they are in the manifest): on the layout, counted right.
+fn check_runs(
+    path: &Path,
+    f: &str,
+    lc: &crate::manifest::LevelCoverage,
+    lay: &crate::layout::Layout,
+) -> Result<()> {
+    let per = lay.tiles_per_side(lc.level) as u64;
+    if lc.tiles_per_face != per * per {
+        return Err(bad(
+            path,
+            &format!("{f}.tiles_per_face"),
+            format!("is {}, expected {}", lc.tiles_per_face, per * per),
+        ));
+    }
+    let mut count = 0u64;
+    for (face, runs) in &lc.faces {
+        for (k, r) in runs.iter().enumerate() {
+            let [y, x0, x1] = *r;
+            if (y as u64) >= per || (x1 as u64) >= per || x0 > x1 {
+                return Err(bad(
+                    path,
+                    &format!("{f}.faces.{face}[{k}]"),
+                    format!("run {r:?} is not [y, x_first, x_last] within 0..{per}"),
+                ));
+            }
+            count += (x1 - x0 + 1) as u64;
+        }
+    }
+    if count != lc.tiles {
+        return Err(bad(
+            path,
+            &format!("{f}.tiles"),
+            format!("is {} but its runs hold {count} tiles", lc.tiles),
+        ));
+    }
     Ok(())
 }

@@ -11,6 +11,7 @@
 //!   manifest's limits.
 
 pub mod cache;
+pub mod deps;
 pub mod index;
 pub use crate::fsio;
 
@@ -183,6 +184,8 @@ pub struct Store {
     cache: TileCache,
     /// Each product's index, read on the first read of one of its files.
     indexes: std::sync::Mutex<std::collections::HashMap<&'static str, Option<Arc<Index>>>>,
+    /// What the unit running now reads ([`deps`]).
+    deps: deps::Recorder,
     _reader: Option<lock::CommitLock>,
 }
 
@@ -206,6 +209,7 @@ impl Store {
             ts,
             cache,
             indexes: Default::default(),
+            deps: Default::default(),
             _reader: None,
         })
     }
@@ -249,6 +253,68 @@ impl Store {
         Ok(ix)
     }
 
+    /// The recorder of what the unit running now reads ([`deps`]).
+    pub fn deps(&self) -> &deps::Recorder {
+        &self.deps
+    }
+
+    /// Note, for the unit running now, that it read (or looked for) the file of `product` at
+    /// `path`: with the blake3 its index records, None where there is none.
+    pub fn note_file(&self, product: Product, path: &Path) {
+        if !self.deps.active() {
+            return;
+        }
+        let rel = path
+            .strip_prefix(&self.dir)
+            .map(|r| r.to_string_lossy().replace('\\', "/"))
+            .unwrap_or_default();
+        let blake3 = self.index(product).ok().flatten().and_then(|ix| {
+            ix.files
+                .get(&rel)
+                .map(|(_, h)| blake3::Hash::from(*h).to_hex().to_string())
+        });
+        self.deps.note(deps::Dep::File {
+            product: product.name().to_string(),
+            rel,
+            blake3,
+        });
+    }
+
+    /// Whether the tileset holds tile `id`, noted for the unit running now when it does not
+    /// (when it does, reading the tile notes its file).
+    pub fn has_tile(&self, id: TileId) -> bool {
+        let has = self.ts.has_tile(id);
+        if !has && self.deps.active() {
+            self.deps.note(deps::Dep::Absent { tile: id });
+        }
+        has
+    }
+
+    /// Whether `dep`, recorded by an earlier run, holds for this tileset (a value only its
+    /// stage can recompute: None).
+    pub fn dep_holds(&self, dep: &deps::Dep) -> Option<bool> {
+        match dep {
+            deps::Dep::File {
+                product,
+                rel,
+                blake3,
+            } => {
+                let p = Product::ALL.iter().find(|p| p.name() == product)?;
+                let now = match self.index(*p) {
+                    Ok(Some(ix)) => ix
+                        .files
+                        .get(rel)
+                        .map(|(_, h)| blake3::Hash::from(*h).to_hex().to_string()),
+                    Ok(None) => None,
+                    Err(_) => return Some(false),
+                };
+                Some(now == *blake3)
+            }
+            deps::Dep::Absent { tile } => Some(!self.ts.has_tile(*tile)),
+            deps::Dep::Value { .. } => None,
+        }
+    }
+
     /// Read a file of `product` whole, bounded before the read starts: a regular file, inside
     /// the tileset, of the size its index recorded (or at most `cap` bytes when the product has
     /// no index), and then of the blake3 the index recorded. `what` names the file's kind.
@@ -259,6 +325,7 @@ impl Store {
         cap: u64,
         what: &str,
     ) -> Result<Vec<u8>> {
+        self.note_file(product, path);
         let index = self.index(product)?;
         let rel = path
             .strip_prefix(&self.dir)
@@ -336,6 +403,12 @@ impl Store {
 
     /// The height tile `id` through the shared cache, or None where the tileset has none.
     pub fn height(&self, id: TileId) -> Result<Option<Arc<HeightTile>>> {
+        if self.deps.active() {
+            // Noted on every call: a tile another unit left in the cache is read here too.
+            if self.has_tile(id) {
+                self.note_file(Product::Height, &self.height_path(id)?);
+            }
+        }
         self.cache.get_or_load(id, || {
             if self.ts.has_tile(id) {
                 self.read_height(id).map(Some)

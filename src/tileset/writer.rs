@@ -66,6 +66,10 @@ struct Plan {
     indexes: Vec<String>,
 }
 
+/// What follows a product's name in the name of its unit records in the index folder
+/// (`.penumbra/index/<product>.units.json`, [`crate::runner`]).
+pub const UNITS_SUFFIX: &str = ".units";
+
 /// The exclusive writer of one tileset folder.
 pub struct Writer {
     dir: PathBuf,
@@ -113,6 +117,29 @@ impl Staging {
             path,
             file: std::sync::Mutex::new(file),
         })
+    }
+
+    /// Put the committed file `from` at `rel` below the staging root, as a hard link (a copy
+    /// where the file system cannot link), with its blake3 recorded for the commit's index:
+    /// a unit an earlier run made and whose inputs have not changed is kept, not redone.
+    pub fn link(&self, from: &Path, rel: &str, hash: &blake3::Hash) -> Result<()> {
+        let to = self.root.join(rel);
+        if let Some(d) = to.parent() {
+            std::fs::create_dir_all(d).at(d)?;
+        }
+        if std::fs::symlink_metadata(&to).is_ok() {
+            std::fs::remove_file(&to).at(&to)?;
+        }
+        if std::fs::hard_link(from, &to).is_err() {
+            fsio::write_staged(&to, |f| {
+                let mut r = std::fs::File::open(from).at(from)?;
+                std::io::copy(&mut r, f).at(from)?;
+                Ok(())
+            })?;
+            return Ok(());
+        }
+        let stamp = fsio::FileStamp::of(&std::fs::symlink_metadata(&to).at(&to)?);
+        self._hashes.record(rel, stamp, hash)
     }
 
     /// Every unit record runs of this key left here, by unit name (the last of a name wins).
@@ -355,10 +382,13 @@ impl Writer {
             let json = serde_json::to_vec(&files).expect("index serialises");
             write_atomic_bytes(&index_dir.join(format!("{}.json", p.name())), &json)?;
             indexes.push(p.name().to_string());
+            // The runner's unit records (staged beside the index, or dropped).
+            indexes.push(format!("{}{UNITS_SUFFIX}", p.name()));
         }
         for p in &downstream {
             removes.extend(p.dirs().iter().map(|d| d.to_string()));
             indexes.push(p.name().to_string());
+            indexes.push(format!("{}{UNITS_SUFFIX}", p.name()));
         }
         for (name, dirs) in unlisted_stale {
             removes.extend(dirs);

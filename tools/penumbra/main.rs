@@ -622,6 +622,7 @@ impl TileFlags {
             albedo: self.albedo.clone().map(|p| (p, self.albedo_west)),
             max_output_gib: self.max_output_gib,
             allow_relief_m: self.allow_relief.as_deref().map(parse_relief).transpose()?,
+            prune: false,
         })
     }
 }
@@ -677,6 +678,10 @@ struct BakeArgs {
     /// committed (a valid tileset) instead of removing the folder.
     #[arg(long)]
     keep_partial: bool,
+    /// With a scene: keep only the scene's tiles in the output folder, removing those that
+    /// bakes of other scenes added there (by default a bake adds its tiles and keeps theirs).
+    #[arg(long)]
+    prune: bool,
     #[command(flatten)]
     fourier: FourierFlags,
 }
@@ -769,6 +774,7 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
             };
             let how = penumbra::scene::bake::BakeOptions {
                 keep_partial: a.keep_partial,
+                prune: a.prune,
             };
             let t0 = std::time::Instant::now();
             let report = penumbra::scene::bake::bake_scene(&plan, &a.out, &how, &progress)?;
@@ -871,6 +877,7 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
                 near_px: flags.near_px()?,
                 fine_margin_px: flags.fine_margin_px()?,
                 lit_above_deg: lit_above,
+                terrain_range_m: None,
             };
             let fourier = fourier
                 .then(|| fourier_flags.options(None, penumbra::runner::DEFAULT_MAX_OUTPUT_GIB));
@@ -1102,7 +1109,15 @@ fn main() -> ExitCode {
 /// then it runs as before scenes existed; otherwise it bakes the scene (the embedded one when
 /// none is named), which makes the same files.
 fn legacy_bake(m: &clap::ArgMatches) -> bool {
-    const SCENE_FLAGS: &[&str] = &["scene", "out", "keep_partial", "json", "quiet", "threads"];
+    const SCENE_FLAGS: &[&str] = &[
+        "scene",
+        "out",
+        "keep_partial",
+        "prune",
+        "json",
+        "quiet",
+        "threads",
+    ];
     let Some(("bake", b)) = m.subcommand() else {
         return false;
     };
