@@ -82,6 +82,10 @@ impl Default for Plan {
 #[derive(Debug, Serialize)]
 pub struct BakeReport {
     pub out: PathBuf,
+    /// Nothing changed since the last bake of this scene into `out` (its stamp,
+    /// [`crate::scene::bake::unchanged`]): no stage ran.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub unchanged: bool,
     pub stages: Vec<Stage>,
     pub tile: Option<TileReport>,
     pub mip: Option<MipReport>,
@@ -132,6 +136,7 @@ pub fn bake(
         .collect();
     let mut report = BakeReport {
         out: out.to_path_buf(),
+        unchanged: false,
         stages: plan.stages.clone(),
         tile: None,
         mip: None,

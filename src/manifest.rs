@@ -177,6 +177,9 @@ impl Tileset {
     }
 }
 
+/// Largest manifest read (a 24-level global tileset's coverage is a few MiB).
+pub const MAX_MANIFEST_BYTES: u64 = 64 << 20;
+
 /// Row-run coverage of a set of tiles, one entry per level 0..levels.
 pub fn coverage_of(tiles: &BTreeSet<TileId>, levels: u8) -> Vec<LevelCoverage> {
     (0..levels)

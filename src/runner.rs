@@ -406,19 +406,10 @@ struct UnitRecords {
 /// Largest unit-records file read (a record is a few hundred bytes; 10⁶ units).
 const MAX_UNIT_RECORDS_BYTES: u64 = 1 << 30;
 
-fn unit_records_path(dir: &Path, product: Product) -> std::path::PathBuf {
-    crate::tileset::index::index_path(
-        dir,
-        &format!("{}{}", product.name(), crate::tileset::writer::UNITS_SUFFIX),
-    )
-}
-
 /// The unit records of `product`'s last committed run, when there are any and they read back
 /// (a damaged file only costs the reuse).
 fn load_unit_records(dir: &Path, product: Product) -> Option<UnitRecords> {
-    let p = unit_records_path(dir, product);
-    let bytes =
-        crate::fsio::read_capped(&p, MAX_UNIT_RECORDS_BYTES, "a stage's unit records").ok()?;
+    let bytes = crate::tileset::writer::read_unit_records(dir, product, MAX_UNIT_RECORDS_BYTES)?;
     serde_json::from_slice(&bytes).ok()
 }
 
@@ -433,17 +424,20 @@ fn deps_hold<S: Stage>(stage: &S, store: &Store, plan: &S::Plan, deps: &[Dep]) -
     })
 }
 
+/// A committed file a reused unit keeps: its path relative to the tileset, size and blake3
+/// as indexed.
+type Kept = (String, u64, blake3::Hash);
+
 /// The committed files of each tile of the products `writes` (per-tile files only, at
 /// `<dir>/<level>/<face>/<y>/<x>.<ext>`), from their indexes: what a reused unit keeps.
 fn tile_files(
     store: &Store,
     writes: &[Product],
-) -> Result<std::collections::HashMap<TileId, Vec<(String, blake3::Hash)>>> {
-    let mut out: std::collections::HashMap<TileId, Vec<(String, blake3::Hash)>> =
-        Default::default();
+) -> Result<std::collections::HashMap<TileId, Vec<Kept>>> {
+    let mut out: std::collections::HashMap<TileId, Vec<Kept>> = Default::default();
     for &p in writes {
         let Some(ix) = store.index(p)? else { continue };
-        for (rel, (_, h)) in &ix.files {
+        for (rel, (len, h)) in &ix.files {
             let parts: Vec<&str> = rel.split('/').collect();
             let [d, level, face, y, file] = parts[..] else {
                 continue;
@@ -467,7 +461,7 @@ fn tile_files(
                 y,
             })
             .or_default()
-            .push((rel.clone(), blake3::Hash::from(*h)));
+            .push((rel.clone(), *len, blake3::Hash::from(*h)));
         }
     }
     Ok(out)
@@ -572,12 +566,14 @@ pub fn execute<S: Stage>(
                 continue;
             }
             let Some(d) = decode(r) else { continue };
+            // A file gone or of another size than indexed (damaged) is not kept: the unit is
+            // redone.
             let linked = u.writes.iter().all(|t| {
-                files
-                    .get(t)
-                    .into_iter()
-                    .flatten()
-                    .all(|(rel, h)| run.staging.link(&dir.join(rel), rel, h).is_ok())
+                files.get(t).into_iter().flatten().all(|(rel, len, h)| {
+                    let from = dir.join(rel);
+                    std::fs::metadata(&from).is_ok_and(|m| m.is_file() && m.len() == *len)
+                        && run.staging.link(&from, rel, h).is_ok()
+                })
             });
             if !linked {
                 continue;
@@ -672,14 +668,9 @@ pub fn execute<S: Stage>(
         .collect();
     let (manifest, report) = stage.finish(&cx, done)?;
     // Beside the product's index in the staging folder; the commit moves it in with it.
-    let index = out.join("index");
-    std::fs::create_dir_all(&index).map_err(|e| Error::io(&index, e))?;
-    crate::fsio::write_atomic_bytes(
-        &index.join(format!(
-            "{}{}.json",
-            primary.name(),
-            crate::tileset::writer::UNITS_SUFFIX
-        )),
+    crate::tileset::writer::stage_unit_records(
+        &out,
+        primary,
         &serde_json::to_vec(&records).expect("unit records serialise"),
     )?;
     run.commit(manifest)?;

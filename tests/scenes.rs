@@ -436,8 +436,9 @@ fn bake_scene(scene: &Path, out: &Path, extra: &[&str]) -> f64 {
 
 /// Adding a region to a baked scene cuts only the region's new tiles and redoes only the
 /// mipmaps and horizons whose inputs they change, counted file by file (a kept file keeps its
-/// inode), and the result is byte for byte the bake of the new scene from nothing. A bake of
-/// a scene that lists fewer tiles keeps the others; `--prune` removes them.
+/// inode), and the result is byte for byte the bake of the new scene from nothing (the sun
+/// rule on: the horizon bounds' reads are dependencies too). A bake of a scene that lists
+/// fewer tiles keeps the others; `--prune` removes them.
 #[test]
 fn adding_a_region_redoes_only_what_it_changes() {
     let tmp = tempfile::tempdir().unwrap();
@@ -445,7 +446,7 @@ fn adding_a_region_redoes_only_what_it_changes() {
          [[source]]\nembedded = \"south-pole\"\nsize = 1024\n\n\
          [[region]]\nname = \"all\"\nbody = true\nlevel = 9\n\n\
          [[region]]\nname = \"crater\"\ncap = { lat_deg = -89.85, lon_deg = -45.0, radius_m = 2000.0 }\nlevel = 10\n\n\
-         [renderer]\nmethods = [\"dp\", \"fourier\"]\n\n\
+         [renderer]\nmethods = [\"dp\", \"fourier\"]\n\n[sun]\nelevation_deg = [8.0, 20.0]\n\n\
          [horizon]\nlevels = [9, 10]\nazimuths = 16\n";
     let rim = "\n[[region]]\nname = \"rim\"\ncap = { lat_deg = -89.65, lon_deg = 135.0, radius_m = 2000.0 }\nlevel = 10\n";
     let a = write(tmp.path(), "a.toml", base);

@@ -317,9 +317,8 @@ impl MipCache {
         face: Face,
         chunk: Option<(u32, u32)>,
     ) -> Result<Option<Arc<Levels>>> {
-        let cached = self.faces.get(&(level, face, chunk)).cloned();
-        if cached.is_some() && !store.deps().active() {
-            return Ok(cached.flatten());
+        if let Some(l) = self.faces.get(&(level, face, chunk)) {
+            return Ok(l.clone());
         }
         let mp = store
             .manifest()
@@ -333,14 +332,12 @@ impl MipCache {
             }
             _ => tileset::face_file_path(store.dir(), &mp.face_path, level, face),
         };
-        if let Some(l) = cached {
-            // Read (or found absent) by an earlier unit: noted for this one.
-            store.note_file(crate::tileset::Product::Mip, &path);
-            return Ok(l);
-        }
-        store.note_file(crate::tileset::Product::Mip, &path);
+        // Not a dependency as a whole: each texel read is ([`MipCache::face_texel`]), so that
+        // tiles added far away leave a unit's bound valid.
         let l = if path.exists() {
-            let f = store.face_mip(&path, level, face, chunk)?;
+            let f = store
+                .deps()
+                .paused(|| store.face_mip(&path, level, face, chunk))?;
             let l = Arc::new(Levels::of(f, &path)?);
             self.room(l.bytes());
             Some(l)
@@ -352,8 +349,28 @@ impl MipCache {
     }
 
     /// Texel max of face-pyramid level `fl` at texel (x, y) (in units of 2^fl tiles) of tile
-    /// level `level`, wherever it is stored (docs/mipmaps.md); NaN: no terrain.
+    /// level `level`, wherever it is stored (docs/mipmaps.md); NaN: no terrain. Recorded as a
+    /// dependency of the unit running now ([`face_texel_value`] recomputes it).
     fn face_texel(
+        &mut self,
+        store: &Store,
+        level: u8,
+        face: Face,
+        fl: u32,
+        x: u32,
+        y: u32,
+    ) -> Result<f32> {
+        let v = self.face_texel_in(store, level, face, fl, x, y)?;
+        if store.deps().active() {
+            store.deps().note(crate::tileset::deps::Dep::Value {
+                name: format!("facetexel {level} {} {fl} {x} {y}", face.name()),
+                value: v.to_bits().to_string(),
+            });
+        }
+        Ok(v)
+    }
+
+    fn face_texel_in(
         &mut self,
         store: &Store,
         level: u8,
@@ -787,6 +804,22 @@ fn cross(a: Vec3, b: Vec3) -> Vec3 {
         a[2] * b[0] - a[0] * b[2],
         a[0] * b[1] - a[1] * b[0],
     ]
+}
+
+/// A face-pyramid texel a unit recorded (`facetexel LEVEL FACE FL X Y`), read from the tileset
+/// as it is now (its bits as text); None: not such a name, or unreadable.
+pub(crate) fn face_texel_value(store: &Store, cache: &mut MipCache, name: &str) -> Option<String> {
+    let mut it = name.split(' ');
+    if it.next()? != "facetexel" {
+        return None;
+    }
+    let level: u8 = it.next()?.parse().ok()?;
+    let face = it.next()?;
+    let face = *Face::ALL.iter().find(|f| f.name() == face)?;
+    let mut num = || it.next()?.parse::<u32>().ok();
+    let (fl, x, y) = (num()?, num()?, num()?);
+    let v = cache.face_texel_in(store, level, face, fl, x, y).ok()?;
+    Some(v.to_bits().to_string())
 }
 
 #[cfg(test)]

@@ -923,8 +923,9 @@ pub struct HorizonPlan {
     range: (f64, f64),
     fine_margin: u64,
     sinks: Vec<Box<dyn SinkRun>>,
-    /// Coverage boxes for recomputing recorded windows (`revalue`).
+    /// Coverage boxes and face pyramids for recomputing recorded values (`revalue`).
     covers: std::sync::Mutex<Covers>,
+    mips: std::sync::Mutex<MipCache>,
 }
 
 /// What one tile's unit did (floats as bits: the record round-trips exactly).
@@ -1086,6 +1087,7 @@ impl Stage for HorizonStage<'_> {
                 .unwrap_or_else(|| default_fine_margin_px(ts.layout.tile_size)),
             sinks,
             covers: Default::default(),
+            mips: Default::default(),
         })
     }
 
@@ -1367,6 +1369,10 @@ impl Stage for HorizonStage<'_> {
     /// A context window a unit recorded (`window L FACE x0 y0 x1 y1 MARGIN`), on the level's
     /// coverage as it is now.
     fn revalue(&self, store: &Store, plan: &HorizonPlan, name: &str) -> Option<String> {
+        if name.starts_with("facetexel ") {
+            let mut mips = plan.mips.lock().unwrap_or_else(|e| e.into_inner());
+            return bound::face_texel_value(store, &mut mips, name);
+        }
         let mut it = name.split(' ');
         if it.next()? != "window" {
             return None;

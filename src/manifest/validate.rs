@@ -60,8 +60,7 @@ impl Tileset {
     }
 }
 
-/// Largest manifest read (a 24-level global tileset's coverage is a few MiB).
-pub const MAX_MANIFEST_BYTES: u64 = 64 << 20;
+pub use crate::manifest::MAX_MANIFEST_BYTES;
 
 fn finite(path: &Path, field: &str, v: f64) -> Result<()> {
     if v.is_finite() {

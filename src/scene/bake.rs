@@ -2,17 +2,23 @@
 //! graph ([`crate::bake::bake`]): the planned tiles cut from the sources' mosaic, then the
 //! products the renderer's methods read.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
 
 use crate::bake::{self, BakeReport, Input, Stage};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::fourier::FourierOptions;
+use crate::fsio;
+use crate::manifest::MANIFEST;
 use crate::mip::MipOptions;
 use crate::progress::Progress;
+use crate::tileset::writer::Writer;
 use crate::tileset::Product;
 use crate::tiling::TileOptions;
 
 use super::plan::Plan;
+use super::Scene;
 
 /// How a scene's bake runs (not what it makes: that is the plan).
 #[derive(Clone, Debug, Default)]
@@ -96,7 +102,8 @@ fn sources_range_m(plan: &Plan) -> Option<(f64, f64)> {
     range
 }
 
-/// Bake `plan` into the tileset folder `out`.
+/// Bake `plan` into the tileset folder `out`, then stamp the folder with what the bake was
+/// made from ([`unchanged`]).
 pub fn bake_scene(
     plan: &Plan,
     out: &Path,
@@ -104,5 +111,98 @@ pub fn bake_scene(
     progress: &dyn Progress,
 ) -> Result<BakeReport> {
     let stages = stage_plan(plan, how);
-    bake::bake(&Input::Scene(plan), out, &stages, progress)
+    let report = bake::bake(&Input::Scene(plan), out, &stages, progress)?;
+    let mut files: Vec<PathBuf> = plan
+        .sources
+        .iter()
+        .flat_map(|s| s.dem.sources().iter().cloned())
+        .collect();
+    files.extend(plan.scene.albedo.iter().map(|a| a.path.clone()));
+    let writer = Writer::begin(out)?;
+    let stamp = Stamp::now(&plan.scene, how, out, &files)?;
+    writer.write_state_file(
+        STAMP,
+        &serde_json::to_vec(&stamp).expect("stamps serialise"),
+    )?;
+    Ok(report)
+}
+
+/// What a scene's last bake into a folder was made from: the scene (every setting, paths
+/// resolved) and this tool's version, the manifest it left, and each file it read with its
+/// size and modification time. A bake of the same scene finding the same stamp has nothing to
+/// do, as make and cargo decide from the files' times; touch a source to have it checked.
+#[derive(Debug, PartialEq, Serialize, Deserialize)]
+struct Stamp {
+    scene: String,
+    manifest: String,
+    files: Vec<(PathBuf, u64, i128)>,
+}
+
+/// A folder's stamp, in its bookkeeping folder.
+const STAMP: &str = "scene-stamp.json";
+
+impl Stamp {
+    fn now(scene: &Scene, how: &BakeOptions, out: &Path, files: &[PathBuf]) -> Result<Stamp> {
+        let mut h = blake3::Hasher::new();
+        h.update(env!("CARGO_PKG_VERSION").as_bytes());
+        h.update(&serde_json::to_vec(scene).expect("scenes serialise"));
+        h.update(&[u8::from(how.prune)]);
+        let manifest = crate::tileset::manifest_hash(out).ok_or_else(|| {
+            Error::invalid(out.join(MANIFEST), "the bake left no readable manifest")
+        })?;
+        let mut stamped = Vec::new();
+        for f in files {
+            let m = std::fs::metadata(f).map_err(|e| Error::io(f, e))?;
+            let t = fsio::FileStamp::of(&m);
+            stamped.push((f.clone(), t.len, t.mtime_ns));
+        }
+        Ok(Stamp {
+            scene: h.finalize().to_hex().to_string(),
+            manifest,
+            files: stamped,
+        })
+    }
+}
+
+/// The report of a bake of `scene` into `out` that has nothing to do: the folder's stamp is
+/// the one the last bake of this scene left, the manifest is as it left it, every source it
+/// read has the size and time it had, and every file the products' indexes list is there
+/// with its size. None: plan and bake (the stages then decide what is up to date).
+pub fn unchanged(scene: &Scene, out: &Path, how: &BakeOptions) -> Result<Option<BakeReport>> {
+    let Some(bytes) = crate::tileset::read_state_file(out, STAMP, 64 << 20) else {
+        return Ok(None);
+    };
+    let Ok(old) = serde_json::from_slice::<Stamp>(&bytes) else {
+        return Ok(None);
+    };
+    let files: Vec<PathBuf> = old.files.iter().map(|f| f.0.clone()).collect();
+    match Stamp::now(scene, how, out, &files) {
+        Ok(now) if now == old => {}
+        _ => return Ok(None),
+    }
+    let Ok(ts) = crate::manifest::Tileset::load(out) else {
+        return Ok(None);
+    };
+    for p in Product::ALL {
+        if p.recorded_key(&ts).is_none() {
+            continue;
+        }
+        let Ok(Some(ix)) = crate::tileset::Index::load(out, p.name()) else {
+            return Ok(None);
+        };
+        let all_there = ix.files.iter().all(|(rel, (len, _))| {
+            std::fs::metadata(out.join(rel)).is_ok_and(|m| m.is_file() && m.len() == *len)
+        });
+        if !all_there {
+            return Ok(None);
+        }
+    }
+    Ok(Some(BakeReport {
+        out: out.to_path_buf(),
+        unchanged: true,
+        stages: Vec::new(),
+        tile: None,
+        mip: None,
+        horizon: None,
+    }))
 }

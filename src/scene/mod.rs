@@ -163,7 +163,7 @@ struct FourierTable {
 // The scene as checked.
 
 /// A checked scene.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize)]
 pub struct Scene {
     /// The file it was read from ([`EMBEDDED_NAME`] for the embedded one); relative paths in it
     /// are relative to its folder.

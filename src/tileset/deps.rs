@@ -72,6 +72,17 @@ impl Recorder {
         }
     }
 
+    /// Run `f` without recording what it reads (on this thread, and tileset-wide): for a
+    /// read whose parts a unit records more finely itself.
+    pub fn paused<T>(&self, f: impl FnOnce() -> T) -> T {
+        let local = LOCAL.with(|l| l.borrow_mut().take());
+        let on = self.on.swap(false, Ordering::Relaxed);
+        let t = f();
+        self.on.store(on, Ordering::Relaxed);
+        LOCAL.with(|l| *l.borrow_mut() = local);
+        t
+    }
+
     /// Run `f`, a unit running on this thread alone, and return what it read.
     pub fn on_this_thread<T>(&self, f: impl FnOnce() -> T) -> (T, Vec<Dep>) {
         LOCAL.with(|l| *l.borrow_mut() = Some(BTreeSet::new()));

@@ -174,6 +174,29 @@ impl Product {
 
 pub use crate::format::{face_chunk_file_path, face_file_path, tile_path};
 
+/// A bookkeeping file of the tileset in `dir` (`.penumbra/<name>`, e.g. a scene's stamp) as
+/// stored, when it is there and reads back within `cap` bytes.
+pub fn read_state_file(dir: &Path, name: &str, cap: u64) -> Option<Vec<u8>> {
+    fsio::read_capped(
+        &dir.join(STATE_DIR).join(name),
+        cap,
+        "a tileset's bookkeeping file",
+    )
+    .ok()
+}
+
+/// The blake3 (hex) of the manifest of the tileset in `dir` as stored; None when there is
+/// none readable.
+pub fn manifest_hash(dir: &Path) -> Option<String> {
+    let bytes = fsio::read_capped(
+        &dir.join(MANIFEST),
+        crate::manifest::MAX_MANIFEST_BYTES,
+        "a tileset manifest",
+    )
+    .ok()?;
+    Some(blake3::hash(&bytes).to_hex().to_string())
+}
+
 /// Default byte budget of a store's height-tile cache.
 pub const DEFAULT_CACHE_BYTES: u64 = 1 << 30;
 

@@ -70,6 +70,33 @@ struct Plan {
 /// (`.penumbra/index/<product>.units.json`, [`crate::runner`]).
 pub const UNITS_SUFFIX: &str = ".units";
 
+/// The unit records of `product`'s last committed run (`.penumbra/index/<product>.units.json`)
+/// as stored, when there are any that read back within `cap` bytes.
+pub fn read_unit_records(dir: &std::path::Path, product: Product, cap: u64) -> Option<Vec<u8>> {
+    let p = records_path(dir, product);
+    crate::fsio::read_capped(&p, cap, "a stage's unit records").ok()
+}
+
+/// Stage `bytes` as `product`'s unit records in the staging folder `root` (the commit moves
+/// them in beside the product's index).
+pub fn stage_unit_records(
+    root: &std::path::Path,
+    product: Product,
+    bytes: &[u8],
+) -> crate::error::Result<()> {
+    use crate::error::IoContext;
+    let index = root.join("index");
+    std::fs::create_dir_all(&index).at(&index)?;
+    crate::fsio::write_atomic_bytes(
+        &index.join(format!("{}{}.json", product.name(), UNITS_SUFFIX)),
+        bytes,
+    )
+}
+
+fn records_path(dir: &std::path::Path, product: Product) -> std::path::PathBuf {
+    super::index::index_path(dir, &format!("{}{}", product.name(), UNITS_SUFFIX))
+}
+
 /// The exclusive writer of one tileset folder.
 pub struct Writer {
     dir: PathBuf,
@@ -228,6 +255,12 @@ impl Writer {
 
     fn state(&self) -> PathBuf {
         self.dir.join(STATE_DIR)
+    }
+
+    /// Write the bookkeeping file `.penumbra/<name>` (atomically; not a product file: a
+    /// scene's stamp).
+    pub fn write_state_file(&self, name: &str, bytes: &[u8]) -> Result<()> {
+        write_atomic_bytes(&self.state().join(name), bytes)
     }
 
     /// True when every file the index of `product` lists is present with its size.

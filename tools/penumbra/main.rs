@@ -768,15 +768,20 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
             output::print_bake(&report, t0.elapsed().as_secs_f64(), a.flags.json)?;
         }
         Command::Bake(a) if a.scene.is_some() || !legacy_bake => {
-            let plan = match &a.scene {
-                Some(p) => penumbra::scene::plan::plan_file(p)?,
-                None => penumbra::scene::plan::plan(&penumbra::scene::embedded())?,
+            let t0 = std::time::Instant::now();
+            let scene = match &a.scene {
+                Some(p) => penumbra::scene::load(p)?,
+                None => penumbra::scene::embedded(),
             };
             let how = penumbra::scene::bake::BakeOptions {
                 keep_partial: a.keep_partial,
                 prune: a.prune,
             };
-            let t0 = std::time::Instant::now();
+            if let Some(r) = penumbra::scene::bake::unchanged(&scene, &a.out, &how)? {
+                output::print_bake(&r, t0.elapsed().as_secs_f64(), a.flags.json)?;
+                return Ok(());
+            }
+            let plan = penumbra::scene::plan::plan(&scene)?;
             let report = penumbra::scene::bake::bake_scene(&plan, &a.out, &how, &progress)?;
             output::print_bake(&report, t0.elapsed().as_secs_f64(), a.flags.json)?;
         }

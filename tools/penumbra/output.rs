@@ -80,6 +80,13 @@ pub fn print_bake(r: &BakeReport, wall_s: f64, json: bool) -> Result<()> {
         return print_json(&v);
     }
     let mut out = std::io::stdout().lock();
+    if r.unchanged {
+        writeln!(
+            out,
+            "{}: up to date (nothing changed since this scene's last bake here)",
+            r.out.display()
+        )?;
+    }
     if let Some(t) = &r.tile {
         if t.up_to_date {
             writeln!(
