@@ -1,7 +1,7 @@
 //! Several DEMs tiled as one surface (`tiling::tile_sources`, issue 35): the finest source with
 //! data wins, feathered into the coarser one with no cliff at the border (a synthetic pair with
 //! a known answer, and LDEM_4 + the Shoemaker 5 m DEM), the mipmaps of the result, a wanted
-//! tile set, and sources of different bodies refused.
+//! tile set, the horizons across the seam, and sources of different bodies refused.
 
 use std::collections::{BTreeSet, HashMap};
 use std::path::Path;
@@ -200,6 +200,198 @@ fn feathered_seam_has_no_cliff() {
         hard_seam > steps_away + 0.5 * OFFSET_M,
         "the hard seam should fail the bound: {hard_seam} m"
     );
+}
+
+/// [`analytic`] with hills: 600 m ridges about 30 km apart, whose horizons rise several degrees
+/// (the analytic surface alone is flat to within 0.1° at 27 km).
+fn hilly(lat: f64, lon: f64) -> f32 {
+    let k = std::f64::consts::TAU;
+    (analytic(lat, lon) + 600.0 * (k * lon / 0.9).sin() * (k * lat / 1.1).cos()) as f32
+}
+
+/// [`hilly`] as a coarse (0.05°) source over 6° × 6°, raised by `raise` m, and a fine (0.01°)
+/// one over 1.6° × 1.6° inside it, with the borders of [`coarse`] and [`fine`].
+fn hilly_pair(raise: f64) -> (Dem, Dem) {
+    (
+        geographic_dem((17.0, 13.0), (120, 120), 0.05, "coarse", |_, _, la, lo| {
+            hilly(la, lo) + raise as f32
+        }),
+        geographic_dem((19.2, 10.8), (160, 160), 0.01, "fine", |_, _, la, lo| {
+            hilly(la, lo)
+        }),
+    )
+}
+
+/// Tile `id`'s context (`margin` pixels around it, as the horizon stage reads it from the
+/// tileset in `dir`) and its horizons at `a` azimuths (fast method, no far rings).
+fn tile_horizons(dir: &Path, id: TileId, margin: u64, a: usize) -> (Vec<f32>, Vec<f32>) {
+    let store = Store::open(dir).unwrap();
+    let (ctx, rect) = penumbra::horizon::context_for(&store, id, margin, None).unwrap();
+    let h = penumbra::horizon::horizons_far(&ctx, rect, a, penumbra::horizon::DEFAULT_NEAR_PX, &[]);
+    (ctx.heights, h)
+}
+
+/// The horizon stage sees one surface across a mosaic's seam: a fine source feathered into a
+/// coarse one of the same hilly terrain ([`hilly_pair`]), on the finest tile across the fine
+/// source's east border. Against the horizons of one source of that terrain at the fine
+/// resolution everywhere, the mosaic's are nowhere farther off than the coarse source's alone
+/// (plus 0.01°); and in the seam band (the feather and 0.05° beyond) no step between adjacent
+/// pixels' horizons is larger than the steps either source's own surface has there, plus the
+/// slope the feather's blend can add (twice the rasters' height difference over the feather's
+/// width). The same border as a hard seam over the coarse source raised by 500 m fails the
+/// step bound, so the check can fail. With `PENUMBRA_HORIZON_SEAM_PNG` set, writes the horizon
+/// elevation looking along the face's +x over the tile (the one source, the feathered mosaic,
+/// the hard seam).
+#[test]
+fn horizons_see_one_surface_across_the_seam() {
+    let ((coarse, fine), (raised, _)) = (hilly_pair(0.0), hilly_pair(OFFSET_M));
+    // The same terrain at the fine resolution over the coarse source's whole footprint.
+    let whole = geographic_dem((17.0, 13.0), (600, 600), 0.01, "whole", |_, _, la, lo| {
+        hilly(la, lo)
+    });
+    let feather = 16.0;
+    let base = TileOptions {
+        tile_size: 128,
+        ..Default::default()
+    };
+    let dirs: Vec<tempfile::TempDir> = (0..4).map(|_| tempfile::tempdir().unwrap()).collect();
+    let r = tile_mosaic(
+        &[(&fine, feather), (&coarse, 4.0)],
+        dirs[0].path(),
+        &base,
+        None,
+    )
+    .unwrap();
+    let opts = TileOptions {
+        levels: Some(r.levels),
+        ..base.clone()
+    };
+    tile_dem(&whole, &moon(), dirs[1].path(), &opts, None, &NoProgress).unwrap();
+    tile_mosaic(&[(&fine, 0.0), (&raised, 4.0)], dirs[2].path(), &opts, None).unwrap();
+    tile_dem(&coarse, &moon(), dirs[3].path(), &opts, None, &NoProgress).unwrap();
+    let layout = Tileset::load(dirs[0].path()).unwrap().layout;
+    let level = layout.levels - 1;
+    let px_m = layout.centre_pixel_m(level, moon().radius_m);
+    let id = layout
+        .locate(
+            level,
+            cube::latlon_to_dir(10f64.to_radians(), 20.8f64.to_radians()),
+        )
+        .tile;
+    let (a, margin, n) = (16, 128, layout.tile_size as usize);
+    let [(hm_ctx, hm), (h1_ctx, h1), (_, hh), (_, hc)] =
+        [0, 1, 2, 3].map(|k| tile_horizons(dirs[k].path(), id, margin, a));
+    for h in [&hm, &h1, &hh, &hc] {
+        assert!(h.iter().all(|v| v.is_finite()), "every pixel has data");
+    }
+    // The rasters' own height difference over the context, and the slope the feather's blend
+    // of it can add.
+    let dh = hm_ctx
+        .iter()
+        .zip(&h1_ctx)
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+        .map(|(x, y)| (x - y).abs() as f64)
+        .fold(0.0, f64::max);
+    let feather_m = feather * 0.01f64.to_radians() * moon().radius_m;
+    let blend = (2.0 * dh / feather_m).atan().to_degrees();
+    // Distance (degrees) of each pixel from the fine source's border (lat 9.2..10.8°N, lon
+    // 19.2..20.8°E), and the seam band: the feather and 0.05° beyond.
+    let border = |i: usize, j: usize| {
+        let (gx, gy) = (
+            id.x as i64 * n as i64 + i as i64,
+            id.y as i64 * n as i64 + j as i64,
+        );
+        let (la, lo) = latlon(&layout, level, id.face, gx, gy);
+        let dx = (lo - 19.2).abs().min((lo - 20.8).abs());
+        let dy = (la - 9.2).abs().min((la - 10.8).abs());
+        match ((19.2..=20.8).contains(&lo), (9.2..=10.8).contains(&la)) {
+            (true, true) => dx.min(dy),
+            (true, false) => dy,
+            (false, true) => dx,
+            (false, false) => dx.hypot(dy),
+        }
+    };
+    let band = feather * 0.01 + 0.05;
+    let (mut diff, mut diff_c) = (0f64, 0f64);
+    // Largest steps in the seam band: the mosaic, the one source, the coarse source, the hard
+    // seam; and the mosaic's away from the band.
+    let (mut seam, mut seam1, mut seam_c, mut hard, mut away) = (0f64, 0f64, 0f64, 0f64, 0f64);
+    let mut in_band = 0;
+    for j in 0..n {
+        for i in 0..n - 1 {
+            let near = border(i, j) < band || border(i + 1, j) < band;
+            in_band += usize::from(near);
+            for k in 0..a {
+                let at = |h: &[f32], i: usize| h[k * n * n + j * n + i] as f64;
+                let step = |h: &[f32]| (at(h, i + 1) - at(h, i)).abs();
+                diff = diff.max((at(&hm, i) - at(&h1, i)).abs());
+                diff_c = diff_c.max((at(&hc, i) - at(&h1, i)).abs());
+                if near {
+                    seam = seam.max(step(&hm));
+                    seam1 = seam1.max(step(&h1));
+                    seam_c = seam_c.max(step(&hc));
+                    hard = hard.max(step(&hh));
+                } else {
+                    away = away.max(step(&hm));
+                }
+            }
+        }
+    }
+    eprintln!(
+        "horizons across the seam (tile {id}, {px_m:.0} m pixels, heights differ by {dh:.1} m): \
+         {diff:.3}° from the one source's at most ({diff_c:.3}° for the coarse source alone); \
+         largest step in the seam band ({in_band} pixel pairs) {seam:.3}°, the one source's \
+         {seam1:.3}°, the coarse source's {seam_c:.3}°, {away:.3}° away from it, {hard:.2}° \
+         with a hard 500 m seam (blend allowance {blend:.3}°)"
+    );
+    assert!(in_band > 500, "{in_band} pixel pairs in the seam band");
+    assert!(
+        diff <= diff_c + 0.01,
+        "the mosaic's horizons are {diff}° off, the coarse source's {diff_c}°"
+    );
+    let bound = seam1.max(seam_c) + blend;
+    assert!(
+        seam <= bound,
+        "a step in the horizons at the seam: {seam}° against the sources' {seam1}°, {seam_c}°"
+    );
+    assert!(
+        hard > bound + 1.0,
+        "the hard seam should fail the step bound: {hard}°"
+    );
+
+    if let Some(png) = std::env::var_os("PENUMBRA_HORIZON_SEAM_PNG") {
+        // Azimuth 0 looks along the face's +x, across the border; grey from the lowest to the
+        // highest of the one source's and the mosaic's maps (the hard seam's cliff saturates).
+        let maps = [&h1, &hm, &hh].map(|h| &h[..n * n]);
+        let (lo, hi) = maps[..2]
+            .iter()
+            .flat_map(|m| m.iter())
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+                (lo.min(v), hi.max(v))
+            });
+        let gap = 4;
+        let mut img =
+            image::GrayImage::from_pixel((3 * n + 2 * gap) as u32, n as u32, image::Luma([255]));
+        for (p, m) in maps.iter().enumerate() {
+            for y in 0..n {
+                for x in 0..n {
+                    let v = ((m[y * n + x] - lo) / (hi - lo) * 255.0).clamp(0.0, 255.0) as u8;
+                    img.put_pixel((p * (n + gap) + x) as u32, y as u32, image::Luma([v]));
+                }
+            }
+        }
+        let img = image::imageops::resize(
+            &img,
+            img.width() * 2,
+            img.height() * 2,
+            image::imageops::FilterType::Nearest,
+        );
+        img.save(Path::new(&png)).unwrap();
+        eprintln!(
+            "wrote {} (tile {id}, horizon elevation {lo:.2}°..{hi:.2}° looking along +x)",
+            Path::new(&png).display()
+        );
+    }
 }
 
 /// One source through `tile_sources` is `tile_dem`: the same files, bytes and manifest,

@@ -6,6 +6,7 @@
 //! bakes when given none.
 
 pub mod bake;
+pub mod cost;
 pub mod plan;
 
 use std::path::{Path, PathBuf};

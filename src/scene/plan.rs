@@ -12,6 +12,7 @@ use std::path::Path;
 use rayon::prelude::*;
 use serde::Serialize;
 
+use super::cost::{self, HorizonWork, WorkInputs};
 use super::{Finest, RegionShape, RegionSpec, Scene, SourceKind, SunSpec, PRODUCTS};
 use crate::body::Body;
 use crate::cube;
@@ -72,15 +73,29 @@ impl Rule {
     }
 }
 
-/// Per-tile CPU rates the estimates use (core-seconds), with where they come from.
+/// CPU rates the estimates use (core-nanoseconds), with where they come from.
+///
+/// Tiling and mipmaps cost a rate per stored pixel. The horizons (fast method) cost a sum of
+/// four terms per azimuth, over the quantities [`super::cost::HorizonWork`] counts for each
+/// tile: every interior pixel (degrees, the zero-distance slope, the Fourier sink's input),
+/// every pixel with data (its exact near field and the exact search of the sweep's guesses),
+/// every line sample the sweeps visit (the full-resolution context and the far rings: a tile's
+/// context grows with the body's relief in pixels of its level, not with its pixel count), and
+/// every pixel raised to a far ring.
 #[derive(Clone, Debug, Serialize)]
 pub struct Rates {
     /// Tiling, per stored height pixel (halo included), per source sampled.
     pub tile_ns_per_px: f64,
     /// Both mipmaps, per stored height pixel.
     pub mip_ns_per_px: f64,
-    /// Horizons (fast method), per interior pixel and azimuth.
+    /// Horizons, per interior pixel and azimuth.
     pub horizon_ns_per_px_az: f64,
+    /// Horizons, per interior pixel with data and azimuth.
+    pub horizon_ns_per_data_px_az: f64,
+    /// Horizons, per line sample swept (contexts and far rings) and azimuth.
+    pub horizon_ns_per_sample_az: f64,
+    /// Horizons, per interior pixel, far ring and azimuth.
+    pub horizon_ns_per_ring_px_az: f64,
     /// Fourier encoding, per interior pixel and azimuth.
     pub fourier_ns_per_px_az: f64,
     pub source: &'static str,
@@ -91,14 +106,32 @@ impl Default for Rates {
         Rates {
             tile_ns_per_px: 300.0,
             mip_ns_per_px: 100.0,
-            horizon_ns_per_px_az: 450.0,
+            horizon_ns_per_px_az: 20.0,
+            horizon_ns_per_data_px_az: 400.0,
+            horizon_ns_per_sample_az: 25.0,
+            horizon_ns_per_ring_px_az: 43.0,
             fourier_ns_per_px_az: 6.0,
-            source: "core-ns per pixel: horizons the fast method's 393–479 per pixel·azimuth on \
-                     real DEMs (docs/benchmarks.md); tiling and mipmaps from this machine's \
-                     bakes, 2026-12-05. Horizon cost varies with the terrain: measured 135 \
-                     (synthetic scene) to 1042 (Shoemaker descent) (docs/scenes.md, \
-                     \"Estimates\")",
+            source: "core-ns; horizons (fast method): each term's functions' share of a perf \
+                     profile of a bake on this 2-core machine, 2026-12-05, over the quantities \
+                     the plan counts: per line sample swept 18-37 (sweeps), per pixel with \
+                     data 280-510 (near field, exact search: it varies with the terrain), per \
+                     pixel raised to a far ring 43, per pixel 6-25; the rates are the middle \
+                     of the ranges over the embedded, Shoemaker descent and equatorial scenes \
+                     (docs/scenes.md, \"Plan against bake: CPU time\"); tiling and mipmaps \
+                     from this machine's bakes",
         }
+    }
+}
+
+impl Rates {
+    /// Core-seconds of the horizons of `work` at `az` azimuths (fast method).
+    pub fn horizon_core_s(&self, work: &HorizonWork, az: u64) -> f64 {
+        (work.px * self.horizon_ns_per_px_az
+            + work.data_px * self.horizon_ns_per_data_px_az
+            + (work.context_samples + work.ring_samples) * self.horizon_ns_per_sample_az
+            + work.ring_px * self.horizon_ns_per_ring_px_az)
+            * az as f64
+            * 1e-9
     }
 }
 
@@ -141,12 +174,6 @@ pub struct LeftOut {
     pub cpu_s_est: f64,
 }
 
-/// Core-seconds of the horizons of one tile of `layout` at `az` azimuths (fast method).
-fn horizon_core_s(rates: &Rates, layout: &Layout, az: u64) -> f64 {
-    let n = layout.tile_size as f64;
-    n * n * az as f64 * rates.horizon_ns_per_px_az * 1e-9
-}
-
 /// A scene's plan.
 pub struct Plan {
     pub scene: Scene,
@@ -179,6 +206,8 @@ pub struct Plan {
     /// this plan's heights and mipmaps); None: decided by the horizon stage after the mipmaps.
     pub pruned: Option<BTreeSet<TileId>>,
     pub rates: Rates,
+    /// The horizon stage's work the estimate prices (per azimuth, over the horizon tiles).
+    pub horizon_work: HorizonWork,
 }
 
 /// What `penumbra plan --json` prints.
@@ -204,6 +233,7 @@ pub struct PlanReport<'a> {
     /// decides after the mipmaps.
     pub pruned_tiles: Option<BTreeMap<u8, u64>>,
     pub rates: &'a Rates,
+    pub horizon_work: &'a HorizonWork,
 }
 
 #[derive(Serialize)]
@@ -480,6 +510,26 @@ pub fn plan(scene: &Scene) -> Result<Plan> {
     }
 
     let rates = Rates::default();
+    // The horizon stage's work over the horizon tiles, counted as it lays out its rasters.
+    let work = if wants_horizons {
+        let shifted: Vec<(&Dem, f64)> = sources
+            .iter()
+            .map(|s| (&s.dem, s.dem.datum_radius_m().map_or(0.0, |r0| r0 - radius)))
+            .collect();
+        let defaults = crate::horizon::HorizonOptions::default();
+        let inputs = WorkInputs {
+            layout: &layout,
+            radius_m: radius,
+            range: cost::terrain_range(&shifted).unwrap_or(body.relief_m),
+            sources: shifted,
+            fine_margin_px: crate::horizon::default_fine_margin_px(layout.tile_size),
+            max_margin_px: defaults.max_margin_px,
+            far_rings: scene.horizon.method.sees_far_rings(),
+        };
+        cost::horizon_work(&inputs, &horizon_tiles, &present)
+    } else {
+        HorizonWork::default()
+    };
     let side = layout.stored_size() as u64;
     let n = layout.tile_size as u64;
     let az = scene.horizon.azimuths as u64;
@@ -498,6 +548,24 @@ pub fn plan(scene: &Scene) -> Result<Plan> {
             .map_or(1.0, |(_, r)| *r);
         (raw as f64 * r) as u64
     };
+    let horizon_tile_s = if work.tiles > 0.0 {
+        rates.horizon_core_s(&work, az) / work.tiles
+    } else {
+        let px = (n * n) as f64;
+        let fine = crate::horizon::default_fine_margin_px(layout.tile_size) as i64;
+        let nn = n as i64;
+        let one = HorizonWork {
+            tiles: 1.0,
+            px,
+            data_px: px,
+            context_samples: cost::line_samples(
+                (-fine, -fine, nn + fine, nn + fine),
+                (0, 0, nn, nn),
+            ),
+            ..Default::default()
+        };
+        rates.horizon_core_s(&one, az)
+    };
     // Raw bytes and core-seconds per tile of each product.
     let k = scene.fourier.coefficients as u64;
     let cost = |p: Product| -> (u64, f64) {
@@ -514,7 +582,9 @@ pub fn plan(scene: &Scene) -> Result<Plan> {
                 side as f64 * side as f64 * rates.mip_ns_per_px * 1e-9,
             ),
             // f16 per pixel and azimuth.
-            Product::Horizon => (n * n * az * 2, horizon_core_s(&rates, &layout, az)),
+            // The mean of the horizon tiles' work (a tile of the same size with data in
+            // every pixel and no far rings where there are none).
+            Product::Horizon => (n * n * az * 2, horizon_tile_s),
             // The multires pyramid: 4/3 · K bytes per pixel (K f16 coefficients, reduced
             // groups), measured 21.27 B/px at K = 16 against 21.33.
             Product::Fourier => (
@@ -695,6 +765,7 @@ pub fn plan(scene: &Scene) -> Result<Plan> {
         lit_above_deg,
         pruned: None,
         rates,
+        horizon_work: work,
     })
 }
 
@@ -871,6 +942,7 @@ impl Plan {
                 m
             }),
             rates: &self.rates,
+            horizon_work: &self.horizon_work,
         }
     }
 }
@@ -1286,4 +1358,81 @@ fn sun_limits(
 /// Read and plan the scene file at `path`.
 pub fn plan_file(path: &Path) -> Result<Plan> {
     plan(&super::load(path)?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::cost::terrain_range;
+
+    /// A scene of the embedded terrain (512² px at 20 m around the south pole, which lies at
+    /// the corner of four tiles of every level) with horizons at `level`.
+    fn small_plan(level: u8) -> Plan {
+        let text = format!(
+            "[scene]\nname = \"t\"\nbody = \"moon\"\n\n[layout]\ntile_size = 128\n\n\
+             [[source]]\nembedded = \"south-pole\"\nsize = 512\n\n[[region]]\nname = \"all\"\n\
+             body = true\n\n[renderer]\nmethods = [\"dp\", \"fourier\"]\n\n[horizon]\n\
+             levels = [{level}]\nazimuths = 16\n"
+        );
+        let scene = crate::scene::parse(&text, Path::new("t.toml")).unwrap();
+        plan(&scene).unwrap()
+    }
+
+    #[test]
+    fn data_pixels_are_the_sources_footprint() {
+        // Level 9's centre pixel is 53 m: the 10.24 km terrain covers about 193² pixels of the
+        // four tiles around the pole.
+        let plan = small_plan(9);
+        let w = plan.horizon_work;
+        let side = 512.0 * 20.0 / plan.layout.centre_pixel_m(9, plan.body.radius_m);
+        assert_eq!(w.tiles, 4.0);
+        assert_eq!(w.px, 4.0 * 128.0 * 128.0);
+        assert!(
+            (w.data_px / (side * side) - 1.0).abs() < 0.1,
+            "{} data pixels against {}",
+            w.data_px,
+            side * side
+        );
+        assert!(w.context_samples > 0.0);
+    }
+
+    #[test]
+    fn far_rings_count_only_where_they_hold_terrain() {
+        let plan = small_plan(9);
+        let shifted: Vec<(&Dem, f64)> = plan.sources.iter().map(|s| (&s.dem, 0.0)).collect();
+        let tiles: BTreeSet<TileId> = plan
+            .tiles
+            .iter()
+            .filter(|t| t.level == 9)
+            .copied()
+            .collect();
+        let inputs = |fine_margin_px| WorkInputs {
+            layout: &plan.layout,
+            radius_m: plan.body.radius_m,
+            sources: shifted.clone(),
+            range: terrain_range(&shifted).unwrap(),
+            fine_margin_px,
+            max_margin_px: 4096,
+            far_rings: true,
+        };
+        // The default margin holds the whole terrain: rings are planned but hold none.
+        let wide = cost::horizon_work(&inputs(1024), &tiles, &plan.tiles);
+        assert_eq!((wide.ring_px, wide.ring_samples), (0.0, 0.0));
+        // A 16-px margin leaves most of it to the rings: each tile is raised to at least one.
+        let narrow = cost::horizon_work(&inputs(16), &tiles, &plan.tiles);
+        assert!(narrow.ring_px >= narrow.px, "{narrow:?}");
+        assert!(narrow.ring_samples > 0.0);
+        assert!(narrow.context_samples < wide.context_samples);
+        // Without far rings the narrow margin is not applied.
+        let none = cost::horizon_work(
+            &WorkInputs {
+                far_rings: false,
+                ..inputs(16)
+            },
+            &tiles,
+            &plan.tiles,
+        );
+        assert_eq!(none.ring_px, 0.0);
+        assert_eq!(none.context_samples, wide.context_samples);
+    }
 }
