@@ -403,6 +403,9 @@ struct UnitRecords {
     units: std::collections::BTreeMap<String, UnitRecord>,
 }
 
+/// A unit done here: its report to the finish and its record.
+type UnitResult<D> = Result<(D, UnitRecord)>;
+
 /// Largest unit-records file read (a record is a few hundred bytes; 10⁶ units).
 const MAX_UNIT_RECORDS_BYTES: u64 = 1 << 30;
 
@@ -602,7 +605,7 @@ pub fn execute<S: Stage>(
         progress,
     };
     let order = stage.order();
-    let one = |i: usize, scratch: &mut S::Scratch| -> Result<(S::Done, UnitRecord)> {
+    let one = |i: usize, scratch: &mut S::Scratch| -> UnitResult<S::Done> {
         let unit = || stage.run_unit(&cx, &units[i], scratch);
         let (d, deps) = match order {
             Order::Parallel => store.deps().on_this_thread(unit),
@@ -619,7 +622,7 @@ pub fn execute<S: Stage>(
         Ok((d, record))
     };
     progress.start(spec.name, todo.len() as u64);
-    let results: Vec<(usize, Result<(S::Done, UnitRecord)>)> = match order {
+    let results: Vec<(usize, UnitResult<S::Done>)> = match order {
         Order::Parallel => todo
             .par_iter()
             .map_init(|| stage.scratch(&plan), |s, &i| (i, one(i, s)))
