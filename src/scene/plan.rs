@@ -135,7 +135,8 @@ impl Rates {
     }
 }
 
-/// Bytes on disk per byte before compression of the height and mip products, the larger of
+/// Bytes on disk per byte before compression where no sample of tiles measures them
+/// ([`sampled_tile_bytes`] does for heights and mipmaps when the plan has tiles): the larger of
 /// those measured on the embedded scene's bake (smooth synthetic terrain: height 0.37, mip 0.25)
 /// and the Shoemaker descent scene's (LDEM_4 tiles oversampled 2–4×, whose f32 mantissas are
 /// noise to deflate: height 0.83, mip 0.79), 2026-12-05: an estimate from the safe side. The
@@ -541,7 +542,18 @@ pub fn plan(scene: &Scene) -> Result<Plan> {
         m
     };
     let count = |m: &BTreeMap<u8, u64>| m.values().sum::<u64>();
-    let disk = |p: Product, raw: u64| {
+    // Heights and mipmaps on disk: a sample of the tiles rendered and encoded as the bake
+    // does, their mean size per tile; the measured ratios where there is no sample.
+    let sampled = sampled_tile_bytes(&sources, &layout, &present);
+    let disk = |p: Product, raw: u64, tiles: u64| {
+        let per_tile = match (p, sampled) {
+            (Product::Height, Some((h, _))) => Some(h),
+            (Product::Mip, Some((_, m))) => Some(m),
+            _ => None,
+        };
+        if let Some(b) = per_tile {
+            return (tiles as f64 * b).round() as u64;
+        }
         let r = DISK_RATIO
             .iter()
             .find(|(q, _)| *q == p)
@@ -624,9 +636,9 @@ pub fn plan(scene: &Scene) -> Result<Plan> {
                     product: p.name(),
                     made,
                     why: why.clone(),
+                    disk_bytes_est: disk(p, raw, count(&tiles)),
                     tiles,
                     raw_bytes: raw,
-                    disk_bytes_est: disk(p, raw),
                     cpu_s_est: if p == Product::Horizon && needed.contains_key(&Product::Fourier) {
                         0.0
                     } else {
@@ -1214,6 +1226,92 @@ fn shape_of(s: &RegionShape) -> region::Shape {
         },
         RegionShape::Path { .. } => unreachable!("camera paths are walked by the LOD rule"),
     }
+}
+
+/// Most tiles [`sampled_tile_bytes`] renders and encodes.
+const SAMPLE_TILES: usize = 8;
+
+/// The mean bytes on disk of a height tile and of a tile's two mipmap files (maximum, and
+/// minimum and maximum), measured on up to [`SAMPLE_TILES`] of `tiles` evenly spread over
+/// them (coarse to fine), each rendered from the first source with data there as the tiling
+/// stage renders it and encoded as the stages write it (default compression and precision).
+/// None for no tiles.
+fn sampled_tile_bytes(
+    sources: &[PlannedSource],
+    layout: &Layout,
+    tiles: &BTreeSet<TileId>,
+) -> Option<(f64, f64)> {
+    use crate::format::{height, mip as mipfmt, Identity};
+    if tiles.is_empty() {
+        return None;
+    }
+    let all: Vec<TileId> = tiles.iter().copied().collect();
+    let step = all.len().div_ceil(SAMPLE_TILES).max(1);
+    let picked: Vec<TileId> = all.iter().copied().step_by(step).collect();
+    let (h, n, s) = (
+        layout.halo as usize,
+        layout.tile_size as usize,
+        layout.stored_size(),
+    );
+    let key = "0".repeat(64);
+    let mip = crate::mip::MipOptions::default();
+    let sizes: Vec<(f64, f64)> = picked
+        .par_iter()
+        .filter_map(|&id| {
+            let tile = sources.iter().find_map(|src| {
+                let t = crate::tiling::render_height_tile(
+                    &src.dem,
+                    layout,
+                    id,
+                    dem::Resampling::Bilinear,
+                    crate::tiling::Prefilter::Box,
+                    0.0,
+                );
+                (h..h + n)
+                    .any(|j| {
+                        t.mask[j * s + h..j * s + h + n]
+                            .iter()
+                            .any(|&m| m != mask::NO_DATA)
+                    })
+                    .then_some(t)
+            })?;
+            let hb = height::encode_height_tile_identified(
+                &tile,
+                crate::format::TileCompression::Zip,
+                crate::exrcodec::ZipLevel::HEIGHT_TILE,
+                Some(&Identity::tile(height::ID, id, &key)),
+            )
+            .ok()?;
+            let p = crate::mip::minmax_pyramid(&tile.height, s, h).ok()?;
+            let mut mb = 0usize;
+            for (min, name, what) in [
+                (None, "penumbra-maxmip", mipfmt::MAX_ID),
+                (Some(&p.min[..]), "penumbra-minmax", mipfmt::MINMAX_ID),
+            ] {
+                mb += mipfmt::encode_mip_exr_identified(
+                    n,
+                    min,
+                    &p.max,
+                    mip.precision,
+                    mip.compression,
+                    crate::exrcodec::ZipLevel::DEFAULT,
+                    name,
+                    Some(&Identity::tile(what, id, &key)),
+                )
+                .ok()?
+                .len();
+            }
+            Some((hb.len() as f64, mb as f64))
+        })
+        .collect();
+    if sizes.is_empty() {
+        return None;
+    }
+    let k = sizes.len() as f64;
+    Some((
+        sizes.iter().map(|x| x.0).sum::<f64>() / k,
+        sizes.iter().map(|x| x.1).sum::<f64>() / k,
+    ))
 }
 
 /// Split `wanted` into the tiles with data in their interior on some source (the tiling stage
