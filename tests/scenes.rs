@@ -553,4 +553,33 @@ fn adding_a_region_redoes_only_what_it_changes() {
     for (rel, (_, bytes)) in &pruned {
         assert!(only_a[rel].1 == *bytes, "{rel} differs after --prune");
     }
+
+    // A scene whose methods read the heights only keeps the other scene's products, unless
+    // pruned: then the folder is its own clean bake.
+    let heights = write(
+        tmp.path(),
+        "h.toml",
+        &base.replace("methods = [\"dp\", \"fourier\"]", "methods = [\"uniform\"]"),
+    );
+    bake_scene(&heights, &inc, &[]);
+    assert_eq!(
+        files_of(&inc).len(),
+        pruned.len(),
+        "another scene's products went"
+    );
+    bake_scene(&heights, &inc, &["--prune"]);
+    let only_h = tmp.path().join("only-h");
+    bake_scene(&heights, &only_h, &[]);
+    let (got, want) = (files_of(&inc), files_of(&only_h));
+    assert_eq!(
+        got.keys().collect::<Vec<_>>(),
+        want.keys().collect::<Vec<_>>(),
+        "--prune kept products the scene does not make"
+    );
+    for (rel, (_, bytes)) in &got {
+        assert!(
+            want[rel].1 == *bytes,
+            "{rel} differs after pruning products"
+        );
+    }
 }

@@ -118,7 +118,16 @@ pub fn bake_scene(
         .flat_map(|s| s.dem.sources().iter().cloned())
         .collect();
     files.extend(plan.scene.albedo.iter().map(|a| a.path.clone()));
-    let writer = Writer::begin(out)?;
+    let mut writer = Writer::begin(out)?;
+    if how.prune {
+        // Exactly the plan: products an earlier bake of another scene made go too.
+        let ts = crate::manifest::Tileset::load(out)?;
+        let extra: Vec<Product> = [Product::Mip, Product::Horizon, Product::Fourier]
+            .into_iter()
+            .filter(|p| p.recorded_key(&ts).is_some() && !plan.makes(*p))
+            .collect();
+        writer.drop_products(&extra, ts)?;
+    }
     let stamp = Stamp::now(&plan.scene, how, out, &files)?;
     writer.write_state_file(
         STAMP,

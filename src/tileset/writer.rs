@@ -454,6 +454,45 @@ impl Writer {
         Ok(())
     }
 
+    /// Remove `products` from the tileset (their folders, indexes, unit records and manifest
+    /// entries), nothing else: `manifest` is the tileset's manifest as it is. Crash-safe as a
+    /// commit is (a kill is finished by the next writer).
+    pub fn drop_products(&mut self, products: &[Product], mut manifest: Tileset) -> Result<()> {
+        if products.is_empty() {
+            return Ok(());
+        }
+        let staging = self.stage("drop", "drop")?;
+        let mut removes = Vec::new();
+        let mut indexes = Vec::new();
+        for p in products {
+            p.clear(&mut manifest);
+            removes.extend(p.dirs().iter().map(|d| d.to_string()));
+            indexes.push(p.name().to_string());
+            indexes.push(format!("{}{UNITS_SUFFIX}", p.name()));
+        }
+        let json = serde_json::to_string_pretty(&manifest).expect("manifest serialises");
+        write_atomic_bytes(&staging.root.join(MANIFEST), json.as_bytes())?;
+        let plan = Plan {
+            staging: staging
+                .root
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            moves: Vec::new(),
+            removes,
+            indexes,
+        };
+        let plan_path = self.state().join(PLAN);
+        write_atomic_bytes(
+            &plan_path,
+            &serde_json::to_vec(&plan).expect("plan serialises"),
+        )?;
+        self.apply(&plan_path)?;
+        self.committed = true;
+        self.staging = None;
+        Ok(())
+    }
+
     /// Carry out a written commit plan; every step can be repeated after a kill.
     fn apply(&self, plan_path: &Path) -> Result<()> {
         let bytes = fsio::read_capped(plan_path, 1 << 20, "a commit plan")?;
