@@ -274,7 +274,16 @@ pub(crate) fn margin_for(ts: &Tileset, id: TileId, rad: f64, cap: u64) -> Reach 
 /// Bounding box (global pixels of `face` at `level`, half-open) of every tile of the level
 /// projected onto `face`'s plane, or None when none projects there.
 pub(crate) fn coverage_box(ts: &Tileset, level: u8, face: Face) -> Option<(i64, i64, i64, i64)> {
-    let lay = ts.layout;
+    coverage_box_of(&ts.layout, &ts.tile_set(), level, face)
+}
+
+/// [`coverage_box`] of the tiles `all` (those of other levels ignored) on `lay`.
+pub(crate) fn coverage_box_of(
+    lay: &crate::layout::Layout,
+    all: &std::collections::BTreeSet<TileId>,
+    level: u8,
+    face: Face,
+) -> Option<PxBox> {
     let s = lay.face_pixels(level) as f64;
     let n = lay.tile_size as i64;
     let mut bx = (i64::MAX, i64::MAX, i64::MIN, i64::MIN);
@@ -284,7 +293,7 @@ pub(crate) fn coverage_box(ts: &Tileset, level: u8, face: Face) -> Option<(i64, 
         bx.2 = bx.2.max(x);
         bx.3 = bx.3.max(y);
     };
-    for id in ts.tile_set().into_iter().filter(|t| t.level == level) {
+    for &id in all.iter().filter(|t| t.level == level) {
         if id.face == face {
             let (x, y) = (id.x as i64 * n, id.y as i64 * n);
             grow(x, y);
@@ -375,10 +384,50 @@ pub(crate) fn far_rings(
     covers: &mut Covers,
 ) -> Vec<RingSpec> {
     let ts = src.manifest();
-    let n = ts.layout.tile_size as i64;
-    let (tx, ty) = (id.x as i64 * n, id.y as i64 * n);
     let mut rings = Vec::new();
     let mut prev = fine;
+    for r in ring_steps(id, ts.layout.tile_size, fine_margin, needed_px, ring_px) {
+        let cover = *covers
+            .entry((r.level, id.face))
+            .or_insert_with(|| coverage_box(ts, r.level, id.face));
+        let win = window(src, r.level, id.face, r.foot, r.margin, cover);
+        rings.push(RingSpec {
+            level: r.level,
+            face: id.face,
+            foot: r.foot,
+            win,
+            prev,
+            factor: r.factor,
+        });
+        prev = win;
+    }
+    rings
+}
+
+/// One far ring of a tile before its window is clipped to the level's coverage.
+pub(crate) struct RingStep {
+    pub level: u8,
+    /// Pixels of the tile's level per pixel of the ring's.
+    pub factor: u32,
+    /// The tile's footprint in global pixels of the ring's level.
+    pub foot: PxBox,
+    /// Ring pixels around the footprint.
+    pub margin: i64,
+}
+
+/// The far rings of tile `id` (`tile_size` pixels a side) beyond its `fine_margin` pixels out
+/// to `needed_px` (pixels of its level), `ring_px` ring pixels each (level 0 takes whatever
+/// reach is left): what [`far_rings`] builds and the plan's cost model counts.
+pub(crate) fn ring_steps(
+    id: TileId,
+    tile_size: u32,
+    fine_margin: u64,
+    needed_px: u64,
+    ring_px: u64,
+) -> Vec<RingStep> {
+    let n = i64::from(tile_size);
+    let (tx, ty) = (id.x as i64 * n, id.y as i64 * n);
+    let mut steps = Vec::new();
     // Reach of the windows so far (before clipping), in pixels of the tile's level.
     let mut reach = fine_margin;
     let mut k = 0u32;
@@ -394,22 +443,15 @@ pub(crate) fn far_rings(
         );
         let rest = needed_px.div_ceil(f as u64);
         let margin = if level == 0 { rest } else { rest.min(ring_px) } as i64;
-        let cover = *covers
-            .entry((level, id.face))
-            .or_insert_with(|| coverage_box(ts, level, id.face));
-        let win = window(src, level, id.face, foot, margin, cover);
         reach = reach.max((margin * f) as u64);
-        rings.push(RingSpec {
+        steps.push(RingStep {
             level,
-            face: id.face,
-            foot,
-            win,
-            prev,
             factor: 1 << k,
+            foot,
+            margin,
         });
-        prev = win;
     }
-    rings
+    steps
 }
 
 /// The rasters tile `id`'s horizons are computed over with `method`: the context `reach`
@@ -656,7 +698,7 @@ fn window(
     margin: i64,
     cover: Option<(i64, i64, i64, i64)>,
 ) -> (i64, i64, i64, i64) {
-    let w = window_in(src, level, foot, margin, cover);
+    let w = window_on(&src.manifest().layout, level, foot, margin, cover);
     // The window depends on the level's coverage (the cover): a unit reading it is redone
     // when its window would differ ([`HorizonStage`]'s `revalue`).
     if cover.is_some() && src.deps().active() {
@@ -675,15 +717,15 @@ fn window(
     w
 }
 
-/// [`window`] itself, not recorded.
-fn window_in(
-    src: &Store,
+/// [`window`] itself on `lay`, not recorded.
+pub(crate) fn window_on(
+    lay: &crate::layout::Layout,
     level: u8,
-    foot: (i64, i64, i64, i64),
+    foot: PxBox,
     margin: i64,
-    cover: Option<(i64, i64, i64, i64)>,
-) -> (i64, i64, i64, i64) {
-    let s = src.manifest().layout.face_pixels(level) as i64;
+    cover: Option<PxBox>,
+) -> PxBox {
+    let s = lay.face_pixels(level) as i64;
     let (fx0, fy0, fx1, fy1) = foot;
     let (mut x0, mut y0, mut x1, mut y1) = (fx0 - margin, fy0 - margin, fx1 + margin, fy1 + margin);
     if let Some((bx0, by0, bx1, by1)) = cover {
@@ -1390,7 +1432,7 @@ impl Stage for HorizonStage<'_> {
             .entry((level, face))
             .or_insert_with(|| coverage_box(store.manifest(), level, face));
         cover?;
-        let w = window_in(store, level, foot, margin, cover);
+        let w = window_on(&store.manifest().layout, level, foot, margin, cover);
         Some(format!("{} {} {} {}", w.0, w.1, w.2, w.3))
     }
 

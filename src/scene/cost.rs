@@ -15,10 +15,9 @@ use serde::Serialize;
 
 use crate::cube::{self, Face};
 use crate::dem::{mask, Dem, Resampling};
+use crate::horizon::stage::{coverage_box_of, ring_steps, window_on};
 use crate::layout::{Layout, TileId};
 
-/// Largest |u|, |v| a horizon context reaches on a face's extended plane (as the stage).
-const PLANE_LIMIT: f64 = 3.0;
 /// Interior points per tile side sampled for its data fraction and highest point.
 const GRID: i64 = 32;
 /// Plane azimuths over which the line samples are averaged.
@@ -160,40 +159,22 @@ pub fn tile_work(
     let (tx, ty) = (i64::from(id.x) * n, i64::from(id.y) * n);
     let cover = *covers
         .entry((id.level, id.face))
-        .or_insert_with(|| coverage_box(lay, all, id.level, id.face));
-    let win = window(lay, id.level, (tx, ty, tx + n, ty + n), fine as i64, cover);
+        .or_insert_with(|| coverage_box_of(&lay, all, id.level, id.face));
+    let win = window_on(&lay, id.level, (tx, ty, tx + n, ty + n), fine as i64, cover);
     work.context_samples = line_samples(win, (tx, ty, tx + n, ty + n));
     if !(inp.far_rings && fine < needed) {
         return work;
     }
     // The far rings, as `horizon::stage::far_rings` plans them.
     let mut prev = win;
-    let mut reach = inp.fine_margin_px;
-    let mut k = 0u32;
-    while reach < needed && k < u32::from(id.level) {
-        k += 1;
-        let level = id.level - k as u8;
-        let f = 1i64 << k;
-        let foot = (
-            tx.div_euclid(f),
-            ty.div_euclid(f),
-            (tx + n + f - 1).div_euclid(f),
-            (ty + n + f - 1).div_euclid(f),
-        );
-        let rest = needed.div_ceil(f as u64);
-        let m = if level == 0 {
-            rest
-        } else {
-            rest.min(inp.fine_margin_px)
-        } as i64;
+    for r in ring_steps(id, lay.tile_size, fine, needed, inp.fine_margin_px) {
         let cover = *covers
-            .entry((level, id.face))
-            .or_insert_with(|| coverage_box(lay, all, level, id.face));
-        let rwin = window(lay, level, foot, m, cover);
-        reach = reach.max((m * f) as u64);
+            .entry((r.level, id.face))
+            .or_insert_with(|| coverage_box_of(&lay, all, r.level, id.face));
+        let rwin = window_on(&lay, r.level, r.foot, r.margin, cover);
         // A ring with no terrain beyond what the finer window holds is not built.
-        if ring_has_terrain(inp, level, id.face, rwin, prev) {
-            work.ring_samples += line_samples(rwin, foot);
+        if ring_has_terrain(inp, r.level, id.face, rwin, prev) {
+            work.ring_samples += line_samples(rwin, r.foot);
             work.ring_px += px;
         }
         prev = rwin;
@@ -233,59 +214,6 @@ fn ring_has_terrain(inp: &WorkInputs, level: u8, face: Face, win: PxBox, prev: P
         }
     }
     false
-}
-
-/// The window (global pixels of `level`) `margin` pixels around `foot`, clipped to the
-/// coverage box `cover` (never into the footprint) and to the face plane's usable part: the
-/// horizon stage's `window`.
-fn window(lay: &Layout, level: u8, foot: PxBox, margin: i64, cover: Option<PxBox>) -> PxBox {
-    let s = lay.face_pixels(level) as i64;
-    let (fx0, fy0, fx1, fy1) = foot;
-    let (mut x0, mut y0, mut x1, mut y1) = (fx0 - margin, fy0 - margin, fx1 + margin, fy1 + margin);
-    if let Some((bx0, by0, bx1, by1)) = cover {
-        x0 = x0.max(bx0.min(fx0));
-        y0 = y0.max(by0.min(fy0));
-        x1 = x1.min(bx1.max(fx1));
-        y1 = y1.min(by1.max(fy1));
-    }
-    let lim = ((PLANE_LIMIT - 1.0) / 2.0 * s as f64) as i64;
-    (x0.max(-lim), y0.max(-lim), x1.min(s + lim), y1.min(s + lim))
-}
-
-/// Bounding box (global pixels of `face` at `level`) of every tile of `all` at `level`
-/// projected onto `face`'s plane: the horizon stage's `coverage_box`.
-fn coverage_box(lay: &Layout, all: &BTreeSet<TileId>, level: u8, face: Face) -> Option<PxBox> {
-    let s = lay.face_pixels(level) as f64;
-    let n = lay.tile_size as i64;
-    let mut bx = (i64::MAX, i64::MAX, i64::MIN, i64::MIN);
-    let mut grow = |x: i64, y: i64| {
-        bx.0 = bx.0.min(x);
-        bx.1 = bx.1.min(y);
-        bx.2 = bx.2.max(x);
-        bx.3 = bx.3.max(y);
-    };
-    for id in all.iter().filter(|t| t.level == level) {
-        if id.face == face {
-            let (x, y) = (i64::from(id.x) * n, i64::from(id.y) * n);
-            grow(x, y);
-            grow(x + n, y + n);
-            continue;
-        }
-        for j in 0..=8 {
-            for i in 0..=8 {
-                let d = lay.pixel_dir(*id, (i * n) / 8, (j * n) / 8);
-                if let Some((u, v)) = cube::dir_to_uv_on(face, d) {
-                    if u.abs() <= PLANE_LIMIT && v.abs() <= PLANE_LIMIT {
-                        let gx = ((u + 1.0) / 2.0 * s).floor() as i64;
-                        let gy = ((1.0 - v) / 2.0 * s).floor() as i64;
-                        grow(gx - n / 8 - 2, gy - n / 8 - 2);
-                        grow(gx + n / 8 + 2, gy + n / 8 + 2);
-                    }
-                }
-            }
-        }
-    }
-    (bx.0 <= bx.2).then_some(bx)
 }
 
 /// The samples one azimuth's sweep visits, averaged over [`AZ_SAMPLES`] azimuths: the lines one

@@ -427,11 +427,25 @@ impl Writer {
             removes.extend(dirs);
             indexes.push(name);
         }
-        let json = serde_json::to_string_pretty(&manifest).expect("manifest serialises");
-        write_atomic_bytes(&staging.root.join(MANIFEST), json.as_bytes())?;
         for d in &moves {
             fsio::sync_staged(&staging.root.join(d))?;
         }
+        self.decide(&staging, &manifest, moves, removes, indexes)
+    }
+
+    /// Stage `manifest`, write the commit plan (`moves` from the staging folder, `removes`,
+    /// `indexes` replaced or dropped) and carry it out: from the plan's write on the commit is
+    /// decided, and a killed writer's successor finishes it.
+    fn decide(
+        &mut self,
+        staging: &Staging,
+        manifest: &Tileset,
+        moves: Vec<String>,
+        removes: Vec<String>,
+        indexes: Vec<String>,
+    ) -> Result<()> {
+        let json = serde_json::to_string_pretty(manifest).expect("manifest serialises");
+        write_atomic_bytes(&staging.root.join(MANIFEST), json.as_bytes())?;
         let plan = Plan {
             staging: staging
                 .root
@@ -447,7 +461,6 @@ impl Writer {
             &plan_path,
             &serde_json::to_vec(&plan).expect("plan serialises"),
         )?;
-        // From here on the commit is decided: a killed writer's successor finishes it.
         self.apply(&plan_path)?;
         self.committed = true;
         self.staging = None;
@@ -470,27 +483,7 @@ impl Writer {
             indexes.push(p.name().to_string());
             indexes.push(format!("{}{UNITS_SUFFIX}", p.name()));
         }
-        let json = serde_json::to_string_pretty(&manifest).expect("manifest serialises");
-        write_atomic_bytes(&staging.root.join(MANIFEST), json.as_bytes())?;
-        let plan = Plan {
-            staging: staging
-                .root
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default(),
-            moves: Vec::new(),
-            removes,
-            indexes,
-        };
-        let plan_path = self.state().join(PLAN);
-        write_atomic_bytes(
-            &plan_path,
-            &serde_json::to_vec(&plan).expect("plan serialises"),
-        )?;
-        self.apply(&plan_path)?;
-        self.committed = true;
-        self.staging = None;
-        Ok(())
+        self.decide(&staging, &manifest, Vec::new(), removes, indexes)
     }
 
     /// Carry out a written commit plan; every step can be repeated after a kill.
