@@ -71,10 +71,18 @@ pub fn write_height_tile(
     compression: TileCompression,
     identity: Option<&Identity>,
 ) -> Result<()> {
-    let bytes =
-        encode_height_tile_identified(tile, compression, exrcodec::ZipLevel::HEIGHT_TILE, identity)
-            .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
+    let bytes = encode_height_tile_stored(tile, compression, identity)
+        .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
     write_staged(path, |f| f.write_all(&bytes).at(path))
+}
+
+/// The bytes [`write_height_tile`] stores for `tile` (a plan measures its sizes with them).
+pub fn encode_height_tile_stored(
+    tile: &HeightTile,
+    compression: TileCompression,
+    identity: Option<&Identity>,
+) -> std::result::Result<Vec<u8>, String> {
+    encode_height_tile_identified(tile, compression, exrcodec::ZipLevel::HEIGHT_TILE, identity)
 }
 
 /// The bytes of a height tile file without an identity, at a given deflate level.

@@ -96,7 +96,23 @@ pub fn write_mip_exr(
     name: &str,
     identity: Option<&Identity>,
 ) -> Result<()> {
-    let bytes = encode_mip_exr_identified(
+    let bytes = encode_mip_exr_stored(size, min, max, precision, compression, name, identity)
+        .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
+    write_staged(path, |f| f.write_all(&bytes).at(path))
+}
+
+/// The bytes [`write_mip_exr`] stores (a plan measures its sizes with them).
+#[allow(clippy::too_many_arguments)]
+pub fn encode_mip_exr_stored(
+    size: usize,
+    min: Option<&[Vec<f32>]>,
+    max: &[Vec<f32>],
+    precision: Precision,
+    compression: TileCompression,
+    name: &str,
+    identity: Option<&Identity>,
+) -> std::result::Result<Vec<u8>, String> {
+    encode_mip_exr_identified(
         size,
         min,
         max,
@@ -106,8 +122,6 @@ pub fn write_mip_exr(
         name,
         identity,
     )
-    .map_err(|e| Error::invalid(path, format!("EXR encoding failed: {e}")))?;
-    write_staged(path, |f| f.write_all(&bytes).at(path))
 }
 
 /// The bytes the `exr` crate's own writer produced for a mip file before

@@ -1275,10 +1275,9 @@ fn sampled_tile_bytes(
                     })
                     .then_some(t)
             })?;
-            let hb = height::encode_height_tile_identified(
+            let hb = height::encode_height_tile_stored(
                 &tile,
                 crate::format::TileCompression::Zip,
-                crate::exrcodec::ZipLevel::HEIGHT_TILE,
                 Some(&Identity::tile(height::ID, id, &key)),
             )
             .ok()?;
@@ -1288,13 +1287,12 @@ fn sampled_tile_bytes(
                 (None, "penumbra-maxmip", mipfmt::MAX_ID),
                 (Some(&p.min[..]), "penumbra-minmax", mipfmt::MINMAX_ID),
             ] {
-                mb += mipfmt::encode_mip_exr_identified(
+                mb += mipfmt::encode_mip_exr_stored(
                     n,
                     min,
                     &p.max,
                     mip.precision,
                     mip.compression,
-                    crate::exrcodec::ZipLevel::DEFAULT,
                     name,
                     Some(&Identity::tile(what, id, &key)),
                 )
