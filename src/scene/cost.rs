@@ -159,8 +159,8 @@ pub fn tile_work(
     let (tx, ty) = (i64::from(id.x) * n, i64::from(id.y) * n);
     let cover = *covers
         .entry((id.level, id.face))
-        .or_insert_with(|| coverage_box_of(&lay, all, id.level, id.face));
-    let win = window_on(&lay, id.level, (tx, ty, tx + n, ty + n), fine as i64, cover);
+        .or_insert_with(|| coverage_box_of(lay, all, id.level, id.face));
+    let win = window_on(lay, id.level, (tx, ty, tx + n, ty + n), fine as i64, cover);
     work.context_samples = line_samples(win, (tx, ty, tx + n, ty + n));
     if !(inp.far_rings && fine < needed) {
         return work;
@@ -170,8 +170,8 @@ pub fn tile_work(
     for r in ring_steps(id, lay.tile_size, fine, needed, inp.fine_margin_px) {
         let cover = *covers
             .entry((r.level, id.face))
-            .or_insert_with(|| coverage_box_of(&lay, all, r.level, id.face));
-        let rwin = window_on(&lay, r.level, r.foot, r.margin, cover);
+            .or_insert_with(|| coverage_box_of(lay, all, r.level, id.face));
+        let rwin = window_on(lay, r.level, r.foot, r.margin, cover);
         // A ring with no terrain beyond what the finer window holds is not built.
         if ring_has_terrain(inp, r.level, id.face, rwin, prev) {
             work.ring_samples += line_samples(rwin, r.foot);
