@@ -1154,6 +1154,9 @@ fn region_tiles(
         ));
     }
     if !keep.iter().any(|t| t.level == finest) {
+        // The finest level a source resolves within the region (not the finest any source
+        // resolves anywhere).
+        let top = keep.iter().map(|t| t.level).max().unwrap_or(0);
         if let Finest::Level(_) | Finest::ResolutionM(_) = r.finest {
             return Err(err(
                 match r.finest {
