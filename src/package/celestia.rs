@@ -310,9 +310,7 @@ impl<'a> Sampler<'a> {
         let lay = self.store.manifest().layout;
         for l in (0..=level.min(lay.levels.saturating_sub(1))).rev() {
             let loc = lay.locate(l, d);
-            if !self.store.manifest().has_tile(loc.tile) {
-                continue;
-            }
+            // The store's cache remembers absent tiles too.
             let Some(t) = self.store.height(loc.tile)? else {
                 continue;
             };
