@@ -23,6 +23,7 @@ pub mod layout;
 pub mod lod;
 pub mod manifest;
 pub mod mip;
+pub mod package;
 pub mod progress;
 pub mod query;
 pub mod region;

@@ -28,6 +28,7 @@ pub mod height;
 pub mod horizon;
 pub mod lit;
 pub mod mip;
+pub mod vt;
 
 #[cfg(test)]
 mod tests;
