@@ -500,24 +500,9 @@ pub fn tile_sources(
     // otherwise every finest-level tile a footprint point of a source falls in, and their
     // ancestors.
     let finest = levels - 1;
-    let tile_ground_m = 0.4 * opts.tile_size as f64 * layout.centre_pixel_m(finest, radius);
     let mut candidates = BTreeSet::new();
     for s in sources.iter().filter(|_| wanted.is_none()) {
-        let px_m = s.dem.pixel_size_m(radius);
-        let stride = ((tile_ground_m / px_m) / 2.0).floor().max(1.0) as usize;
-        for (lat, lon) in s.dem.footprint_points(stride) {
-            let d = cube::latlon_to_dir(lat.to_radians(), lon.to_radians());
-            let mut t = layout.locate(finest, d).tile;
-            loop {
-                if !candidates.insert(t) {
-                    break;
-                }
-                match t.parent() {
-                    Some(p) => t = p,
-                    None => break,
-                }
-            }
-        }
+        candidates.extend(footprint_tiles(s.dem, &layout, finest, radius));
     }
     // With a wanted set, the tiles an earlier run of this key made stay (and are kept, not
     // cut again) unless pruned; tiles it found without data are not tried again.
@@ -1193,6 +1178,29 @@ pub fn render_height_tile(
 ) -> HeightTile {
     let one = [mosaic::Layer::new(dem, 0.0, 0.0, true)];
     render_tile(&one, layout, id, resampling, prefilter, height_shift)
+}
+
+/// The tiles at `level` that `dem`'s footprint reaches, and their ancestors: its footprint
+/// points (every boundary pixel and an interior grid fine enough for the level's tiles)
+/// located at `level`. The tiling stage's candidates; a scene's plan finds each source's reach
+/// with it.
+pub fn footprint_tiles(dem: &Dem, layout: &Layout, level: u8, radius: f64) -> BTreeSet<TileId> {
+    let tile_ground_m = 0.4 * layout.tile_size as f64 * layout.centre_pixel_m(level, radius);
+    let stride = ((tile_ground_m / dem.pixel_size_m(radius)) / 2.0)
+        .floor()
+        .max(1.0) as usize;
+    let mut out = BTreeSet::new();
+    for (lat, lon) in dem.footprint_points(stride) {
+        let d = cube::latlon_to_dir(lat.to_radians(), lon.to_radians());
+        let mut t = layout.locate(level, d).tile;
+        while out.insert(t) {
+            match t.parent() {
+                Some(p) => t = p,
+                None => break,
+            }
+        }
+    }
+    out
 }
 
 /// [`render_height_tile`] of a mosaic's `layers` (highest priority first).

@@ -597,3 +597,40 @@ fn every_validated_field_is_refused_by_name() {
         );
     }
 }
+
+/// A scene bake's tiles tried without data (`no_data`, absent from a whole bake's manifest):
+/// off the layout's levels, miscounted, or tiles the coverage holds are refused by name.
+#[test]
+fn no_data_tiles_are_validated() {
+    let tmp = tempfile::tempdir().unwrap();
+    let good_dir = tmp.path().join("good");
+    let good = baked(&good_dir);
+    let dir = tmp.path().join("case");
+    std::fs::create_dir_all(&dir).unwrap();
+    let per = good["coverage"][1]["tiles_per_face"].clone();
+    let cases = [
+        (
+            json!([{"level": 99, "tiles": 1, "tiles_per_face": 1, "faces": {"px": [[0, 0, 0]]}}]),
+            "no_data[0].level",
+        ),
+        (
+            json!([{"level": 1, "tiles": 2, "tiles_per_face": per, "faces": {"px": [[0, 0, 0]]}}]),
+            "no_data[0].tiles",
+        ),
+        (json!([good["coverage"][1].clone()]), "no_data"),
+    ];
+    for (value, named) in cases {
+        let mut v = good.clone();
+        v["no_data"] = value.clone();
+        std::fs::write(
+            dir.join("tileset.json"),
+            serde_json::to_vec_pretty(&v).unwrap(),
+        )
+        .unwrap();
+        let e = Tileset::load(&dir).expect_err(&format!("no_data = {value}: accepted"));
+        assert!(
+            e.to_string().contains(&format!("field `{named}`")),
+            "no_data = {value}: does not name `{named}`: {e}"
+        );
+    }
+}

@@ -335,7 +335,7 @@ pub fn plan(scene: &Scene) -> Result<Plan> {
             let native_level =
                 Layout::levels_for(scene.projection, scene.tile_size, radius, pixel_m) - 1;
             let max_level = (native_level + extra_levels).min(MAX_LEVELS - 1);
-            let reach = source_reach(&dem, &probe, radius, pixel_m, max_level);
+            let reach = crate::tiling::footprint_tiles(&dem, &probe, max_level, radius);
             PlannedSource {
                 label,
                 dem,
@@ -957,35 +957,6 @@ impl Plan {
             horizon_work: &self.horizon_work,
         }
     }
-}
-
-/// The tiles at levels `..= max_level` that `dem`'s footprint reaches, and their ancestors:
-/// its footprint points (every boundary pixel and an interior grid fine enough for the finest
-/// level's tiles, as the tiling stage finds its candidates) located at `max_level`.
-fn source_reach(
-    dem: &Dem,
-    probe: &Layout,
-    radius: f64,
-    pixel_m: f64,
-    max_level: u8,
-) -> BTreeSet<TileId> {
-    let tile_ground_m = 0.4 * probe.tile_size as f64 * probe.centre_pixel_m(max_level, radius);
-    let stride = ((tile_ground_m / pixel_m) / 2.0).floor().max(1.0) as usize;
-    let mut out = BTreeSet::new();
-    for (lat, lon) in dem.footprint_points(stride) {
-        let d = cube::latlon_to_dir(lat.to_radians(), lon.to_radians());
-        let mut t = probe.locate(max_level, d).tile;
-        loop {
-            if !out.insert(t) {
-                break;
-            }
-            match t.parent() {
-                Some(p) => t = p,
-                None => break,
-            }
-        }
-    }
-    out
 }
 
 struct RegionTiles {
