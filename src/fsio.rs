@@ -102,9 +102,11 @@ pub fn capture_writes<T>(whole_process: bool, f: impl FnOnce() -> T) -> (T, Vec<
             .take();
         (t, w.unwrap_or_default())
     } else {
-        THREAD_WRITES.with(|c| *c.borrow_mut() = Some(Vec::new()));
+        // Nested: a thread waiting inside a unit's parallel work may run another unit (work
+        // stealing); that unit captures its own files and the outer capture goes on after it.
+        let outer = THREAD_WRITES.with(|c| c.borrow_mut().replace(Vec::new()));
         let t = f();
-        let w = THREAD_WRITES.with(|c| c.borrow_mut().take());
+        let w = THREAD_WRITES.with(|c| std::mem::replace(&mut *c.borrow_mut(), outer));
         (t, w.unwrap_or_default())
     }
 }

@@ -70,6 +70,8 @@ pub struct Run {
 }
 
 /// What [`start`] found.
+// Made once per run and matched at once: its size does not matter.
+#[allow(clippy::large_enum_variant)]
 pub enum Start {
     /// The tileset already holds this stage's output for this run key, every file present.
     UpToDate,

@@ -65,11 +65,9 @@ pub fn pricing(
     plan: &Plan,
     stage: crate::bake::Stage,
 ) -> Option<impl Fn(&[Unit]) -> Vec<f64> + Sync + '_> {
-    (stage == crate::bake::Stage::Horizon).then(|| {
-        move |units: &[Unit]| {
-            let tiles: Vec<TileId> = units.iter().map(|u| u.tile).collect();
-            horizon_costs(plan, &tiles)
-        }
+    (stage == crate::bake::Stage::Horizon).then_some(move |units: &[Unit]| {
+        let tiles: Vec<TileId> = units.iter().map(|u| u.tile).collect();
+        horizon_costs(plan, &tiles)
     })
 }
 

@@ -212,7 +212,8 @@ pub fn print_ran(ran: &Ran, wall_s: f64, json: bool) -> Result<()> {
             writeln!(
                 out,
                 "{stage}: {ran} units run, {done} of {total} done; the stage commits when a run \
-                 with the same options completes the rest ({wall_s:.2} s)"
+                 with the same options completes the rest (shards of a scene's stage: when \
+                 `bake SCENE --stage {stage} --finish` has checked them) ({wall_s:.2} s)"
             )?;
             Ok(())
         }
