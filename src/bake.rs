@@ -18,7 +18,7 @@ use crate::graph::{self, HorizonNode, Node, Ran};
 use crate::horizon::{HorizonOptions, HorizonReport};
 use crate::mip::{MipOptions, MipReport};
 use crate::progress::Progress;
-use crate::runner::Select;
+use crate::runner::{Pricing, Role, Select};
 use crate::synthetic::{self, SyntheticSpec};
 use crate::tileset::Product;
 use crate::tiling::{self, Embedded, TileOptions, TileReport};
@@ -169,6 +169,70 @@ pub fn bake(
     Ok(report)
 }
 
+/// Run one stage of the plan, on its own, in a [`Role`]: whole as the writer (after the
+/// stages it reads from have committed), as one shard of its units ([`Select::Shard`]) among
+/// others running at the same time, or as the finish that checks and commits the shards'
+/// work; `pricing` prices the units for the shard cut. The plan's other stages are the graph's
+/// dependencies of this one: run before it, each whole or sharded and finished. Tiling runs
+/// whole only.
+#[allow(clippy::too_many_arguments)]
+pub fn run_stage(
+    input: &Input<'_>,
+    out: &Path,
+    plan: &Plan,
+    stage: Stage,
+    select: &Select,
+    role: Role,
+    pricing: Option<Pricing>,
+    progress: &dyn Progress,
+) -> Result<Ran> {
+    if !plan.stages.contains(&stage) {
+        return Err(Error::usage(format!(
+            "the bake has no {} stage (its stages: {})",
+            stage.name(),
+            plan.stages
+                .iter()
+                .map(|s| s.name())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )));
+    }
+    match stage {
+        Stage::Tile => {
+            plan.tile.validate()?;
+            TileNode {
+                input,
+                opts: &plan.tile,
+            }
+            .run_as(out, select, role, pricing, progress)
+        }
+        Stage::Mip => graph::mip(plan.mip.clone()).run_as(out, select, role, pricing, progress),
+        Stage::Horizon => BakeHorizon {
+            node: HorizonNode::new(plan.horizon.clone(), plan.fourier.clone(), plan.keep_raw)?,
+            at_most: plan.horizon_level_at_most,
+        }
+        .run_as(out, select, role, pricing, progress),
+    }
+}
+
+impl Stage {
+    /// The stage's name, as the runner and the graph call it (`tile`, `mip`, `horizon`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Tile => tiling::STAGE.name,
+            Stage::Mip => "mip",
+            Stage::Horizon => "horizon",
+        }
+    }
+
+    /// The stage called `name` ([`Stage::name`]).
+    pub fn named(name: &str) -> Option<Stage> {
+        [Stage::Tile, Stage::Mip, Stage::Horizon]
+            .into_iter()
+            .find(|s| s.name() == name)
+    }
+}
+
 /// The error of stage `failed` after the stages `committed` had committed in `out`; removes
 /// `out` when this bake `created` it and the caller did not ask to `keep_partial`.
 fn after_commit(
@@ -292,14 +356,25 @@ impl Node for BakeHorizon {
         self.node.reads()
     }
     fn run(&self, out: &Path, select: &Select, progress: &dyn Progress) -> Result<Ran> {
+        self.run_as(out, select, Role::Writer, None, progress)
+    }
+    fn run_as(
+        &self,
+        out: &Path,
+        select: &Select,
+        role: Role,
+        pricing: Option<Pricing>,
+        progress: &dyn Progress,
+    ) -> Result<Ran> {
         match self.at_most {
-            None => self.node.run(out, select, progress),
+            None => self.node.run_as(out, select, role, pricing, progress),
             Some(l) => {
                 let levels = crate::manifest::Tileset::load(out)?.layout.levels;
                 let mut opts = self.node.opts.clone();
                 opts.levels = Some(vec![l.min(levels - 1)]);
                 let fourier = self.node.fourier.as_ref().map(|f| f.opts.clone());
-                HorizonNode::new(opts, fourier, self.node.keep_raw)?.run(out, select, progress)
+                HorizonNode::new(opts, fourier, self.node.keep_raw)?
+                    .run_as(out, select, role, pricing, progress)
             }
         }
     }

@@ -59,8 +59,56 @@ pub fn write_staged(
     // a record, which the commit hashes.
     if let (Some((log, rel)), Some((hash, stamp))) = (log, written) {
         log.append(&rel, stamp, &hash)?;
+        captured(&rel, stamp.len, &hash);
     }
     Ok(())
+}
+
+/// A file [`write_staged`] wrote below a recording staging root: its path relative to the
+/// root (`/` between names), size and blake3.
+pub type Written = (String, u64, blake3::Hash);
+
+thread_local! {
+    static THREAD_WRITES: std::cell::RefCell<Option<Vec<Written>>> =
+        const { std::cell::RefCell::new(None) };
+}
+
+/// The files written in [`capture_writes`] with `whole_process`.
+static PROCESS_WRITES: std::sync::Mutex<Option<Vec<Written>>> = std::sync::Mutex::new(None);
+
+fn captured(rel: &str, len: u64, hash: &blake3::Hash) {
+    THREAD_WRITES.with(|c| {
+        if let Some(v) = c.borrow_mut().as_mut() {
+            v.push((rel.to_string(), len, *hash));
+        }
+    });
+    let mut p = PROCESS_WRITES.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(v) = p.as_mut() {
+        v.push((rel.to_string(), len, *hash));
+    }
+}
+
+/// Run `f` and return, with its result, every file [`write_staged`] wrote meanwhile below a
+/// staging root that records hashes ([`StagedHashes`]): on this thread only, or, with
+/// `whole_process`, on any thread (then one capture at a time: the caller runs nothing else
+/// that writes). The files of one unit of a stage, for a shard's record of it.
+pub fn capture_writes<T>(whole_process: bool, f: impl FnOnce() -> T) -> (T, Vec<Written>) {
+    if whole_process {
+        *PROCESS_WRITES.lock().unwrap_or_else(|e| e.into_inner()) = Some(Vec::new());
+        let t = f();
+        let w = PROCESS_WRITES
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .take();
+        (t, w.unwrap_or_default())
+    } else {
+        // Nested: a thread waiting inside a unit's parallel work may run another unit (work
+        // stealing); that unit captures its own files and the outer capture goes on after it.
+        let outer = THREAD_WRITES.with(|c| c.borrow_mut().replace(Vec::new()));
+        let t = f();
+        let w = THREAD_WRITES.with(|c| std::mem::replace(&mut *c.borrow_mut(), outer));
+        (t, w.unwrap_or_default())
+    }
 }
 
 /// The file [`write_staged`] hands its writer: writes go to the temp file and, when the
@@ -174,7 +222,8 @@ impl FileStamp {
     }
 }
 
-/// Folder of a staging root's hash logs: `hashes/<pid>.log`, one per process, a line per file
+/// Folder of a staging root's hash logs: `hashes/<pid>.log`, one per process (a shard's:
+/// [`StagedHashes::record_below_as`]), a line per file
 /// [`write_staged`] wrote there: `path<TAB>bytes<TAB>inode<TAB>mtime_ns<TAB>blake3 hex`.
 pub const HASH_LOGS: &str = "hashes";
 /// Largest hash log read back (a line is about 150 bytes).
@@ -184,6 +233,8 @@ const MAX_HASH_LOG_BYTES: u64 = 1 << 30;
 #[derive(Debug)]
 struct HashLog {
     root: PathBuf,
+    /// The log's file name less `.log`.
+    name: String,
     file: std::sync::Mutex<Option<std::fs::File>>,
 }
 
@@ -204,8 +255,15 @@ pub struct StagedHashes(std::sync::Arc<HashLog>);
 
 impl StagedHashes {
     pub fn record_below(root: &Path) -> StagedHashes {
+        StagedHashes::record_below_as(root, &std::process::id().to_string())
+    }
+
+    /// [`StagedHashes::record_below`] into the log `root/hashes/<name>.log` (a shard's, named
+    /// so that processes on several hosts sharing the folder cannot collide).
+    pub fn record_below_as(root: &Path, name: &str) -> StagedHashes {
         let log = std::sync::Arc::new(HashLog {
             root: root.to_path_buf(),
+            name: name.to_string(),
             file: std::sync::Mutex::new(None),
         });
         hash_logs_open().push(log.clone());
@@ -258,9 +316,7 @@ fn recordable(rel: &str) -> bool {
 
 impl HashLog {
     fn path(&self) -> PathBuf {
-        self.root
-            .join(HASH_LOGS)
-            .join(format!("{}.log", std::process::id()))
+        self.root.join(HASH_LOGS).join(format!("{}.log", self.name))
     }
 
     /// Append the record of the file at `rel`: one `write` of a whole line, kept by the kernel
@@ -712,5 +768,41 @@ pub fn remove_tree(p: &Path) -> Result<()> {
         Ok(()) => Ok(()),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
         Err(e) => Err(Error::io(p, e)),
+    }
+}
+
+/// This host's name as a file name can hold it (letters, digits, `-`, `_`; anything else
+/// becomes `_`), or `host` where the system gives none: what tells apart the logs of processes
+/// on several hosts that share a folder (a pid alone is unique on one host only).
+pub fn host_name() -> String {
+    #[cfg(unix)]
+    let raw = {
+        let mut buf = [0u8; 256];
+        // SAFETY: `buf` is valid for writes of its length for the call.
+        let r = unsafe { libc::gethostname(buf.as_mut_ptr().cast(), buf.len()) };
+        if r == 0 {
+            let end = buf.iter().position(|&b| b == 0).unwrap_or(buf.len());
+            String::from_utf8_lossy(&buf[..end]).into_owned()
+        } else {
+            String::new()
+        }
+    };
+    #[cfg(not(unix))]
+    let raw = std::env::var("COMPUTERNAME").unwrap_or_default();
+    let name: String = raw
+        .chars()
+        .take(64)
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    if name.is_empty() {
+        "host".to_string()
+    } else {
+        name
     }
 }

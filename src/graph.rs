@@ -16,7 +16,7 @@ use crate::fourier::{FourierOptions, FourierReport, FourierSink, FourierStage};
 use crate::horizon::{HorizonOptions, HorizonReport, HorizonStage};
 use crate::mip::{MipOptions, MipReport, MipStage};
 use crate::progress::Progress;
-use crate::runner::{self, Outcome, Select, Stage};
+use crate::runner::{self, Outcome, Pricing, Role, Select, Stage};
 use crate::sink::HorizonSink;
 use crate::tileset::Product;
 use crate::tiling::TileReport;
@@ -46,6 +46,25 @@ pub trait Node {
     fn writes(&self) -> Vec<Product>;
     fn reads(&self) -> Vec<Product>;
     fn run(&self, dir: &Path, select: &Select, progress: &dyn Progress) -> Result<Ran>;
+    /// Run (some of) it in a [`Role`]: as a shard among others running at once, or as the
+    /// finish of their run; `pricing` prices the units for the shard cut. A node that is not a
+    /// runner stage runs whole, as the writer, only.
+    fn run_as(
+        &self,
+        dir: &Path,
+        select: &Select,
+        role: Role,
+        pricing: Option<Pricing>,
+        progress: &dyn Progress,
+    ) -> Result<Ran> {
+        if role != Role::Writer || pricing.is_some() {
+            return Err(Error::usage(format!(
+                "the {} stage runs whole, in one process: it has no shards to run or finish",
+                self.name()
+            )));
+        }
+        self.run(dir, select, progress)
+    }
 }
 
 /// A runner stage as a node, with how its report is told apart.
@@ -66,6 +85,17 @@ impl<S: Stage> Node for StageNode<S> {
     }
     fn run(&self, dir: &Path, select: &Select, progress: &dyn Progress) -> Result<Ran> {
         let outcome = runner::execute(&self.stage, dir, select, progress)?;
+        Ok(ran(self.name(), outcome, self.report))
+    }
+    fn run_as(
+        &self,
+        dir: &Path,
+        select: &Select,
+        role: Role,
+        pricing: Option<Pricing>,
+        progress: &dyn Progress,
+    ) -> Result<Ran> {
+        let outcome = runner::execute_as(&self.stage, dir, select, role, pricing, progress)?;
         Ok(ran(self.name(), outcome, self.report))
     }
 }
@@ -149,6 +179,17 @@ impl Node for HorizonNode {
     }
     fn run(&self, dir: &Path, select: &Select, progress: &dyn Progress) -> Result<Ran> {
         let outcome = runner::execute(&self.stage(), dir, select, progress)?;
+        Ok(ran(self.name(), outcome, Ran::Horizon))
+    }
+    fn run_as(
+        &self,
+        dir: &Path,
+        select: &Select,
+        role: Role,
+        pricing: Option<Pricing>,
+        progress: &dyn Progress,
+    ) -> Result<Ran> {
+        let outcome = runner::execute_as(&self.stage(), dir, select, role, pricing, progress)?;
         Ok(ran(self.name(), outcome, Ran::Horizon))
     }
 }

@@ -70,6 +70,8 @@ pub struct Run {
 }
 
 /// What [`start`] found.
+// Made once per run and matched at once: its size does not matter.
+#[allow(clippy::large_enum_variant)]
 pub enum Start {
     /// The tileset already holds this stage's output for this run key, every file present.
     UpToDate,
@@ -263,31 +265,23 @@ impl Select {
         Ok(Select::Shard { index: k, count: n })
     }
 
-    /// The indices (into `units`) this selection takes.
+    /// The indices (into `units`) this selection takes, a shard cut by the units' own costs.
     pub fn pick(&self, units: &[Unit]) -> Vec<usize> {
+        let costs: Vec<f64> = units.iter().map(|u| u.cost).collect();
+        self.pick_priced(units, &costs)
+    }
+
+    /// The indices (into `units`, in order) this selection takes, a shard cut by `costs` (one
+    /// per unit).
+    pub fn pick_priced(&self, units: &[Unit], costs: &[f64]) -> Vec<usize> {
         match self {
             Select::All => (0..units.len()).collect(),
-            Select::Shard { index, count } => {
-                // Cut the cumulative cost into `count` equal spans; unit i belongs to the span
-                // its cost midpoint falls in (the same cut whatever process computes it).
-                let total: f64 = units.iter().map(|u| u.cost.max(0.0)).sum();
-                let mut acc = 0.0;
-                let mut out = Vec::new();
-                for (i, u) in units.iter().enumerate() {
-                    let c = u.cost.max(0.0);
-                    let mid = acc + c / 2.0;
-                    acc += c;
-                    let span = if total > 0.0 {
-                        ((mid / total * *count as f64) as usize).min(count - 1)
-                    } else {
-                        i * count / units.len().max(1)
-                    };
-                    if span == *index {
-                        out.push(i);
-                    }
-                }
-                out
-            }
+            Select::Shard { index, count } => Select::assign(units, costs, *count)
+                .into_iter()
+                .enumerate()
+                .filter(|&(_, s)| s == *index)
+                .map(|(i, _)| i)
+                .collect(),
             Select::Keys(keys) => units
                 .iter()
                 .enumerate()
@@ -296,6 +290,63 @@ impl Select {
                 .collect(),
         }
     }
+}
+
+impl Select {
+    /// The shard (0-based, below `count`) of each unit: the units are laid along a
+    /// space-filling curve — by level, then face, then the Hilbert curve over the face's
+    /// tiles, so that a shard's tiles lie together and the context they read around them is
+    /// shared — and the cumulative cost along it is cut into `count` equal spans; a unit
+    /// belongs to the span its cost midpoint falls in. The same cut whatever process computes
+    /// it (negative or NaN costs count as zero).
+    pub fn assign(units: &[Unit], costs: &[f64], count: usize) -> Vec<usize> {
+        let count = count.max(1);
+        let cost = |i: usize| costs.get(i).copied().filter(|c| *c > 0.0).unwrap_or(0.0);
+        let mut along: Vec<usize> = (0..units.len()).collect();
+        along.sort_by_key(|&i| {
+            let t = units[i].tile;
+            (t.level, t.face, hilbert(t.x, t.y), i)
+        });
+        let total: f64 = along.iter().map(|&i| cost(i)).sum();
+        let mut out = vec![0; units.len()];
+        let mut acc = 0.0;
+        for (k, &i) in along.iter().enumerate() {
+            let c = cost(i);
+            let mid = acc + c / 2.0;
+            acc += c;
+            out[i] = if total > 0.0 {
+                ((mid / total * count as f64) as usize).min(count - 1)
+            } else {
+                k * count / units.len().max(1)
+            };
+        }
+        out
+    }
+}
+
+/// The position of tile column `x`, row `y` along the Hilbert curve over a 2³² × 2³² grid
+/// (any level's tiles of a face lie in its corner square of 2^level, which the curve visits
+/// whole before leaving it).
+fn hilbert(x: u32, y: u32) -> u64 {
+    const N: u64 = 1 << 32;
+    let (mut x, mut y) = (u64::from(x), u64::from(y));
+    let mut d = 0u64;
+    let mut s = N / 2;
+    while s > 0 {
+        let rx = u64::from(x & s > 0);
+        let ry = u64::from(y & s > 0);
+        d += s * s * ((3 * rx) ^ ry);
+        // Turn the quadrant so that the curve within it starts at its corner.
+        if ry == 0 {
+            if rx == 1 {
+                x = N - 1 - x;
+                y = N - 1 - y;
+            }
+            std::mem::swap(&mut x, &mut y);
+        }
+        s >>= 1;
+    }
+    d
 }
 
 /// Most shards a run can be split into.
@@ -394,6 +445,54 @@ pub trait Stage: Sync {
 struct UnitRecord {
     deps: Vec<Dep>,
     done: serde_json::Value,
+    /// A shard's record ([`Role::Shard`]): every file the unit staged, with its size and
+    /// blake3, for the finish to check; not kept once the run commits.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    files: Vec<FileRecord>,
+    /// A shard's record of a unit kept from the last committed run rather than made.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    kept: bool,
+}
+
+/// A staged file of a unit: its path below the staging root, size and blake3 (hex).
+#[derive(Clone, Debug, Serialize, serde::Deserialize)]
+struct FileRecord(String, u64, String);
+
+impl FileRecord {
+    fn of((rel, len, hash): &crate::fsio::Written) -> FileRecord {
+        FileRecord(rel.clone(), *len, hash.to_hex().to_string())
+    }
+
+    /// Why the file is not what the record says, if it is not.
+    fn problem(&self, root: &Path) -> Option<String> {
+        let p = root.join(&self.0);
+        let m = match std::fs::symlink_metadata(&p) {
+            Ok(m) => m,
+            Err(_) => return Some(format!("{} is missing", self.0)),
+        };
+        if !m.is_file() {
+            return Some(format!("{} is not a regular file", self.0));
+        }
+        if m.len() != self.1 {
+            return Some(format!(
+                "{} has {} bytes, its record {}",
+                self.0,
+                m.len(),
+                self.1
+            ));
+        }
+        let mut h = blake3::Hasher::new();
+        let read = std::fs::File::open(&p).and_then(|f| h.update_reader(f).map(|_| ()));
+        if let Err(e) = read {
+            return Some(format!("{} cannot be read ({e})", self.0));
+        }
+        (h.finalize().to_hex().as_str() != self.2).then(|| {
+            format!(
+                "{} does not hold the bytes its record's blake3 says",
+                self.0
+            )
+        })
+    }
 }
 
 /// The unit records a committed run left: its run key and each unit's record, by unit name.
@@ -498,6 +597,69 @@ pub fn execute<S: Stage>(
     select: &Select,
     progress: &dyn Progress,
 ) -> Result<Outcome<S::Report>> {
+    execute_as(stage, dir, select, Role::Writer, None, progress)
+}
+
+/// How a process takes part in a stage's run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Role {
+    /// The tileset's one writer: runs the selected units (those earlier runs of the key have
+    /// not done) and, when every unit is done, the finish and the commit.
+    #[default]
+    Writer,
+    /// One of several processes that run shards of the units at the same time, on one host or
+    /// several sharing the folder ([`Select::Shard`]). It holds the tileset's shard lock (no
+    /// writer begins or commits while it runs), stages its units with a record of each file
+    /// they wrote (size, blake3) in logs named after the shard, host and process, and never
+    /// commits, even when it did the last unit: [`Role::Finish`] does.
+    Shard,
+    /// After the shards: as the writer, checks that every unit is recorded, still holds, and
+    /// that every file each record lists is there with its size and blake3; then the stage's
+    /// finish and the commit, as a whole run makes them. Runs no unit: a unit missing or a
+    /// file damaged refuses the run, naming the shard to run again, and commits nothing.
+    Finish,
+}
+
+/// Unit costs a caller prices itself (a scene's plan, from its model of the stage's work):
+/// given the stage's units, the cost of each, in order. They replace the units' own estimates
+/// in a [`Select::Shard`] selection; all shards of a run and its finish must price alike.
+pub type Pricing<'a> = &'a (dyn Fn(&[Unit]) -> Vec<f64> + Sync);
+
+/// The costs a selection cuts by: `pricing`'s, or the units' own.
+fn priced(units: &[Unit], pricing: Option<Pricing>) -> Vec<f64> {
+    match pricing {
+        Some(p) => {
+            let c = p(units);
+            assert_eq!(c.len(), units.len(), "a pricing prices every unit");
+            c
+        }
+        None => units.iter().map(|u| u.cost).collect(),
+    }
+}
+
+/// [`execute`] in a given [`Role`], with the shard selection's costs from `pricing` when given.
+pub fn execute_as<S: Stage>(
+    stage: &S,
+    dir: &Path,
+    select: &Select,
+    role: Role,
+    pricing: Option<Pricing>,
+    progress: &dyn Progress,
+) -> Result<Outcome<S::Report>> {
+    match role {
+        Role::Writer => execute_writer(stage, dir, select, pricing, progress),
+        Role::Shard => execute_shard(stage, dir, select, pricing, progress),
+        Role::Finish => execute_finish(stage, dir, select, pricing),
+    }
+}
+
+fn execute_writer<S: Stage>(
+    stage: &S,
+    dir: &Path,
+    select: &Select,
+    pricing: Option<Pricing>,
+    progress: &dyn Progress,
+) -> Result<Outcome<S::Report>> {
     let spec = stage.spec();
     // Everything that can refuse the run is checked before the tileset's folder is touched.
     stage.check()?;
@@ -508,7 +670,7 @@ pub fn execute<S: Stage>(
     let plan = stage.plan(dir, ts)?;
     let key = stage.key(ts, &plan);
     let units = stage.units(ts, &plan)?;
-    let picked = select.pick(&units);
+    let picked = select.pick_priced(&units, &priced(&units, pricing));
     if *select != Select::All && picked.is_empty() {
         return Err(Error::usage(format!(
             "the selection picks none of the {} units of the {} stage",
@@ -551,7 +713,7 @@ pub fn execute<S: Stage>(
     let mut done: Vec<Option<(S::Done, bool, UnitRecord)>> = units
         .iter()
         .map(|u| {
-            let r: UnitRecord = serde_json::from_slice(staged.get(&record_name(u))?).ok()?;
+            let r: UnitRecord = serde_json::from_slice(&staged.get(&record_name(u))?.0).ok()?;
             if !holds(&r) {
                 return None;
             }
@@ -584,6 +746,8 @@ pub fn execute<S: Stage>(
             let record = UnitRecord {
                 deps: r.deps.clone(),
                 done: r.done.clone(),
+                files: Vec::new(),
+                kept: false,
             };
             log.append(
                 &record_name(u),
@@ -615,6 +779,8 @@ pub fn execute<S: Stage>(
         let record = UnitRecord {
             deps,
             done: serde_json::to_value(&d).expect("unit records serialise"),
+            files: Vec::new(),
+            kept: false,
         };
         let bytes = serde_json::to_vec(&record).expect("unit records serialise");
         log.append(&record_name(&units[i]), &bytes)?;
@@ -656,28 +822,463 @@ pub fn execute<S: Stage>(
             total: units.len(),
         });
     }
+    let done = done
+        .into_iter()
+        .map(|d| d.expect("every unit done"))
+        .collect();
+    finish_and_commit(stage, &cx, run, units, done, key.clone())
+}
+
+/// Every unit done (`done`, in the units' order: report, whether made here, record): the
+/// stage's finish, the unit records staged beside the product's index (without the files a
+/// shard listed), and the commit.
+fn finish_and_commit<S: Stage>(
+    stage: &S,
+    cx: &Cx<S::Plan>,
+    run: Run,
+    units: Vec<Unit>,
+    done: Vec<(S::Done, bool, UnitRecord)>,
+    key: String,
+) -> Result<Outcome<S::Report>> {
     let mut records = UnitRecords {
-        key: key.clone(),
+        key,
         units: Default::default(),
     };
     let done: Vec<Finished<S::Done>> = units
         .into_iter()
         .zip(done)
-        .map(|(unit, d)| {
-            let (done, here, record) = d.expect("every unit done");
+        .map(|(unit, (done, here, mut record))| {
+            record.files.clear();
+            record.kept = false;
             records.units.insert(record_name(&unit), record);
             Finished { unit, done, here }
         })
         .collect();
-    let (manifest, report) = stage.finish(&cx, done)?;
+    let (manifest, report) = stage.finish(cx, done)?;
     // Beside the product's index in the staging folder; the commit moves it in with it.
     crate::tileset::writer::stage_unit_records(
-        &out,
-        primary,
+        cx.out,
+        run.spec.writes[0],
         &serde_json::to_vec(&records).expect("unit records serialise"),
     )?;
     run.commit(manifest)?;
     Ok(Outcome::Done(report))
+}
+
+/// Whether the stage's output for `key` is up to date: recorded with this key, its units the
+/// ones recorded (`units_current`), every file of its products' indexes there with its size.
+fn up_to_date(dir: &Path, spec: &StageSpec, key: &str, ts: &Tileset, units_current: bool) -> bool {
+    let primary = spec.writes[0];
+    units_current
+        && primary.recorded_key(ts) == Some(key)
+        && spec
+            .writes
+            .iter()
+            .filter(|p| p.recorded_key(ts).is_some())
+            .all(|&p| crate::tileset::writer::verify_product(dir, p))
+}
+
+/// What a stage's run knows before it runs a unit: its plan, key, units, and which units the
+/// last committed run of the key made with dependencies that still hold.
+struct Prepared<'s, S: Stage> {
+    plan: S::Plan,
+    key: String,
+    units: Vec<Unit>,
+    previous: Option<UnitRecords>,
+    stage: &'s S,
+}
+
+impl<'s, S: Stage> Prepared<'s, S> {
+    fn new(stage: &'s S, dir: &Path, store: &Store) -> Result<Self> {
+        let ts = store.manifest();
+        let plan = stage.plan(dir, ts)?;
+        let key = stage.key(ts, &plan);
+        let units = stage.units(ts, &plan)?;
+        let previous = load_unit_records(dir, stage.spec().writes[0]).filter(|r| r.key == key);
+        Ok(Prepared {
+            plan,
+            key,
+            units,
+            previous,
+            stage,
+        })
+    }
+
+    fn holds(&self, store: &Store, r: &UnitRecord) -> bool {
+        deps_hold(self.stage, store, &self.plan, &r.deps)
+    }
+
+    /// Per unit, its record in the last committed run of this key when its dependencies hold.
+    fn reusable(&self, store: &Store) -> Vec<Option<&UnitRecord>> {
+        self.units
+            .iter()
+            .map(|u| {
+                self.previous
+                    .as_ref()
+                    .and_then(|p| p.units.get(&record_name(u)))
+                    .filter(|r| self.holds(store, r))
+            })
+            .collect()
+    }
+
+    /// Whether the units are those the last committed run recorded, all still holding.
+    fn units_current(&self, reusable: &[Option<&UnitRecord>]) -> bool {
+        match &self.previous {
+            None => true,
+            Some(p) => p.units.len() == self.units.len() && reusable.iter().all(Option::is_some),
+        }
+    }
+}
+
+/// The name of a shard's logs: `shard-<index>-of-<count>.<host>.<pid>`.
+fn shard_log(index: usize, count: usize) -> String {
+    format!(
+        "shard-{index}-of-{count}.{}.{}",
+        crate::fsio::host_name(),
+        std::process::id()
+    )
+}
+
+/// The shard (index, count) whose log is called `log`, if a shard's.
+fn shard_of_log(log: &str) -> Option<(usize, usize)> {
+    let rest = log.strip_prefix("shard-")?;
+    let (i, rest) = rest.split_once("-of-")?;
+    let n = rest.split('.').next()?;
+    Some((i.parse().ok()?, n.parse().ok()?))
+}
+
+fn execute_shard<S: Stage>(
+    stage: &S,
+    dir: &Path,
+    select: &Select,
+    pricing: Option<Pricing>,
+    progress: &dyn Progress,
+) -> Result<Outcome<S::Report>> {
+    let spec = stage.spec();
+    let Select::Shard { index, count } = *select else {
+        return Err(Error::usage(format!(
+            "a shard of the {} stage runs one shard of its units: give its index and count",
+            spec.name
+        )));
+    };
+    stage.check()?;
+    stage.plan(dir, &Tileset::load(dir)?)?;
+    let shard = crate::tileset::writer::ShardWriter::begin(dir)?;
+    let store = Store::open_unlocked(dir)?;
+    let ts = store.manifest();
+    let pre = Prepared::new(stage, dir, &store)?;
+    let units = &pre.units;
+    let costs = priced(units, pricing);
+    let picked = select.pick_priced(units, &costs);
+    if picked.is_empty() {
+        return Err(Error::usage(format!(
+            "the selection picks none of the {} units of the {} stage",
+            units.len(),
+            spec.name
+        )));
+    }
+    let reusable = pre.reusable(&store);
+    if up_to_date(dir, &spec, &pre.key, ts, pre.units_current(&reusable)) {
+        return Ok(Outcome::Done(stage.up_to_date(&store, &pre.plan, units)));
+    }
+    let staging = shard.stage(spec.name, &pre.key, &shard_log(index, count))?;
+    let staged = staging.read_records()?;
+    let record_of = |i: usize| -> Option<UnitRecord> {
+        let r: UnitRecord = serde_json::from_slice(&staged.get(&record_name(&units[i]))?.0).ok()?;
+        (pre.holds(&store, &r) && serde_json::from_value::<S::Done>(r.done.clone()).is_ok())
+            .then_some(r)
+    };
+    // Units already recorded (by any shard); those of this shard are checked file by file (a
+    // crash of a host can leave a recorded file short), and redone when they do not hold.
+    let recorded: Vec<bool> = (0..units.len())
+        .into_par_iter()
+        .map(|i| {
+            let Some(r) = record_of(i) else {
+                return false;
+            };
+            !picked.contains(&i) || r.files.iter().all(|f| f.problem(&staging.root).is_none())
+        })
+        .collect();
+    let log = staging.record_log()?;
+    let mut todo = Vec::new();
+    if reusable.iter().any(Option::is_some) {
+        let files = tile_files(&store, &spec.writes)?;
+        for &i in &picked {
+            if recorded[i] {
+                continue;
+            }
+            let (Some(r), u) = (reusable[i], &units[i]) else {
+                todo.push(i);
+                continue;
+            };
+            // A unit of the committed run: its files linked in, listed in its record.
+            let mut listed = Vec::new();
+            let linked = u.writes.iter().all(|t| {
+                files.get(t).into_iter().flatten().all(|(rel, len, h)| {
+                    let from = dir.join(rel);
+                    let ok = std::fs::metadata(&from).is_ok_and(|m| m.is_file() && m.len() == *len)
+                        && staging.link(&from, rel, h).is_ok();
+                    listed.push(FileRecord(rel.clone(), *len, h.to_hex().to_string()));
+                    ok
+                })
+            });
+            if !linked {
+                todo.push(i);
+                continue;
+            }
+            let record = UnitRecord {
+                deps: r.deps.clone(),
+                done: r.done.clone(),
+                files: listed,
+                kept: true,
+            };
+            log.append(
+                &record_name(u),
+                &serde_json::to_vec(&record).expect("unit records serialise"),
+            )?;
+        }
+    } else {
+        todo = picked.iter().copied().filter(|&i| !recorded[i]).collect();
+    }
+    let out = staging.root.clone();
+    let cx = Cx {
+        store: &store,
+        out: &out,
+        plan: &pre.plan,
+        key: &pre.key,
+        progress,
+    };
+    let order = stage.order();
+    let one = |i: usize, scratch: &mut S::Scratch| -> Result<()> {
+        let unit = || stage.run_unit(&cx, &units[i], scratch);
+        let ((d, deps), written) = match order {
+            Order::Parallel => {
+                crate::fsio::capture_writes(false, || store.deps().on_this_thread(unit))
+            }
+            Order::Sequential => {
+                crate::fsio::capture_writes(true, || store.deps().tileset_wide(unit))
+            }
+        };
+        let record = UnitRecord {
+            deps,
+            done: serde_json::to_value(d?).expect("unit records serialise"),
+            files: written.iter().map(FileRecord::of).collect(),
+            kept: false,
+        };
+        let bytes = serde_json::to_vec(&record).expect("unit records serialise");
+        log.append(&record_name(&units[i]), &bytes)?;
+        progress.inc(1);
+        Ok(())
+    };
+    progress.start(spec.name, todo.len() as u64);
+    let results: Vec<Result<()>> = match order {
+        Order::Parallel => todo
+            .par_iter()
+            .map_init(|| stage.scratch(&pre.plan), |s, &i| one(i, s))
+            .collect(),
+        Order::Sequential => {
+            let mut s = stage.scratch(&pre.plan);
+            let mut r = Vec::with_capacity(todo.len());
+            for &i in &todo {
+                let x = one(i, &mut s);
+                let failed = x.is_err();
+                r.push(x);
+                if failed {
+                    break;
+                }
+            }
+            r
+        }
+    };
+    progress.finish();
+    let ran = results.len();
+    results.into_iter().collect::<Result<Vec<()>>>()?;
+    let done = staging.read_records()?.len().min(units.len());
+    Ok(Outcome::Partial {
+        ran,
+        done,
+        total: units.len(),
+    })
+}
+
+/// Most examples a refused finish names per shard.
+const EXAMPLES: usize = 4;
+
+fn execute_finish<S: Stage>(
+    stage: &S,
+    dir: &Path,
+    select: &Select,
+    pricing: Option<Pricing>,
+) -> Result<Outcome<S::Report>> {
+    let spec = stage.spec();
+    if *select != Select::All {
+        return Err(Error::usage(format!(
+            "the finish of the {} stage's shards takes every unit, not a selection",
+            spec.name
+        )));
+    }
+    stage.check()?;
+    stage.plan(dir, &Tileset::load(dir)?)?;
+    let mut writer = Writer::begin(dir)?;
+    let store = Store::open_unlocked(dir)?;
+    let ts = store.manifest();
+    let mut pre = Prepared::new(stage, dir, &store)?;
+    let reusable = pre.reusable(&store);
+    if up_to_date(dir, &spec, &pre.key, ts, pre.units_current(&reusable)) {
+        writer.discard_stage(spec.name, &pre.key)?;
+        return Ok(Outcome::Done(
+            stage.up_to_date(&store, &pre.plan, &pre.units),
+        ));
+    }
+    let changed = spec.writes[0].recorded_key(ts) != Some(pre.key.as_str());
+    let Some(staging) = writer.open_staged(spec.name, &pre.key)? else {
+        return Err(Error::usage(format!(
+            "no shard of the {} stage has run for this run key (the tileset as it is, these \
+             options): run its shards, then finish",
+            spec.name
+        )));
+    };
+    let units = std::mem::take(&mut pre.units);
+    let staged = staging.read_records()?;
+    // Every count of shards that ran, to name the shard a missing unit belongs to.
+    let counts: std::collections::BTreeSet<usize> = staged
+        .values()
+        .filter_map(|(_, log)| shard_of_log(log).map(|(_, n)| n))
+        .collect();
+    let shard_label = |log: &str| match shard_of_log(log) {
+        Some((i, n)) => format!("shard {i}/{n}"),
+        None => format!("the run that logged as {log}"),
+    };
+    // Per shard, what is wrong: (units not recorded, problems of recorded units).
+    let mut wrong: std::collections::BTreeMap<String, (Vec<String>, Vec<String>)> =
+        Default::default();
+    let mut done = Vec::with_capacity(units.len());
+    let mut missing = Vec::new();
+    for (i, u) in units.iter().enumerate() {
+        let found = staged.get(&record_name(u)).and_then(|(bytes, log)| {
+            let r: UnitRecord = serde_json::from_slice(bytes).ok()?;
+            let d: S::Done = serde_json::from_value(r.done.clone()).ok()?;
+            Some((d, r, log.clone()))
+        });
+        match found {
+            Some((d, r, log)) => {
+                if !pre.holds(&store, &r) {
+                    wrong
+                        .entry(shard_label(&log))
+                        .or_default()
+                        .1
+                        .push(format!("unit {} read what has changed since", u.key()));
+                }
+                done.push(Some((d, r, log)));
+            }
+            None => {
+                missing.push(i);
+                done.push(None);
+            }
+        }
+    }
+    if !missing.is_empty() {
+        let costs = priced(&units, pricing);
+        if counts.is_empty() {
+            wrong.entry("no shard".into()).or_default().0 =
+                missing.iter().map(|&i| units[i].key()).collect();
+        }
+        for &n in &counts {
+            let shard = Select::assign(&units, &costs, n);
+            for &i in &missing {
+                wrong
+                    .entry(format!("shard {}/{n}", shard[i]))
+                    .or_default()
+                    .0
+                    .push(units[i].key());
+            }
+        }
+    }
+    // Every file of every recorded unit, read back against its record.
+    let files: Vec<(&FileRecord, &str)> = done
+        .iter()
+        .flatten()
+        .flat_map(|(_, r, log)| r.files.iter().map(move |f| (f, log.as_str())))
+        .collect();
+    let damaged: Vec<(String, String)> = files
+        .par_iter()
+        .filter_map(|(f, log)| f.problem(&staging.root).map(|p| (shard_label(log), p)))
+        .collect();
+    for (shard, p) in damaged {
+        wrong.entry(shard).or_default().1.push(p);
+    }
+    if !wrong.is_empty() {
+        let mut parts = Vec::new();
+        for (shard, (miss, bad)) in &wrong {
+            let mut say = Vec::new();
+            if !miss.is_empty() {
+                say.push(format!(
+                    "{} of its units not recorded ({}{})",
+                    miss.len(),
+                    miss[..miss.len().min(EXAMPLES)].join(", "),
+                    if miss.len() > EXAMPLES { ", …" } else { "" }
+                ));
+            }
+            if !bad.is_empty() {
+                say.push(format!(
+                    "{}{}",
+                    bad[..bad.len().min(EXAMPLES)].join("; "),
+                    if bad.len() > EXAMPLES {
+                        format!("; and {} more", bad.len() - EXAMPLES)
+                    } else {
+                        String::new()
+                    }
+                ));
+            }
+            parts.push(format!("{shard}: {}", say.join("; ")));
+        }
+        return Err(Error::invalid(
+            &staging.root,
+            format!(
+                "the {} stage's shards are not complete, so nothing was committed: {}. Run \
+                 each shard named again (it redoes what is missing or damaged), then finish",
+                spec.name,
+                parts.join(". ")
+            ),
+        ));
+    }
+    // What the units listed is what commits: anything else in the product folders (a
+    // finish's leftovers, a stray file) goes.
+    let listed: std::collections::HashSet<&str> = files.iter().map(|(f, _)| f.0.as_str()).collect();
+    for p in spec.writes.iter() {
+        for d in p.dirs() {
+            for (rel, _) in crate::fsio::list_files(&staging.root.join(d))? {
+                let rel = format!("{d}/{rel}");
+                if !listed.contains(rel.as_str()) {
+                    let f = staging.root.join(&rel);
+                    std::fs::remove_file(&f).map_err(|e| Error::io(&f, e))?;
+                }
+            }
+        }
+    }
+    let out = staging.root.clone();
+    let cx = Cx {
+        store: &store,
+        out: &out,
+        plan: &pre.plan,
+        key: &pre.key,
+        progress: &crate::progress::NoProgress,
+    };
+    let done: Vec<(S::Done, bool, UnitRecord)> = done
+        .into_iter()
+        .map(|d| {
+            let (d, r, _) = d.expect("every unit recorded");
+            let here = !r.kept;
+            (d, here, r)
+        })
+        .collect();
+    let run = Run {
+        spec,
+        writer,
+        staging,
+        changed,
+    };
+    finish_and_commit(stage, &cx, run, units, done, pre.key.clone())
 }
 
 impl<R> Outcome<R> {

@@ -170,8 +170,6 @@ fn shards_cover_every_unit_once_by_cost() {
         let mut costs = Vec::new();
         for k in 0..n {
             let picked = Select::Shard { index: k, count: n }.pick(&units);
-            // Contiguous runs of units, in order.
-            assert!(picked.windows(2).all(|w| w[1] == w[0] + 1), "{k}/{n}");
             costs.push(picked.iter().map(|&i| units[i].cost).sum::<f64>());
             for i in picked {
                 seen[i] += 1;
@@ -187,6 +185,45 @@ fn shards_cover_every_unit_once_by_cost() {
     }
     let keys = Select::Keys(vec![units[5].key(), units[50].key()]).pick(&units);
     assert_eq!(keys, vec![5, 50]);
+}
+
+/// Shards lie together: the 16 × 16 tiles of a face at level 4, of equal cost, in four shards
+/// are its four quadrants (the Hilbert curve fills each before the next), and in 16 shards its
+/// 4 × 4 blocks; the levels and faces follow one another, each whole.
+#[test]
+fn shards_are_compact_blocks_of_tiles() {
+    use penumbra::cube::Face;
+    let mut units = Vec::new();
+    for face in [Face::Px, Face::Nz] {
+        for y in 0..16 {
+            for x in 0..16 {
+                let t = TileId {
+                    level: 4,
+                    face,
+                    x,
+                    y,
+                };
+                units.push(Unit::tile(t, Vec::new(), 1.0));
+            }
+        }
+    }
+    for (n, side) in [(8usize, 8u32), (32, 4)] {
+        let costs = vec![1.0; units.len()];
+        let shard = Select::assign(&units, &costs, n);
+        let mut blocks: BTreeMap<usize, std::collections::BTreeSet<(usize, u32, u32)>> =
+            BTreeMap::new();
+        for (u, &k) in units.iter().zip(&shard) {
+            let t = u.tile;
+            blocks
+                .entry(k)
+                .or_default()
+                .insert((t.face as usize, t.x / side, t.y / side));
+        }
+        assert_eq!(blocks.len(), n, "{n} shards: {blocks:?}");
+        for (k, b) in &blocks {
+            assert_eq!(b.len(), 1, "{n} shards: shard {k} spans the blocks {b:?}");
+        }
+    }
 }
 
 // -------------------------------------------------------------------------------------------

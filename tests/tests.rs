@@ -70,3 +70,8 @@ mod prune;
 // Scene files, `plan` and `bake SCENE`: bad scenes refused by line and key with nothing
 // written; the plan's counts against what the bake writes.
 mod scenes;
+
+// A scene's stages as concurrent shard processes and a finish: the bytes of one bake for 1, 2,
+// 4 and 7 shards; a killed shard rerun; a finish refused (exit 2, the shard named, nothing
+// committed) with a shard missing or a staged file damaged; two finishes at once.
+mod shards;

@@ -83,6 +83,49 @@ pub fn stage_plan(plan: &Plan, how: &BakeOptions) -> bake::Plan {
     }
 }
 
+/// Run one stage of `plan`'s bake into `out` on its own ([`bake::run_stage`]): whole (the
+/// writer), one shard of its units among others running at the same time, or the finish that
+/// checks the shards' work and commits it once. Shards cut the horizon stage's units by the
+/// plan's model of each tile's cost ([`super::shards::pricing`]), as `penumbra plan --shards`
+/// shows them. The stages it reads from must have committed (each run whole, or sharded and
+/// finished); the folder's stamp is left to a whole bake of the scene.
+pub fn bake_stage(
+    plan: &Plan,
+    out: &Path,
+    stage: &str,
+    select: &crate::runner::Select,
+    role: crate::runner::Role,
+    progress: &dyn Progress,
+) -> Result<crate::graph::Ran> {
+    let stages = stage_plan(plan, &BakeOptions::default());
+    let Some(st) = Stage::named(stage).filter(|s| stages.stages.contains(s)) else {
+        let names: Vec<&str> = stages.stages.iter().map(|s| s.name()).collect();
+        return Err(Error::param(
+            "stage",
+            format!(
+                "'{stage}' is not a stage of this scene's bake: its stages are {}",
+                names.join(", ")
+            ),
+        ));
+    };
+    let sharded = role != crate::runner::Role::Writer
+        || matches!(select, crate::runner::Select::Shard { .. });
+    let price = super::shards::pricing(plan, st).filter(|_| sharded);
+    let pricing = price
+        .as_ref()
+        .map(|p| p as &(dyn Fn(&[crate::runner::Unit]) -> Vec<f64> + Sync));
+    bake::run_stage(
+        &Input::Scene(plan),
+        out,
+        &stages,
+        st,
+        select,
+        role,
+        pricing,
+        progress,
+    )
+}
+
 /// The lowest and highest heights of the plan's sources (metres above the body's sphere,
 /// datum shifts included), read from every sample; None when they hold none (the tiling stage
 /// refuses that before the horizons run).

@@ -8,6 +8,7 @@
 pub mod bake;
 pub mod cost;
 pub mod plan;
+pub mod shards;
 
 use std::path::{Path, PathBuf};
 

@@ -24,7 +24,7 @@ use serde::{Deserialize, Serialize};
 
 use super::fsio::{self, list_files, remove_tree, sync_dir, write_atomic_bytes};
 use super::index::IndexEntry;
-use super::lock::{CommitLock, WriteLock, STATE_DIR};
+use super::lock::{CommitLock, ShardLock, WriteLock, STATE_DIR};
 use super::Product;
 use crate::error::{Error, IoContext, Result};
 use crate::manifest::{Tileset, MANIFEST};
@@ -39,6 +39,11 @@ struct RunMarker {
     /// rerun resumes from them only within the same boot.
     #[serde(default)]
     boot: Option<String>,
+    /// Made by shards ([`ShardWriter`]), on any host: resumed by shards of the same key, whose
+    /// records carry each file's blake3, and finished by [`Writer::open_staged`]; a whole run
+    /// replaces it.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    sharded: bool,
 }
 
 impl RunMarker {
@@ -116,6 +121,9 @@ pub struct Staging {
     pub root: PathBuf,
     /// True when an interrupted run with the same run key left files here to keep.
     pub resume: bool,
+    /// Name (less `.log`) of this process's logs of unit records and file hashes: its pid, or
+    /// a shard's `shard-<i>-of-<n>.<host>.<pid>`.
+    pub log: String,
     /// While the run lasts, the files it stages have their hashes recorded for the commit.
     _hashes: fsio::StagedHashes,
 }
@@ -134,7 +142,7 @@ impl Staging {
     pub fn record_log(&self) -> Result<RecordLog> {
         let dir = self.root.join(Self::UNITS);
         std::fs::create_dir_all(&dir).at(&dir)?;
-        let path = dir.join(format!("{}.log", std::process::id()));
+        let path = dir.join(format!("{}.log", self.log));
         let file = std::fs::OpenOptions::new()
             .create(true)
             .append(true)
@@ -169,10 +177,15 @@ impl Staging {
         self._hashes.record(rel, stamp, hash)
     }
 
-    /// Every unit record runs of this key left here, by unit name (the last of a name wins).
-    pub fn read_records(&self) -> Result<std::collections::HashMap<String, Vec<u8>>> {
+    /// Every unit record runs of this key left here, by unit name (the last of a name wins),
+    /// with the name of the log it was read from (less `.log`: which process, which shard).
+    pub fn read_records(&self) -> Result<std::collections::HashMap<String, (Vec<u8>, String)>> {
         let mut out = std::collections::HashMap::new();
         for p in fsio::logs_in(&self.root.join(Self::UNITS)) {
+            let log = p
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
             let bytes = fsio::read_capped(&p, Self::MAX_LOG_BYTES, "a log of unit records")?;
             // Whole lines only: the last may have been cut by a crash.
             for line in bytes.split_inclusive(|&b| b == b'\n') {
@@ -181,7 +194,7 @@ impl Staging {
                 };
                 if let Some(tab) = line.iter().position(|&b| b == b'\t') {
                     let name = String::from_utf8_lossy(&line[..tab]).into_owned();
-                    out.insert(name, line[tab + 1..].to_vec());
+                    out.insert(name, (line[tab + 1..].to_vec(), log.clone()));
                 }
             }
         }
@@ -246,6 +259,15 @@ impl Writer {
         }
         fsio::sweep_temps(&w.state())?;
         remove_tree(&w.state().join("trash"))?;
+        // Staging folders shards were making when killed ([`ShardWriter::stage`]).
+        if let Ok(rd) = std::fs::read_dir(w.state().join("staging")) {
+            for e in rd.flatten() {
+                let name = e.file_name().to_string_lossy().into_owned();
+                if name.starts_with('.') && name.contains(".new.") {
+                    remove_tree(&e.path())?;
+                }
+            }
+        }
         Ok(w)
     }
 
@@ -265,19 +287,7 @@ impl Writer {
 
     /// True when every file the index of `product` lists is present with its size.
     pub fn verify(&self, product: Product) -> bool {
-        let path = self
-            .state()
-            .join("index")
-            .join(format!("{}.json", product.name()));
-        let Ok(bytes) = fsio::read_capped(&path, 1 << 30, "an index") else {
-            return false;
-        };
-        let Ok(files) = serde_json::from_slice::<Vec<IndexEntry>>(&bytes) else {
-            return false;
-        };
-        files.iter().all(|IndexEntry(rel, len, _)| {
-            std::fs::metadata(self.dir.join(rel)).is_ok_and(|m| m.is_file() && m.len() == *len)
-        })
+        verify_product(&self.dir, product)
     }
 
     /// Remove what a run of stage `name` with `run_key` left in staging once that run's
@@ -305,6 +315,7 @@ impl Writer {
             let m = RunMarker {
                 run_key: run_key.to_string(),
                 boot: fsio::boot_id().map(str::to_string),
+                sharded: false,
             };
             write_atomic_bytes(&marker, &serde_json::to_vec(&m).expect("marker serialises"))?;
         }
@@ -316,8 +327,53 @@ impl Writer {
         Ok(Staging {
             root,
             resume,
+            log: std::process::id().to_string(),
             _hashes,
         })
+    }
+
+    /// The staging folder shards of stage `name` made for a run with `run_key`, to check and
+    /// commit (None: there is none). It stays when this writer ends without committing (a
+    /// refused finish leaves the shards' work for a rerun). Refused when the folder holds a run
+    /// of another key, or one not made by shards.
+    pub fn open_staged(&mut self, name: &str, run_key: &str) -> Result<Option<Staging>> {
+        let root = self.state().join("staging").join(name);
+        if !root.exists() {
+            return Ok(None);
+        }
+        match RunMarker::read(&root) {
+            Some(m) if m.run_key == run_key && m.sharded => {}
+            Some(m) if m.run_key == run_key => {
+                return Err(Error::invalid(
+                    &root,
+                    format!(
+                        "the {name} stage's staged run was made by one process, not by shards: \
+                         run the stage whole to complete it"
+                    ),
+                ))
+            }
+            _ => {
+                return Err(Error::invalid(
+                    &root,
+                    format!(
+                        "the {name} stage's staged run is of another run key (other options, or \
+                         other inputs) than this one: its shards were run for something else; \
+                         run the stage whole, which replaces it, or remove this folder and run \
+                         the shards again"
+                    ),
+                ))
+            }
+        }
+        let _ = std::fs::remove_file(root.join(MANIFEST));
+        remove_tree(&root.join("index"))?;
+        let log = format!("finish.{}.{}", fsio::host_name(), std::process::id());
+        let _hashes = fsio::StagedHashes::record_below_as(&root, &log);
+        Ok(Some(Staging {
+            root,
+            resume: true,
+            log,
+            _hashes,
+        }))
     }
 
     /// Leave the staged run as it is, uncommitted, for a later process with the same run key
@@ -567,6 +623,115 @@ impl Drop for Writer {
     }
 }
 
+/// True when every file the index of `product` lists in the tileset `dir` is present with its
+/// size ([`Writer::verify`], for a reader that is not the writer: a shard).
+pub fn verify_product(dir: &Path, product: Product) -> bool {
+    let path = dir
+        .join(STATE_DIR)
+        .join("index")
+        .join(format!("{}.json", product.name()));
+    let Ok(bytes) = fsio::read_capped(&path, 1 << 30, "an index") else {
+        return false;
+    };
+    let Ok(files) = serde_json::from_slice::<Vec<IndexEntry>>(&bytes) else {
+        return false;
+    };
+    files.iter().all(|IndexEntry(rel, len, _)| {
+        std::fs::metadata(dir.join(rel)).is_ok_and(|m| m.is_file() && m.len() == *len)
+    })
+}
+
+/// One of several processes (on one host or several sharing the folder) that each run some
+/// units of one stage at the same time ([`crate::runner::Role::Shard`]): it holds the tileset's
+/// shard lock ([`ShardLock`]), so no writer begins (nor commits) while it runs, and stages its
+/// files in the stage's one staging folder, which the first shard makes; it never commits nor
+/// removes anything.
+pub struct ShardWriter {
+    dir: PathBuf,
+    _lock: ShardLock,
+}
+
+impl ShardWriter {
+    /// Hold the tileset in `dir` as a shard: refused at once while a writer holds it, or when a
+    /// commit a killed writer left is pending (a writer finishes it).
+    pub fn begin(dir: &Path) -> Result<ShardWriter> {
+        let lock = ShardLock::acquire(dir)?;
+        let plan = dir.join(STATE_DIR).join(PLAN);
+        if plan.exists() {
+            return Err(Error::invalid(
+                &plan,
+                "a commit of this tileset was interrupted: a writer (a stage run whole, or the \
+                 finish of a sharded run) completes it first; run the shards after it",
+            ));
+        }
+        Ok(ShardWriter {
+            dir: dir.to_path_buf(),
+            _lock: lock,
+        })
+    }
+
+    /// The staging folder of stage `name` for a run with `run_key`, for the shard whose logs
+    /// are called `log`: made if missing, at once and whole (a folder with its run marker,
+    /// renamed into place: of shards starting together one makes it and the others find it),
+    /// kept when shards of the same key made it. Refused when it holds a run of another key
+    /// or of one process: that run's finish (or a run of the stage whole, which replaces it)
+    /// comes first.
+    pub fn stage(&self, name: &str, run_key: &str, log: &str) -> Result<Staging> {
+        let staging = self.dir.join(STATE_DIR).join("staging");
+        let root = staging.join(name);
+        if !root.exists() {
+            std::fs::create_dir_all(&staging).at(&staging)?;
+            let fresh = staging.join(format!(".{name}.new.{log}"));
+            remove_tree(&fresh)?;
+            std::fs::create_dir_all(&fresh).at(&fresh)?;
+            let m = RunMarker {
+                run_key: run_key.to_string(),
+                boot: None,
+                sharded: true,
+            };
+            write_atomic_bytes(
+                &fresh.join(RUN),
+                &serde_json::to_vec(&m).expect("marker serialises"),
+            )?;
+            // A folder renamed onto one that exists, not empty, is refused: another shard's
+            // stands.
+            if std::fs::rename(&fresh, &root).is_err() {
+                remove_tree(&fresh)?;
+            } else {
+                sync_dir(&staging)?;
+            }
+        }
+        let (resume, pending) = match RunMarker::read(&root) {
+            Some(m) if m.run_key == run_key && m.sharded => (true, None),
+            Some(m) if m.run_key == run_key => (false, Some("a run of this stage by one process")),
+            Some(_) => (
+                false,
+                Some("shards or a run of this stage with another run key"),
+            ),
+            None => (
+                false,
+                Some("a run of this stage that did not get to write its marker"),
+            ),
+        };
+        if let Some(what) = pending {
+            return Err(Error::invalid(
+                &root,
+                format!(
+                    "{what} left this staging folder: finish that run (or run the {name} stage \
+                     whole, which replaces it) before running shards of this one"
+                ),
+            ));
+        }
+        let _hashes = fsio::StagedHashes::record_below_as(&root, log);
+        Ok(Staging {
+            root,
+            resume,
+            log: log.to_string(),
+            _hashes,
+        })
+    }
+}
+
 /// The index entries of the files (`rel`, size) staged below `root`, and how many of them
 /// were read back and hashed. A file's blake3 is the one [`fsio::write_staged`] recorded as it
 /// wrote the file when a record's size, inode and mtime are the file's on disk now; any other
@@ -639,6 +804,7 @@ mod record_tests {
         let s = Staging {
             root: d.path().to_path_buf(),
             resume: true,
+            log: std::process::id().to_string(),
             _hashes: fsio::StagedHashes::record_below(d.path()),
         };
         assert!(s.read_records().unwrap().is_empty());
@@ -650,8 +816,9 @@ mod record_tests {
         std::fs::write(&other, b"3-px-0-2\t[3]\n3-px-0-3\t{\"cut").unwrap();
         let r = s.read_records().unwrap();
         assert_eq!(r.len(), 2, "{r:?}");
-        assert_eq!(r["3-px-0-1"], b"{\"a\":1}");
-        assert!(r["3-px-0-2"] == b"[1,2]" || r["3-px-0-2"] == b"[3]");
+        assert_eq!(r["3-px-0-1"].0, b"{\"a\":1}");
+        assert!(r["3-px-0-2"].0 == b"[1,2]" || r["3-px-0-2"].0 == b"[3]");
+        assert_eq!(r["3-px-0-1"].1, std::process::id().to_string());
         assert!(!r.contains_key("3-px-0-3"));
     }
 }

@@ -59,6 +59,11 @@ enum Command {
         /// horizon stage will decide (without it the stage decides after the mipmaps).
         #[arg(long)]
         tileset: Option<PathBuf>,
+        /// Also cut the sharded stages (mip, horizon) into N shards as `bake --stage S --shard
+        /// I/N` will: per shard its units and estimated CPU time, and the slowest shard over
+        /// the mean.
+        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=penumbra::runner::MAX_SHARDS as i64))]
+        shards: Option<u32>,
         /// Print the plan as JSON.
         #[arg(long)]
         json: bool,
@@ -680,8 +685,21 @@ struct BakeArgs {
     keep_partial: bool,
     /// With a scene: keep only the scene's tiles in the output folder, removing those that
     /// bakes of other scenes added there (by default a bake adds its tiles and keeps theirs).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "stage")]
     prune: bool,
+    /// Run only this stage of the scene's bake (tile, mip or horizon), after the stages it
+    /// reads have committed: whole, or with --shard / --finish (docs/cluster.md).
+    #[arg(long, value_name = "STAGE", conflicts_with_all = ["dem", "scene_size", "horizon_levels", "no_horizons", "no_fourier", "keep_raw"])]
+    stage: Option<String>,
+    /// With --stage: run only shard I of N (0-based) of the stage's units, at the same time as
+    /// the others (here or on other hosts sharing the folder); it never commits: --finish does.
+    #[arg(long, value_name = "I/N", requires = "stage", value_parser = penumbra::runner::Select::shard)]
+    shard: Option<penumbra::runner::Select>,
+    /// With --stage: once every shard has run, check their work (every unit recorded, every
+    /// file with its size and blake3) and commit the stage; a shard missing or damaged is
+    /// named and nothing is committed (exit 2).
+    #[arg(long, requires = "stage", conflicts_with = "shard")]
+    finish: bool,
     #[command(flatten)]
     fourier: FourierFlags,
 }
@@ -773,6 +791,20 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
                 Some(p) => penumbra::scene::load(p)?,
                 None => penumbra::scene::embedded(),
             };
+            if let Some(stage) = &a.stage {
+                let role = match (&a.shard, a.finish) {
+                    (_, true) => penumbra::runner::Role::Finish,
+                    (Some(_), false) => penumbra::runner::Role::Shard,
+                    (None, false) => penumbra::runner::Role::Writer,
+                };
+                let select = a.shard.clone().unwrap_or_default();
+                let plan = penumbra::scene::plan::plan(&scene)?;
+                let ran = penumbra::scene::bake::bake_stage(
+                    &plan, &a.out, stage, &select, role, &progress,
+                )?;
+                output::print_ran(&ran, t0.elapsed().as_secs_f64(), a.flags.json)?;
+                return Ok(());
+            }
             let how = penumbra::scene::bake::BakeOptions {
                 keep_partial: a.keep_partial,
                 prune: a.prune,
@@ -788,6 +820,7 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
         Command::Plan {
             scene,
             tileset,
+            shards,
             json,
         } => {
             let t0 = std::time::Instant::now();
@@ -798,7 +831,13 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
             if let Some(dir) = &tileset {
                 penumbra::scene::plan::decide_pruning(&mut plan, dir)?;
             }
-            output::print_plan(&plan, t0.elapsed().as_secs_f64(), json)?;
+            match shards {
+                None => output::print_plan(&plan, t0.elapsed().as_secs_f64(), json)?,
+                Some(n) => {
+                    let table = penumbra::scene::shards::table(&plan, n as usize);
+                    output::print_plan_shards(&plan, &table, t0.elapsed().as_secs_f64(), json)?
+                }
+            }
         }
         Command::Bake(a) => {
             let mut plan = Plan {
@@ -1119,6 +1158,9 @@ fn legacy_bake(m: &clap::ArgMatches) -> bool {
         "out",
         "keep_partial",
         "prune",
+        "stage",
+        "shard",
+        "finish",
         "json",
         "quiet",
         "threads",

@@ -212,7 +212,8 @@ pub fn print_ran(ran: &Ran, wall_s: f64, json: bool) -> Result<()> {
             writeln!(
                 out,
                 "{stage}: {ran} units run, {done} of {total} done; the stage commits when a run \
-                 with the same options completes the rest ({wall_s:.2} s)"
+                 with the same options completes the rest (shards of a scene's stage: when \
+                 `bake SCENE --stage {stage} --finish` has checked them) ({wall_s:.2} s)"
             )?;
             Ok(())
         }
@@ -800,5 +801,52 @@ pub fn print_plan(plan: &penumbra::scene::plan::Plan, wall_s: f64, json: bool) -
     )?;
     writeln!(out, "rates: {}", r.rates.source)?;
     writeln!(out, "planned in {wall_s:.2} s")?;
+    Ok(())
+}
+
+/// `penumbra plan SCENE --shards N`: the plan, then each sharded stage cut into N shards (JSON:
+/// the plan's object with `shards` added).
+pub fn print_plan_shards(
+    plan: &penumbra::scene::plan::Plan,
+    table: &penumbra::scene::shards::ShardTable,
+    wall_s: f64,
+    json: bool,
+) -> Result<()> {
+    if json {
+        let mut v = serde_json::to_value(plan.report())?;
+        v["plan_wall_s"] = serde_json::json!(wall_s);
+        v["shards"] = serde_json::to_value(table)?;
+        return print_json(&v);
+    }
+    print_plan(plan, wall_s, false)?;
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "in {} shards (tiling runs whole first: {:.1} core-s estimated, {:.1} % of the bake):",
+        table.count,
+        table.tile_cpu_s_est,
+        100.0 * table.tile_share
+    )?;
+    for st in &table.stages {
+        writeln!(
+            out,
+            "  {}: {} units, {:.1} core-s estimated; slowest shard / mean = {:.3}",
+            st.stage, st.units, st.cpu_s_est, st.slowest_over_mean
+        )?;
+        writeln!(
+            out,
+            "    {:>6} {:>8} {:>12}",
+            "shard", "units", "core-s est"
+        )?;
+        for s in &st.shards {
+            writeln!(
+                out,
+                "    {:>6} {:>8} {:>12.2}",
+                format!("{}/{}", s.shard, table.count),
+                s.units,
+                s.cpu_s_est
+            )?;
+        }
+    }
     Ok(())
 }
