@@ -95,8 +95,8 @@ mod with_gdal {
         String::from_utf8(o.stdout).unwrap()
     }
 
-    /// The embedded scene at 1024 px, 32-px tiles, 4 levels, Fourier pyramids (and raw maps)
-    /// at level 3.
+    /// The embedded scene at 1024 px (20 km across the south pole), 32-px tiles, 12 levels
+    /// (53 m/px at level 11), Fourier pyramids (and raw maps) at level 9 (212 m/px).
     fn baked(dir: &Path) -> String {
         let s = dir.join("tiles").to_str().unwrap().to_string();
         json(&run(&[
@@ -106,11 +106,11 @@ mod with_gdal {
             "--scene-size",
             "1024",
             "--levels",
-            "4",
+            "12",
             "--tile-size",
             "32",
             "--horizon-levels",
-            "3",
+            "9",
             "--keep-raw",
             "--json",
         ]));
@@ -202,23 +202,65 @@ mod with_gdal {
             "{name}"
         );
 
-        // 20 random pixels with data: their centres in the body's lon/lat by PROJ.
+        // 20 random pixels with data (found in GDAL's ASCII grid of the file): their centres
+        // in the body's lon/lat by PROJ.
+        let grid = tool(
+            "gdal_translate",
+            &[
+                "-q",
+                "-of",
+                "AAIGrid",
+                "-co",
+                "DECIMAL_PRECISION=2",
+                o,
+                "/vsistdout/",
+            ],
+            None,
+        );
+        let values: Vec<f64> = grid
+            .lines()
+            .filter(|l| {
+                let key = l
+                    .split_whitespace()
+                    .next()
+                    .unwrap_or("")
+                    .to_ascii_lowercase();
+                ![
+                    "ncols",
+                    "nrows",
+                    "xllcorner",
+                    "yllcorner",
+                    "xllcenter",
+                    "yllcenter",
+                    "cellsize",
+                    "dx",
+                    "dy",
+                    "nodata_value",
+                ]
+                .contains(&key.as_str())
+            })
+            .flat_map(|l| l.split_whitespace())
+            .map(|t| t.parse().unwrap_or(f64::NAN))
+            .collect();
+        assert_eq!(
+            values.len(),
+            w * h,
+            "{name}: the ASCII grid has {} values",
+            values.len()
+        );
+        let mut data: Vec<usize> = (0..w * h).filter(|&k| !values[k].is_nan()).collect();
+        assert!(data.len() >= 20, "{name}: {} pixels with data", data.len());
         let mut rnd = rng(0x5EED ^ name.len() as u64);
         let mut picked = Vec::new();
-        let mut tries = 0;
-        while picked.len() < 20 {
-            tries += 1;
-            assert!(tries < 5000, "{name}: too few pixels with data");
-            let (c, r) = ((rnd() * w as f64) as usize, (rnd() * h as f64) as usize);
+        for _ in 0..20 {
+            let k = data.swap_remove((rnd() * data.len() as f64) as usize % data.len());
+            let (c, r) = (k % w, k / w);
             let v = tool(
                 "gdallocationinfo",
                 &["-valonly", o, &c.to_string(), &r.to_string()],
                 None,
             );
-            let v: f64 = v.trim().parse().unwrap_or(f64::NAN);
-            if !v.is_nan() {
-                picked.push((c, r, v));
-            }
+            picked.push((c, r, v.trim().parse::<f64>().unwrap()));
         }
         let xy: String = picked
             .iter()
@@ -280,7 +322,7 @@ mod with_gdal {
             "height",
             &["--product", "height"],
             &|la, lo| {
-                q(&["query", "height", "--level", "3"], "height_m", la, lo)
+                q(&["query", "height", "--level", "11"], "height_m", la, lo)
                     .as_f64()
                     .unwrap()
             },
@@ -290,9 +332,9 @@ mod with_gdal {
             t,
             d.path(),
             "height-face",
-            &["--product", "height", "--face", "nz", "--level", "2"],
+            &["--product", "height", "--face", "nz", "--level", "5"],
             &|la, lo| {
-                q(&["query", "height", "--level", "2"], "height_m", la, lo)
+                q(&["query", "height", "--level", "5"], "height_m", la, lo)
                     .as_f64()
                     .unwrap()
             },
@@ -311,12 +353,12 @@ mod with_gdal {
                 "--sun-el",
                 "1.5",
                 "--level",
-                "3",
+                "9",
             ],
             &|la, lo| {
                 q(
                     &[
-                        "query", "shadow", "--level", "3", "--sun-az", "135", "--sun-el", "1.5",
+                        "query", "shadow", "--level", "9", "--sun-az", "135", "--sun-el", "1.5",
                     ],
                     "lit_fraction",
                     la,
@@ -334,7 +376,7 @@ mod with_gdal {
             &["--product", "horizon-mean", "--crs", "eqc"],
             &|la, lo| {
                 let e = q(
-                    &["query", "horizon", "--level", "3", "--from", "fourier"],
+                    &["query", "horizon", "--level", "9", "--from", "fourier"],
                     "elevation_deg",
                     la,
                     lo,
@@ -410,8 +452,8 @@ mod with_gdal {
                 "are for --product lit",
             ),
             (
-                vec!["--product", "height", "--level", "9"],
-                "--level 9 does not exist",
+                vec!["--product", "height", "--level", "12"],
+                "--level 12 does not exist",
             ),
             (
                 vec!["--product", "height", "--max-output-gib", "0.0000001"],

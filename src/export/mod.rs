@@ -461,10 +461,11 @@ fn region_points(store: &Store, region: &Region, level: u8, tiles: &BTreeSet<Til
         Region::Coverage => {
             let per = lay.tiles_per_side(level) as f64;
             for t in tiles.iter().filter(|t| t.level == level) {
-                for a in 0..=4 {
-                    for b in 0..=4 {
-                        let s = -1.0 + 2.0 * (t.x as f64 + a as f64 / 4.0) / per;
-                        let tt = 1.0 - 2.0 * (t.y as f64 + b as f64 / 4.0) / per;
+                // 9×9 points a tile: at level 0 (a face a tile) about 11° apart.
+                for a in 0..=8 {
+                    for b in 0..=8 {
+                        let s = -1.0 + 2.0 * (t.x as f64 + a as f64 / 8.0) / per;
+                        let tt = 1.0 - 2.0 * (t.y as f64 + b as f64 / 8.0) / per;
                         pts.push(lay.st_to_dir(t.face, s, tt));
                     }
                 }
@@ -474,7 +475,22 @@ fn region_points(store: &Store, region: &Region, level: u8, tiles: &BTreeSet<Til
     pts
 }
 
-/// The centre of the smallest arc of longitudes (degrees) holding every point.
+/// The centre of the smallest arc of longitudes (degrees) holding the region, and whether that
+/// is the whole circle: a box's own longitudes; for sampled points, the circle less the largest
+/// gap between them — unless that gap is under 30° (samples of a region that goes all round).
+fn lon_arc(region: &Region, pts: &[Vec3]) -> (f64, bool) {
+    if let Region::Bbox([_, _, lon0, lon1]) = region {
+        return (
+            crate::dem::wrap180((lon0 + lon1) / 2.0),
+            lon1 - lon0 >= 360.0,
+        );
+    }
+    let c = lon_centre(pts);
+    (if c.is_nan() { 0.0 } else { c }, c.is_nan())
+}
+
+/// The centre of the smallest arc of longitudes (degrees) holding every point; NaN when the
+/// largest gap between them is under 30° (all round).
 fn lon_centre(pts: &[Vec3]) -> f64 {
     let mut lons: Vec<f64> = pts
         .iter()
@@ -492,6 +508,9 @@ fn lon_centre(pts: &[Vec3]) -> f64 {
             gap = w[1] - w[0];
             after = w[1];
         }
+    }
+    if gap < 30.0 {
+        return f64::NAN;
     }
     let span = 360.0 - gap;
     let c = crate::dem::wrap180(after + span / 2.0);
@@ -516,7 +535,7 @@ fn choose_crs(kind: Option<CrsKind>, region: &Region, pts: &[Vec3]) -> Result<Ma
     };
     Ok(match kind {
         CrsKind::Eqc => MapCrs::Equirectangular {
-            lon0_deg: lon_centre(pts),
+            lon0_deg: lon_arc(region, pts).0,
         },
         CrsKind::Stere => MapCrs::PolarStereographic {
             north: lo + hi >= 0.0,
@@ -722,6 +741,11 @@ pub fn render(dir: &Path, opts: &ExportOptions) -> Result<Raster> {
                 xmax = xmax.max(x);
                 ymin = ymin.min(y);
                 ymax = ymax.max(y);
+            }
+            // All round the body in equirectangular: the whole circle, whatever was sampled.
+            if matches!(crs, MapCrs::Equirectangular { .. }) && lon_arc(&opts.region, &pts).1 {
+                let half = std::f64::consts::PI * radius;
+                (xmin, xmax) = (-half, half);
             }
             // Snapped to multiples of the pixel (a small tolerance keeps exact edges exact).
             let e = 1e-9;
@@ -1052,5 +1076,13 @@ mod tests {
         );
         let across = [170.0f64, -170.0].map(|l| cube::latlon_to_dir(0.0, l.to_radians()));
         assert!((lon_centre(&across).abs() - 180.0).abs() < 1e-9);
+        let round: Vec<Vec3> = (0..36)
+            .map(|k| cube::latlon_to_dir(0.0, (10.0 * k as f64).to_radians()))
+            .collect();
+        assert!(lon_arc(&Region::Coverage, &round).1);
+        assert_eq!(
+            lon_arc(&Region::Bbox([0.0, 1.0, 170.0, 200.0]), &round),
+            (-175.0, false)
+        );
     }
 }
