@@ -71,9 +71,13 @@ pub fn read(path: &Path) -> Result<DemParts> {
             "its geotransform rotates the raster: warp it to a north-up grid (gdalwarp)",
         ));
     }
-    if !(gt[1].is_finite() && gt[1] > 0.0 && gt[5].is_finite() && gt[5] != 0.0)
-        || !(gt[0].is_finite() && gt[3].is_finite())
-    {
+    let usable = gt[1].is_finite()
+        && gt[1] > 0.0
+        && gt[5].is_finite()
+        && gt[5] != 0.0
+        && gt[0].is_finite()
+        && gt[3].is_finite();
+    if !usable {
         return Err(Error::invalid(
             path,
             format!("geotransform {gt:?} is not usable: finite, pixel width > 0, height ≠ 0"),

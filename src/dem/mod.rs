@@ -90,13 +90,14 @@ fn read_gdal(path: &Path) -> Result<DemParts> {
     self::gdal::read(path)
 }
 
+/// Without GDAL, nothing but the shared message ([`Error::no_gdal`]; keep this trivial: CI
+/// builds with GDAL and does not compile it).
 #[cfg(not(feature = "gdal"))]
 fn read_gdal(path: &Path) -> Result<DemParts> {
-    Err(Error::unsupported(
-        path,
-        "this build reads no DEM through GDAL: rebuild with `cargo build --features gdal` \
-         (needs libgdal-dev), or use a native format (docs/formats.md)",
-    ))
+    Err(Error::no_gdal(format_args!(
+        "{} (read through GDAL)",
+        path.display()
+    )))
 }
 
 /// Open a DEM, choosing the reader from the file name and contents:

@@ -514,11 +514,12 @@ fn lon_centre(pts: &[Vec3]) -> f64 {
     }
     let span = 360.0 - gap;
     let c = crate::dem::wrap180(after + span / 2.0);
-    // A round number for the CRS when the region spans much.
+    // A round number for the CRS when the region spans much, else to 1e-6° (so that the CRS
+    // reads as 3, not 3.0000000000000004).
     if span > 90.0 {
         c.round()
     } else {
-        c
+        (c * 1e6).round() / 1e6
     }
 }
 

@@ -645,8 +645,7 @@ fn check(raw: File, here: &Here) -> Result<Scene> {
                     return Err(here.err(
                         f,
                         &key("format"),
-                        "this build reads no DEM through GDAL: rebuild with `cargo build \
-                         --features gdal` (needs libgdal-dev)",
+                        format!("\"gdal\" reads through GDAL: {}", crate::error::NO_GDAL),
                     ));
                 }
                 v
