@@ -42,6 +42,12 @@ pub enum Input<'a> {
     Embedded(SyntheticSpec),
     /// A DEM file and the body it belongs to as the caller chose it.
     Dem { path: PathBuf, body: BodyChoice },
+    /// A DEM file read by the reader `format` names (`DemFormat::Gdal`: through GDAL).
+    DemWith {
+        path: PathBuf,
+        body: BodyChoice,
+        format: crate::dem::DemFormat,
+    },
     /// A scene's planned tiles, cut from its sources' mosaic.
     Scene(&'a crate::scene::plan::Plan),
 }
@@ -310,6 +316,11 @@ impl Node for TileNode<'_> {
             }
             Input::Dem { path, body } => {
                 let dem = dem::open(path, self.opts.max_fill_px)?;
+                let body = body_for(&dem, body)?;
+                tiling::tile_dem(&dem, &body, out, self.opts, None, progress)?
+            }
+            Input::DemWith { path, body, format } => {
+                let dem = dem::open_as(path, *format, self.opts.max_fill_px)?;
                 let body = body_for(&dem, body)?;
                 tiling::tile_dem(&dem, &body, out, self.opts, None, progress)?
             }

@@ -3,6 +3,11 @@
 
 use std::path::{Path, PathBuf};
 
+/// What a build without `--features gdal` answers when asked for something that needs GDAL
+/// ([`Error::no_gdal`]).
+pub const NO_GDAL: &str =
+    "this build has no GDAL: rebuild with `cargo build --features gdal` (needs libgdal-dev)";
+
 /// Result alias used throughout the library.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
@@ -64,6 +69,13 @@ impl Error {
     pub fn usage(msg: impl Into<String>) -> Self {
         Error::Usage(msg.into())
     }
+    /// `what` (the command, file or option that asked) needs GDAL, which this build lacks: a
+    /// usage error saying how to rebuild ([`NO_GDAL`]). Compiled in every build, so that its
+    /// text is tested where CI builds with GDAL; the `cfg(not(feature = "gdal"))` branches do
+    /// nothing but return it.
+    pub fn no_gdal(what: impl std::fmt::Display) -> Self {
+        Error::Usage(format!("{what}: {NO_GDAL}"))
+    }
     /// `param` (an options field name) with what is wrong with its value, e.g.
     /// `Error::param("near_px", "2000 is outside 0..=1024")`.
     pub fn param(param: &'static str, msg: impl Into<String>) -> Self {
@@ -82,5 +94,37 @@ pub trait IoContext<T> {
 impl<T> IoContext<T> for std::io::Result<T> {
     fn at(self, path: impl AsRef<Path>) -> Result<T> {
         self.map_err(|e| Error::io(path, e))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The message of a build without GDAL names the feature that both packages have (the
+    /// library's and the CLI's, which `cargo build --features gdal` at the root turns on), and
+    /// is a usage error (the CLI exits 2).
+    #[test]
+    fn no_gdal_says_how_to_build_it() {
+        let e = Error::no_gdal("penumbra export");
+        assert!(matches!(e, Error::Usage(_)));
+        let m = e.to_string();
+        assert!(
+            m.starts_with("penumbra export: this build has no GDAL"),
+            "{m}"
+        );
+        assert!(
+            m.contains("`cargo build --features gdal`") && m.contains("libgdal-dev"),
+            "{m}"
+        );
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        for toml in ["Cargo.toml", "tools/penumbra/Cargo.toml"] {
+            let t = std::fs::read_to_string(root.join(toml)).unwrap();
+            let features = t.split("[features]").nth(1).unwrap_or("");
+            assert!(
+                features.lines().any(|l| l.starts_with("gdal = [")),
+                "{toml} has no `gdal` feature"
+            );
+        }
     }
 }

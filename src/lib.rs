@@ -13,6 +13,7 @@ pub mod cube;
 pub mod dem;
 pub mod ephemeris;
 pub mod error;
+pub mod export;
 pub mod exrcodec;
 pub mod format;
 pub mod fourier;

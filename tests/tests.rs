@@ -31,6 +31,10 @@ mod horizon;
 // sets, sources of different bodies refused.
 mod mosaic;
 
+// `penumbra export` to Cloud-Optimized GeoTIFF and DEMs read through GDAL (`--features gdal`;
+// without it, the exit-2 message).
+mod export;
+
 // tileset.json consistency: every field the docs call validated, refused by name (a table).
 mod manifest;
 

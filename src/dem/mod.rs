@@ -13,6 +13,8 @@
 //! `max_fill_px` from data stay NaN and count as "no data".
 
 pub mod exrdem;
+#[cfg(feature = "gdal")]
+pub mod gdal;
 pub mod geotiff;
 pub mod limits;
 pub mod pds3;
@@ -31,10 +33,78 @@ use std::path::Path;
 
 use crate::body::Body;
 use crate::error::{Error, Result};
+/// Which reader opens a DEM.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DemFormat {
+    /// The native reader the file name chooses ([`open`]); GDAL for names none knows, in a
+    /// build with GDAL.
+    #[default]
+    Auto,
+    /// Any raster GDAL opens (ISIS cubes, PDS4, JPEG 2000, VRT mosaics …): needs a build with
+    /// `--features gdal`.
+    Gdal,
+}
+
+impl DemFormat {
+    /// Whether this is the default (`auto`).
+    pub fn is_auto(&self) -> bool {
+        *self == DemFormat::Auto
+    }
+
+    /// Whether this build reads DEMs through GDAL.
+    pub fn gdal_available() -> bool {
+        cfg!(feature = "gdal")
+    }
+}
+
+impl std::str::FromStr for DemFormat {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "auto" => Ok(DemFormat::Auto),
+            "gdal" => Ok(DemFormat::Gdal),
+            _ => Err(format!("unknown DEM format '{s}': use auto or gdal")),
+        }
+    }
+}
+
+/// Open a DEM with the reader `format` names ([`DemFormat::Auto`]: as [`open`]).
+pub fn open_as(path: &Path, format: DemFormat, max_fill_px: u32) -> Result<Dem> {
+    match format {
+        DemFormat::Auto => open(path, max_fill_px),
+        DemFormat::Gdal => {
+            if !path.exists() {
+                return Err(Error::io(
+                    path,
+                    std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
+                ));
+            }
+            Dem::new(read_gdal(path)?, max_fill_px)
+        }
+    }
+}
+
+#[cfg(feature = "gdal")]
+fn read_gdal(path: &Path) -> Result<DemParts> {
+    self::gdal::read(path)
+}
+
+/// Without GDAL, nothing but the shared message ([`Error::no_gdal`]; keep this trivial: CI
+/// builds with GDAL and does not compile it).
+#[cfg(not(feature = "gdal"))]
+fn read_gdal(path: &Path) -> Result<DemParts> {
+    Err(Error::no_gdal(format_args!(
+        "{} (read through GDAL)",
+        path.display()
+    )))
+}
+
 /// Open a DEM, choosing the reader from the file name and contents:
 /// `.lbl`/`.img` → PDS3, `.hgt` → SRTM, `.tif`/`.tiff` → GeoTIFF, `.exr` → EXR (needs a JSON
 /// sidecar for its georeferencing), `.bin`/`.raw`/`.dat` or anything with a
-/// `<file>.json`/`<stem>.json` sidecar → raw (a `.json` sidecar opens the raster it describes).
+/// `<file>.json`/`<stem>.json` sidecar → raw (a `.json` sidecar opens the raster it describes);
+/// any other name through GDAL in a build with `--features gdal` ([`DemFormat::Gdal`]).
 pub fn open(path: &Path, max_fill_px: u32) -> Result<Dem> {
     if !path.exists() {
         return Err(Error::io(
@@ -55,6 +125,7 @@ pub fn open(path: &Path, max_fill_px: u32) -> Result<Dem> {
         "bin" | "raw" | "dat" => raw::read(path)?,
         _ => match sidecar::sidecar_for(path) {
             Some(_) => read_with_sidecar(path)?,
+            None if DemFormat::gdal_available() => read_gdal(path)?,
             None => {
                 return Err(Error::unsupported(
                     path,

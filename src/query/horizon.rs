@@ -86,7 +86,7 @@ pub struct HorizonAnswer {
 }
 
 /// A pixel's horizon as a function of plane azimuth.
-enum Profile {
+pub(crate) enum Profile {
     /// `A` samples at plane azimuths 2πk/A, linearly interpolated between.
     Samples(Vec<f32>),
     /// The series' coefficients.
@@ -95,12 +95,49 @@ enum Profile {
 
 impl Profile {
     /// Elevation (degrees) at plane azimuth `phi` (radians).
-    fn at(&self, phi: f64) -> f64 {
+    pub(crate) fn at(&self, phi: f64) -> f64 {
         match self {
             Profile::Samples(s) => crate::fourier::series::interpolate_samples(s, phi),
             Profile::Series(c) => crate::fourier::evaluate(c, phi),
         }
     }
+
+    /// The lit fraction of `sun`'s disc above this horizon, seen from `frame` (what the shadow
+    /// query answers, and what `export` writes per pixel).
+    pub(crate) fn lit(&self, frame: &Frame, sun: &Sun, model: Model) -> f64 {
+        sun::lit_fraction(frame, sun, model, &|p| self.at(p))
+    }
+}
+
+/// Raw and computed horizons floored as the pyramids are: below the tangent to the sphere of
+/// the lowest terrain lies the body, mapped or not (−90° means no mapped terrain). `height` is
+/// the pixel's own height.
+pub(crate) fn floor_samples(ts: &manifest::Tileset, height: f32, e: &mut [f32]) {
+    if let Some((tmin, _)) = terrain_range(ts) {
+        let floor = crate::fourier::stage::floor_deg(ts.body.radius_m, tmin, height as f64);
+        for v in e.iter_mut() {
+            *v = v.max(floor as f32);
+        }
+    }
+}
+
+/// The local frame at the centre of interior pixel (i, j) of `tile`, and a sun of angular
+/// radius `radius_deg` at compass azimuth `sun_az` and elevation `sun_el` (degrees) there.
+pub(crate) fn sun_at_pixel(
+    lay: &crate::layout::Layout,
+    tile: TileId,
+    (i, j): (usize, usize),
+    (sun_az, sun_el): (f64, f64),
+    radius_deg: f64,
+) -> (Frame, Sun) {
+    let (s, t) = lay.pixel_st(tile, i as i64, j as i64);
+    let (u, v) = (lay.projection.s_to_u(s), lay.projection.s_to_u(t));
+    let frame = Frame::at(tile.face, u, v);
+    let sun = Sun {
+        dir: frame.direction(sun_az, sun_el),
+        radius_deg,
+    };
+    (frame, sun)
 }
 
 /// The located pixel of a query.
@@ -433,12 +470,13 @@ pub fn shadow(
     let px = locate_pixel(&store, dir, lat, lon, level)?;
     let (s, t) = px.st;
     let lay = ts.layout;
-    let (u, v) = (lay.projection.s_to_u(s), lay.projection.s_to_u(t));
-    let frame = Frame::at(px.tile.face, u, v);
-    let sun = Sun {
-        dir: frame.direction(sun_az, sun_el),
-        radius_deg: sun::sun_radius_deg(dist),
-    };
+    let (frame, sun) = sun_at_pixel(
+        &lay,
+        px.tile,
+        (px.i, px.j),
+        (sun_az, sun_el),
+        sun::sun_radius_deg(dist),
+    );
     let phi = frame.plane_azimuth(sun.dir);
     let d = lay.st_to_dir(px.tile.face, s, t);
     let (plat, plon) = crate::cube::dir_to_latlon(d);
@@ -542,15 +580,9 @@ pub fn shadow(
         }
     }
     let (mut prof, source, method, _, _, _) = profile(&store, dir, &px, from, opts)?;
-    // Raw and computed horizons are floored as the pyramids are: below the tangent to the
-    // sphere of the lowest terrain lies the body, mapped or not (−90° means no mapped terrain).
-    if let (Profile::Samples(e), Some((tmin, _))) = (&mut prof, terrain_range(ts)) {
-        let floor = crate::fourier::stage::floor_deg(ts.body.radius_m, tmin, px.height as f64);
-        for v in e.iter_mut() {
-            *v = v.max(floor as f32);
-        }
+    if let Profile::Samples(e) = &mut prof {
+        floor_samples(ts, px.height, e);
     }
-    let horizon = |p: f64| prof.at(p);
-    let lit = sun::lit_fraction(&frame, &sun, model, &horizon);
+    let lit = prof.lit(&frame, &sun, model);
     Ok(answer(prof.at(phi), lit, source, Some(method), 0))
 }

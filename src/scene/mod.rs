@@ -86,6 +86,8 @@ struct LayoutTable {
 #[serde(deny_unknown_fields)]
 struct SourceTable {
     path: Option<Spanned<String>>,
+    /// The reader of `path`: `"auto"` (the native reader the file name chooses) or `"gdal"`.
+    format: Option<Spanned<String>>,
     /// `"south-pole"`: the embedded synthetic terrain.
     embedded: Option<Spanned<String>>,
     /// Pixels per side of the embedded terrain.
@@ -203,6 +205,9 @@ pub enum SourceKind {
 #[derive(Clone, Debug, Serialize)]
 pub struct SourceSpec {
     pub kind: SourceKind,
+    /// The reader of a file source (`format = "gdal"`: through GDAL).
+    #[serde(skip_serializing_if = "crate::dem::DemFormat::is_auto")]
+    pub format: crate::dem::DemFormat,
     /// Width of the seam where this source gives way to the next below it (its own pixels).
     pub feather_px: f64,
     /// Higher wins; None: by resolution (finer wins).
@@ -627,6 +632,26 @@ fn check(raw: File, here: &Here) -> Result<Scene> {
                 ))
             }
         };
+        let format = match &t.format {
+            None => crate::dem::DemFormat::Auto,
+            Some(f) => {
+                if t.path.is_none() {
+                    return Err(here.err(f, &key("format"), "only a file source has a format"));
+                }
+                let v: crate::dem::DemFormat = f
+                    .get_ref()
+                    .parse()
+                    .map_err(|m: String| here.err(f, &key("format"), m))?;
+                if v == crate::dem::DemFormat::Gdal && !crate::dem::DemFormat::gdal_available() {
+                    return Err(here.err(
+                        f,
+                        &key("format"),
+                        format!("\"gdal\" reads through GDAL: {}", crate::error::NO_GDAL),
+                    ));
+                }
+                v
+            }
+        };
         let feather_px = match &t.feather_px {
             Some(f) => finite(here, f, &key("feather_px"), 0.0, MAX_FEATHER_PX)?,
             None => 4.0,
@@ -643,6 +668,7 @@ fn check(raw: File, here: &Here) -> Result<Scene> {
         };
         sources.push(SourceSpec {
             kind,
+            format,
             feather_px,
             priority,
             line,

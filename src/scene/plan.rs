@@ -273,7 +273,7 @@ pub fn plan(scene: &Scene) -> Result<Plan> {
     for (i, s) in scene.sources.iter().enumerate() {
         let (dem, label, embedded) = match &s.kind {
             SourceKind::File(p) => {
-                let d = dem::open(p, crate::dem::DEFAULT_MAX_FILL_PX)
+                let d = dem::open_as(p, s.format, crate::dem::DEFAULT_MAX_FILL_PX)
                     .map_err(|e| line_err(s.line, &format!("source[{i}].path"), e.to_string()))?;
                 (d, p.display().to_string(), None)
             }

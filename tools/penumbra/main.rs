@@ -190,6 +190,11 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Export a product onto a map grid as a Cloud-Optimized GeoTIFF that GIS tools open
+    /// (docs/packaging.md, "GeoTIFF export (GDAL)"): polar stereographic near a pole,
+    /// equirectangular elsewhere, a face's gnomonic grid with --face; nodata where the tileset
+    /// has none. Needs a build with `--features gdal`.
+    Export(ExportArgs),
     /// Describe a tileset.
     Info {
         /// Tileset folder.
@@ -210,6 +215,157 @@ enum Command {
     /// Ask a tileset about one point.
     #[command(subcommand)]
     Query(QueryCommand),
+}
+
+#[derive(Args)]
+struct ExportArgs {
+    /// Tileset folder.
+    dir: PathBuf,
+    /// What each pixel holds: height (m above the reference sphere, bilinear as `query
+    /// height`), lit (lit fraction of the sun's disc, as `query shadow`; needs --sun-az and
+    /// --sun-el) or horizon-mean (mean horizon elevation over azimuth, degrees).
+    #[arg(long)]
+    product: penumbra::export::ExportProduct,
+    /// Output format: cog (Cloud-Optimized GeoTIFF, written by GDAL's COG driver).
+    #[arg(long, default_value = "cog")]
+    format: String,
+    /// A latitude/longitude box LAT0,LAT1,LON0,LON1 (degrees): the smallest grid holding it.
+    /// Default: every tile of the level.
+    #[arg(long, allow_hyphen_values = true, conflicts_with = "face")]
+    bbox: Option<String>,
+    /// One cube face whole (px, nx, py, ny, pz, nz): its gnomonic grid, pixel for pixel the
+    /// level's tiles.
+    #[arg(long)]
+    face: Option<String>,
+    /// Tile level to sample (default: the finest holding the product); the output's pixel is
+    /// the level's pixel at a face centre.
+    #[arg(long)]
+    level: Option<u8>,
+    /// Projection: stere (polar stereographic, the default for a region within 30° of a pole),
+    /// eqc (equirectangular, the default elsewhere) or gnom (gnomonic, the default for --face).
+    #[arg(long)]
+    crs: Option<penumbra::export::CrsKind>,
+    /// For lit: sun azimuth, degrees clockwise from local north, at every pixel.
+    #[arg(long, allow_hyphen_values = true)]
+    sun_az: Option<f64>,
+    /// For lit: sun elevation above the local horizontal, degrees, at every pixel.
+    #[arg(long, allow_hyphen_values = true)]
+    sun_el: Option<f64>,
+    /// For lit: the body's distance from the Sun (AU; default: the body preset's).
+    #[arg(long, allow_hyphen_values = true)]
+    sun_distance_au: Option<f64>,
+    /// For lit: the disc model, constant, segment, slices or exact.
+    #[arg(long, default_value = "exact")]
+    model: Model,
+    /// For lit and horizon-mean: read the horizons from the Fourier pyramids or the raw maps.
+    #[arg(long, default_value = "fourier")]
+    from: penumbra::shadow::HorizonSource,
+    /// The GeoTIFF to write (replaced atomically).
+    #[arg(long)]
+    out: PathBuf,
+    /// Refuse a raster above this many GiB of f32 samples.
+    #[arg(long, default_value_t = penumbra::export::DEFAULT_MAX_OUTPUT_GIB, allow_hyphen_values = true)]
+    max_output_gib: f64,
+    #[arg(long)]
+    json: bool,
+}
+
+impl ExportArgs {
+    /// The library's options, every flag checked.
+    fn options(&self) -> Result<penumbra::export::ExportOptions> {
+        use penumbra::export::{ExportProduct, Region, SunSpec};
+        let region = match (&self.bbox, &self.face) {
+            (Some(b), _) => Region::Bbox(parse_bbox(b)?),
+            (None, Some(f)) => Region::Face(
+                (0..6)
+                    .filter_map(penumbra::cube::Face::from_index)
+                    .find(|x| x.name() == f)
+                    .ok_or_else(|| {
+                        Error::param(
+                            "face",
+                            format!("'{f}' is no face: use px, nx, py, ny, pz or nz"),
+                        )
+                    })?,
+            ),
+            (None, None) => Region::Coverage,
+        };
+        let sun =
+            match (self.sun_az, self.sun_el) {
+                (Some(az), Some(el)) => Some(SunSpec {
+                    azimuth_deg: az,
+                    elevation_deg: el,
+                    distance_au: self.sun_distance_au,
+                    model: self.model,
+                }),
+                (None, None) if self.sun_distance_au.is_none() => None,
+                _ => return Err(Error::usage(
+                    "give the sun as --sun-az and --sun-el together (and --sun-distance-au only \
+                     with them)",
+                )
+                .into()),
+            };
+        if self.product == ExportProduct::Lit && sun.is_none() {
+            return Err(Error::usage(
+                "--product lit needs the sun: give --sun-az and --sun-el (degrees, as for \
+                 `penumbra query shadow`)",
+            )
+            .into());
+        }
+        if self.product != ExportProduct::Lit && sun.is_some() {
+            return Err(Error::usage(format!(
+                "--sun-az/--sun-el are for --product lit, not {}",
+                self.product.name()
+            ))
+            .into());
+        }
+        Ok(penumbra::export::ExportOptions {
+            product: self.product,
+            region,
+            level: self.level,
+            crs: self.crs,
+            sun,
+            from: self.from,
+            max_output_gib: self.max_output_gib,
+        })
+    }
+}
+
+fn export(a: &ExportArgs) -> Result<()> {
+    let opts = a.options()?;
+    if a.format != "cog" {
+        return Err(Error::param(
+            "format",
+            format!(
+                "'{}' is not a format export writes: cog is the one there is",
+                a.format
+            ),
+        )
+        .into());
+    }
+    penumbra::export::check_out(&a.out)?;
+    write_export(a, &opts)
+}
+
+#[cfg(feature = "gdal")]
+fn write_export(a: &ExportArgs, opts: &penumbra::export::ExportOptions) -> Result<()> {
+    let t0 = std::time::Instant::now();
+    let raster = penumbra::export::render(&a.dir, opts)?;
+    let rep = penumbra::export::cog::write(&raster, &a.out)?;
+    output::print_export(
+        &raster,
+        &rep.path,
+        rep.bytes,
+        &rep.gdal,
+        t0.elapsed().as_secs_f64(),
+        a.json,
+    )
+}
+
+/// Without GDAL, nothing but the library's message (`Error::no_gdal`, unit-tested in every
+/// build; keep this trivial: CI builds with GDAL and does not compile it).
+#[cfg(not(feature = "gdal"))]
+fn write_export(_: &ExportArgs, _: &penumbra::export::ExportOptions) -> Result<()> {
+    Err(Error::no_gdal("penumbra export").into())
 }
 
 /// Run part of a stage: the selection of its units (docs/architecture.md, "Units").
@@ -634,8 +790,12 @@ impl TileFlags {
 
 #[derive(Args)]
 struct TileArgs {
-    /// The DEM: PDS3 .LBL or .IMG, SRTM .hgt, GeoTIFF, EXR or raw with a JSON sidecar.
+    /// The DEM: PDS3 .LBL or .IMG, SRTM .hgt, GeoTIFF, EXR or raw with a JSON sidecar (any
+    /// raster GDAL opens with --dem-format gdal, in a build with `--features gdal`).
     dem: PathBuf,
+    /// Reader of the DEM: auto (the native reader its name chooses) or gdal.
+    #[arg(long, default_value = "auto")]
+    dem_format: penumbra::dem::DemFormat,
     #[command(flatten)]
     body: BodyArgs,
     /// Output tileset folder.
@@ -653,6 +813,9 @@ struct BakeArgs {
     /// A DEM to bake whole instead of a scene.
     #[arg(long)]
     dem: Option<PathBuf>,
+    /// Reader of --dem: auto (the native reader its name chooses) or gdal.
+    #[arg(long, default_value = "auto", requires = "dem")]
+    dem_format: penumbra::dem::DemFormat,
     #[command(flatten)]
     body: BodyArgs,
     /// Output tileset folder.
@@ -762,6 +925,19 @@ fn body_arg(b: &BodyArgs) -> Result<BodyChoice> {
     })
 }
 
+/// A DEM input read by `format`'s reader.
+fn dem_input(
+    path: PathBuf,
+    b: &BodyArgs,
+    format: penumbra::dem::DemFormat,
+) -> Result<Input<'static>> {
+    let body = body_arg(b)?;
+    Ok(match format {
+        penumbra::dem::DemFormat::Auto => Input::Dem { path, body },
+        format => Input::DemWith { path, body, format },
+    })
+}
+
 fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
     penumbra_cli::set_threads(cli.threads)?;
     let progress = output::Bars::new(cli.quiet);
@@ -777,10 +953,7 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
                 horizon_level_at_most: None,
                 keep_partial: false,
             };
-            let input = Input::Dem {
-                path: a.dem.clone(),
-                body: body_arg(&a.body)?,
-            };
+            let input = dem_input(a.dem.clone(), &a.body, a.dem_format)?;
             let t0 = std::time::Instant::now();
             let report = bake::bake(&input, &a.out, &plan, &progress)?;
             output::print_bake(&report, t0.elapsed().as_secs_f64(), a.flags.json)?;
@@ -865,10 +1038,7 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
                 }
             }
             let input = match &a.dem {
-                Some(p) => Input::Dem {
-                    path: p.clone(),
-                    body: body_arg(&a.body)?,
-                },
+                Some(p) => dem_input(p.clone(), &a.body, a.dem_format)?,
                 None => {
                     if a.scene_size < 1024 || a.scene_size > 16384 {
                         anyhow::bail!("--scene-size {} is outside 1024..16384", a.scene_size);
@@ -1049,6 +1219,7 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
                 (None, None) => unreachable!("clap requires --tile or --bbox"),
             }
         }
+        Command::Export(a) => export(&a)?,
         Command::Info { dir, json } => output::print_info(&dir, json)?,
         Command::Verify { dir, json } => {
             let r = penumbra::tileset::verify::verify(&dir)?;

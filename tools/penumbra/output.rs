@@ -850,3 +850,55 @@ pub fn print_plan_shards(
     }
     Ok(())
 }
+
+/// The report of `penumbra export`: the raster written and where.
+pub fn print_export(
+    r: &penumbra::export::Raster,
+    path: &Path,
+    bytes: u64,
+    gdal: &str,
+    wall_s: f64,
+    json: bool,
+) -> Result<()> {
+    if json {
+        return print_json(&serde_json::json!({
+            "raster": r,
+            "path": path,
+            "bytes": bytes,
+            "gdal": gdal,
+            "wall_s": wall_s,
+        }));
+    }
+    let mut o = std::io::stdout().lock();
+    let g = &r.geo_transform;
+    writeln!(
+        o,
+        "{}: {} of level {}, {}×{} px of {:.3} m, {}",
+        path.display(),
+        r.product.name(),
+        r.level,
+        r.width,
+        r.height,
+        g[1],
+        r.crs.proj4(r.radius_m)
+    )?;
+    writeln!(
+        o,
+        "  {} px with data ({:.4} .. {:.4}), {} no data{}; {} MB, GDAL {gdal}, {:.2} s",
+        r.data_pixels,
+        r.min,
+        r.max,
+        r.nodata_pixels,
+        if r.unknown_pixels > 0 {
+            format!(
+                " ({} in tiles that keep no horizon for this sun)",
+                r.unknown_pixels
+            )
+        } else {
+            String::new()
+        },
+        mb(bytes),
+        wall_s
+    )?;
+    Ok(())
+}
