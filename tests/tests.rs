@@ -70,3 +70,7 @@ mod prune;
 // Scene files, `plan` and `bake SCENE`: bad scenes refused by line and key with nothing
 // written; the plan's counts against what the bake writes.
 mod scenes;
+
+// `penumbra package`: the Celestia addon with the tileset as its cube-face products, its
+// README and deterministic archive; bad input exits 2 and writes nothing.
+mod package;
