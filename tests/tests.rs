@@ -79,3 +79,6 @@ mod scenes;
 // 4 and 7 shards; a killed shard rerun; a finish refused (exit 2, the shard named, nothing
 // committed) with a shard missing or a staged file damaged; two finishes at once.
 mod shards;
+// `penumbra package`: the Celestia addon with the tileset as its cube-face products, its
+// README and deterministic archive; bad input exits 2 and writes nothing.
+mod package;

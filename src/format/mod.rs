@@ -23,6 +23,7 @@ use crate::cube::Face;
 use crate::layout::TileId;
 
 pub mod albedo;
+pub mod archive;
 pub mod fourier;
 pub mod height;
 pub mod horizon;

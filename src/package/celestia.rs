@@ -35,6 +35,7 @@ use crate::format::albedo::AlbedoTile;
 use crate::format::vt;
 use crate::layout::{Layout, TileId};
 use crate::manifest::Tileset;
+use crate::progress::Progress;
 use crate::tileset::Store;
 
 use super::ssc;
@@ -655,7 +656,13 @@ pub fn covers_globe(ts: &Tileset) -> bool {
 /// [`TEXTURES_DIR`] a `.ctx` and its tile folder per layer (albedo when the tileset has it, the
 /// normal map of the heights). The catalog `Modify`es the body when the data covers the globe,
 /// and adds an `AltSurface` otherwise ([`SurfaceMode`]).
-pub fn write_addon(store: &Store, out: &Path, opts: &AddonOptions) -> Result<AddonReport> {
+/// `progress` counts the tiles rendered.
+pub fn write_addon(
+    store: &Store,
+    out: &Path,
+    opts: &AddonOptions,
+    progress: &dyn Progress,
+) -> Result<AddonReport> {
     let size = opts.vt_tile_size;
     if !(64..=4096).contains(&size) || !size.is_power_of_two() {
         return Err(Error::param(
@@ -702,16 +709,21 @@ pub fn write_addon(store: &Store, out: &Path, opts: &AddonOptions) -> Result<Add
     }
     let sampler = Sampler::new(store);
     let tex = out.join(TEXTURES_DIR);
+    let per_level: Vec<(LevelSource, BTreeSet<VtTile>)> =
+        plan.iter().map(|&src| (src, vt_tiles(ts, src))).collect();
+    let total: usize = per_level.iter().map(|(_, t)| t.len()).sum();
+    progress.start("textures", (total * layers.len()) as u64);
     let mut tiles = Vec::new();
     for &layer in &layers {
         let dir = tex.join(layer.name());
         let mut n = 0u64;
-        for src in &plan {
-            for t in vt_tiles(ts, *src) {
+        for (src, vts) in &per_level {
+            for &t in vts {
                 if let Some(rgb) = render_tile(&sampler, layer, t, size, src.cube_level)? {
                     vt::write_png_rgb8(&dir.join(t.rel_path("png")), size, size, &rgb)?;
                     n += 1;
                 }
+                progress.inc(1);
             }
         }
         vt::write_text(
@@ -738,6 +750,7 @@ pub fn write_addon(store: &Store, out: &Path, opts: &AddonOptions) -> Result<Add
         ),
     };
     vt::write_text(&catalog, &ssc_text(&spec))?;
+    progress.finish();
     vt::write_text(
         &out.join(MARKER),
         "A Celestia addon written by penumbra (docs/packaging.md).\n",
@@ -1460,7 +1473,7 @@ mod tests {
             vt_tile_size: 64,
             ..Default::default()
         };
-        let rep = write_addon(&store, &out, &opts).unwrap();
+        let rep = write_addon(&store, &out, &opts, &NoProgress).unwrap();
         assert_eq!(rep.mode, SurfaceMode::Modify);
         let items = ssc::parse_ssc(&std::fs::read_to_string(&rep.catalog).unwrap()).unwrap();
         assert_eq!(
@@ -1486,17 +1499,19 @@ mod tests {
         let (w, h, _) = vt::decode_png_rgb8(&png).unwrap();
         assert_eq!((w, h), (64, 64));
         // Again into the same addon: replaced. Into a folder that is not an addon: refused.
-        write_addon(&store, &out, &opts).unwrap();
+        write_addon(&store, &out, &opts, &NoProgress).unwrap();
         let other = f.path.parent().unwrap().join("other");
         std::fs::create_dir_all(&other).unwrap();
         std::fs::write(other.join("x"), "x").unwrap();
-        let e = write_addon(&store, &other, &opts).unwrap_err().to_string();
+        let e = write_addon(&store, &other, &opts, &NoProgress)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("not empty"), "{e}");
         let bad = AddonOptions {
             vt_tile_size: 100,
             ..opts.clone()
         };
-        assert!(write_addon(&store, &out, &bad)
+        assert!(write_addon(&store, &out, &bad, &NoProgress)
             .unwrap_err()
             .to_string()
             .contains("power of two"));
@@ -1508,7 +1523,7 @@ mod tests {
             e.contains("penumbra-albedo.ctx") && e.contains("none of"),
             "{e}"
         );
-        write_addon(&store, &out, &opts).unwrap();
+        write_addon(&store, &out, &opts, &NoProgress).unwrap();
         std::fs::remove_dir_all(out.join(TEXTURES_DIR).join("penumbra-normal/level0")).unwrap();
         let e = check_addon(&out).unwrap_err().to_string();
         assert!(e.contains("no level-0 tile"), "{e}");
@@ -1542,7 +1557,7 @@ mod tests {
             vt_tile_size: 64,
             ..Default::default()
         };
-        let rep = write_addon(&store, &out, &opts).unwrap();
+        let rep = write_addon(&store, &out, &opts, &NoProgress).unwrap();
         assert_eq!(rep.mode, SurfaceMode::AltSurface("Penumbra".into()));
         check_addon(&out).unwrap();
         // The finest level holds only tiles near the region (10..40° E, −10..20° N): within

@@ -7,10 +7,13 @@
 //! - [`Store`]: the read API (`open` validates the manifest; typed, size-checked tile reads).
 //! - [`writer::Writer`]: the writer lock, staging of a run's files beside the tileset, and the
 //!   commit that swaps them in (crash-safe, rolled forward by the next writer).
+//! - [`copy::copy_tileset`]: a copy that reads as the original (linked where it can be),
+//!   checked against its indexes.
 //! - [`crate::fsio`]: atomic, durable file writes; [`lock`]: the advisory locks; [`crate::manifest::validate`]: the
 //!   manifest's limits.
 
 pub mod cache;
+pub mod copy;
 pub mod deps;
 pub mod index;
 pub use crate::fsio;

@@ -195,6 +195,11 @@ enum Command {
     /// equirectangular elsewhere, a face's gnomonic grid with --face; nodata where the tileset
     /// has none. Needs a build with `--features gdal`.
     Export(ExportArgs),
+    /// Package a tileset as a Celestia addon folder (docs/packaging.md): the catalog, virtual
+    /// textures of the albedo and of a normal map derived from the heights, the tileset itself
+    /// as the addon's cube-face products (linked where it can be, checked against its indexes)
+    /// and a README; with --zip, an archive of it too. A rerun replaces the package.
+    Package(PackageArgs),
     /// Describe a tileset.
     Info {
         /// Tileset folder.
@@ -266,6 +271,42 @@ struct ExportArgs {
     /// Refuse a raster above this many GiB of f32 samples.
     #[arg(long, default_value_t = penumbra::export::DEFAULT_MAX_OUTPUT_GIB, allow_hyphen_values = true)]
     max_output_gib: f64,
+    /// Print the report as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Args)]
+struct PackageArgs {
+    /// A tileset folder, or a scene file (TOML, docs/scenes.md) whose bake to package: the
+    /// folder `penumbra bake SCENE --out DIR` made (--tileset), which must be that scene's
+    /// latest bake (nothing is baked here).
+    input: PathBuf,
+    /// With a scene: the folder it was baked into [default: tiles, as for `penumbra bake`].
+    #[arg(long, value_name = "DIR")]
+    tileset: Option<PathBuf>,
+    /// The addon folder to write: new, empty, or a package written before (replaced).
+    #[arg(long, value_name = "OUT")]
+    celestia: PathBuf,
+    /// Also write a ZIP archive of the folder: --zip alone writes OUT.zip beside it,
+    /// --zip=FILE names it (its folder must exist). Deterministic: the same package gives the
+    /// same bytes.
+    #[arg(long, value_name = "FILE", num_args = 0..=1, require_equals = true)]
+    zip: Option<Option<PathBuf>>,
+    /// Pixels per side of a virtual-texture tile: a power of two from 64 to 4096.
+    #[arg(long, default_value_t = 512)]
+    vt_tile_size: u32,
+    /// The body as Celestia's catalogs name it (such as "Moon"), with --celestia-parent; by
+    /// default from the tileset's body (moon, mercury, venus, earth, mars, pluto, ceres, vesta).
+    #[arg(long, requires = "celestia_parent")]
+    celestia_body: Option<String>,
+    /// The body's parent path in Celestia (such as "Sol/Earth"), with --celestia-body.
+    #[arg(long, requires = "celestia_body")]
+    celestia_parent: Option<String>,
+    /// The alternate surface's name, where the tileset covers part of the body.
+    #[arg(long, default_value = "Penumbra")]
+    alt_surface: String,
+    /// Print the report as JSON.
     #[arg(long)]
     json: bool,
 }
@@ -1220,6 +1261,11 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
             }
         }
         Command::Export(a) => export(&a)?,
+        Command::Package(a) => {
+            let t0 = std::time::Instant::now();
+            let report = package(&a, &progress)?;
+            output::print_package(&report, t0.elapsed().as_secs_f64(), a.json)?;
+        }
         Command::Info { dir, json } => output::print_info(&dir, json)?,
         Command::Verify { dir, json } => {
             let r = penumbra::tileset::verify::verify(&dir)?;
@@ -1309,6 +1355,120 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// `penumbra package`: the tileset to package (a folder, or a scene's up-to-date bake), then
+/// the package.
+fn package(
+    a: &PackageArgs,
+    progress: &dyn penumbra::progress::Progress,
+) -> Result<penumbra::package::bundle::PackageReport> {
+    use penumbra::package::bundle;
+    let dir = match std::fs::metadata(&a.input) {
+        Ok(m) if m.is_dir() => {
+            if let Some(t) = &a.tileset {
+                return Err(Error::usage(format!(
+                    "--tileset {} names the bake of a scene, but {} is a tileset folder \
+                     already: drop --tileset",
+                    t.display(),
+                    a.input.display()
+                ))
+                .into());
+            }
+            a.input.clone()
+        }
+        Ok(_) => {
+            let scene = penumbra::scene::load(&a.input)?;
+            let dir = a.tileset.clone().unwrap_or_else(|| PathBuf::from("tiles"));
+            // The scene's latest bake there, as `bake` would find it with or without --prune.
+            let baked = [false, true].into_iter().any(|prune| {
+                let how = penumbra::scene::bake::BakeOptions {
+                    keep_partial: false,
+                    prune,
+                };
+                matches!(
+                    penumbra::scene::bake::unchanged(&scene, &dir, &how),
+                    Ok(Some(_))
+                )
+            });
+            if !baked {
+                return Err(Error::usage(format!(
+                    "{} holds no up-to-date bake of the scene {} (never baked there, or the \
+                     scene, its sources or the tileset changed since): run `penumbra bake {} \
+                     --out {}` first (package bakes nothing itself)",
+                    dir.display(),
+                    a.input.display(),
+                    a.input.display(),
+                    dir.display()
+                ))
+                .into());
+            }
+            dir
+        }
+        Err(e) => {
+            return Err(Error::usage(format!(
+                "{}: {e}: give a tileset folder or a scene file",
+                a.input.display()
+            ))
+            .into())
+        }
+    };
+    let zip = a.zip.as_ref().map(|z| {
+        z.clone()
+            .unwrap_or_else(|| bundle::default_zip_path(&a.celestia))
+    });
+    let opts = bundle::PackageOptions {
+        addon: penumbra::package::celestia::AddonOptions {
+            vt_tile_size: a.vt_tile_size,
+            body: a.celestia_body.clone().zip(a.celestia_parent.clone()),
+            alt_surface: a.alt_surface.clone(),
+        },
+        zip,
+        command: package_command(a),
+    };
+    Ok(bundle::package(&dir, &a.celestia, &opts, progress)?)
+}
+
+/// The `penumbra package` command line that makes this package (what changes its bytes: not
+/// --threads, --quiet or --json), for its README.
+fn package_command(a: &PackageArgs) -> String {
+    let q = |p: &std::ffi::OsStr| {
+        let s = p.to_string_lossy();
+        if s.is_empty() || s.contains(|c: char| c.is_whitespace() || "'\"$`\\".contains(c)) {
+            format!("'{}'", s.replace('\'', "'\\''"))
+        } else {
+            s.into_owned()
+        }
+    };
+    let mut v = vec![
+        "penumbra".to_string(),
+        "package".into(),
+        q(a.input.as_os_str()),
+    ];
+    if let Some(t) = &a.tileset {
+        v.extend(["--tileset".into(), q(t.as_os_str())]);
+    }
+    v.extend(["--celestia".into(), q(a.celestia.as_os_str())]);
+    match &a.zip {
+        Some(None) => v.push("--zip".into()),
+        Some(Some(z)) => v.push(format!("--zip={}", q(z.as_os_str()))),
+        None => {}
+    }
+    if a.vt_tile_size != 512 {
+        v.push(format!("--vt-tile-size={}", a.vt_tile_size));
+    }
+    if let (Some(b), Some(p)) = (&a.celestia_body, &a.celestia_parent) {
+        v.extend([
+            "--celestia-body".into(),
+            q(b.as_ref()),
+            "--celestia-parent".into(),
+            q(p.as_ref()),
+        ]);
+    }
+    if a.alt_surface != "Penumbra" {
+        v.extend(["--alt-surface".into(), q(a.alt_surface.as_ref())]);
+    }
+    v.join(" ")
 }
 
 fn main() -> ExitCode {

@@ -902,3 +902,89 @@ pub fn print_export(
     )?;
     Ok(())
 }
+
+/// `penumbra package`: what the addon holds, per part, with files and bytes; the archive.
+pub fn print_package(
+    r: &penumbra::package::bundle::PackageReport,
+    wall_s: f64,
+    json: bool,
+) -> Result<()> {
+    if json {
+        let mut v = serde_json::to_value(r)?;
+        v["wall_s"] = serde_json::json!(wall_s);
+        v["peak_rss_mib"] = serde_json::json!(peak_rss_mib());
+        return print_json(&v);
+    }
+    let mut o = std::io::stdout().lock();
+    let surface = match &r.alt_surface {
+        Some(n) => format!("AltSurface \"{n}\" of \"{}/{}\"", r.parent, r.body),
+        None => format!("Modify \"{}\" \"{}\"", r.body, r.parent),
+    };
+    writeln!(
+        o,
+        "{}: Celestia addon of {} ({surface}){}",
+        r.out.display(),
+        r.tileset.display(),
+        if r.replaced {
+            ", replacing the earlier package"
+        } else {
+            ""
+        }
+    )?;
+    writeln!(o, "{:<34} {:>8} {:>12}  what", "part", "files", "MB")?;
+    for t in &r.textures {
+        writeln!(
+            o,
+            "{:<34} {:>8} {:>12}  {} tiles of {} px",
+            t.ctx,
+            t.tiles,
+            mb(t.bytes),
+            t.layer,
+            r.vt_tile_size
+        )?;
+    }
+    for p in &r.cubemap.products {
+        writeln!(
+            o,
+            "{:<34} {:>8} {:>12}  cube-face product",
+            format!("cubemap/ {}", p.product),
+            p.files,
+            mb(p.bytes)
+        )?;
+    }
+    writeln!(
+        o,
+        "{:<34} {:>8} {:>12}  {} linked, {} copied, {} checked against the indexes",
+        "cubemap/ (all)",
+        r.cubemap.files,
+        mb(r.cubemap_bytes),
+        r.cubemap.linked,
+        r.cubemap.copied,
+        r.cubemap.verified
+    )?;
+    writeln!(
+        o,
+        "{:<34} {:>8} {:>12}  catalog {}, README, marker",
+        "package",
+        r.files,
+        mb(r.bytes),
+        r.catalog
+    )?;
+    let levels: Vec<String> = r
+        .vt_levels
+        .iter()
+        .map(|l| format!("{}<-{}", l.vt_level, l.cube_level))
+        .collect();
+    writeln!(o, "virtual-texture levels (VT<-cube): {}", levels.join(" "))?;
+    if let Some(z) = &r.zip {
+        writeln!(
+            o,
+            "{}: {} entries, {} MB",
+            z.path.display(),
+            z.entries,
+            mb(z.bytes)
+        )?;
+    }
+    writeln!(o, "{wall_s:.2} s")?;
+    Ok(())
+}

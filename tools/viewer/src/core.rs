@@ -45,16 +45,18 @@ pub struct Core {
     pub sun_distance_au: f64,
 }
 
-/// Open the tileset in `dir` and check that it holds what `method` reads: heights on a
-/// gnomonic cube for every method, and Fourier pyramids for `fourier`.
+/// Open the tileset in `dir` (or, in a package `penumbra package` wrote, the cube-face tileset
+/// it holds) and check that it holds what `method` reads: heights on a gnomonic cube for every
+/// method, and Fourier pyramids for `fourier`.
 pub fn open_checked(dir: &Path, method: &GpuMethod) -> Result<Store> {
     if !dir.is_dir() {
         bail!(
-            "{}: no such folder; give a tileset made by `penumbra tile` or `penumbra bake`",
+            "{}: no such folder; give a tileset made by `penumbra tile` or `penumbra bake`, or \
+             a package made by `penumbra package`",
             dir.display()
         );
     }
-    let store = Store::open(dir)?;
+    let store = Store::open(&penumbra::package::bundle::tileset_in(dir))?;
     check_method(&store, method)?;
     Ok(store)
 }

@@ -26,7 +26,8 @@ use crate::shadow::GpuMethod;
                   Esc = quit."
 )]
 pub struct Args {
-    /// Tileset folder (made by `penumbra tile` or `penumbra bake`).
+    /// Tileset folder (made by `penumbra tile` or `penumbra bake`), or a package folder (made
+    /// by `penumbra package`: its cube-face tileset is drawn).
     pub dir: PathBuf,
     /// Shadow method: dp, uniform, extrema or fourier (needs the Fourier pyramids).
     #[arg(long, default_value = "dp")]

@@ -13,3 +13,5 @@ mod bad_input;
 mod window;
 // The GPU shadow methods against the CPU methods, texel by texel (the shadow module's own).
 mod shadow_gpu;
+// A package made by `penumbra package` draws as the tileset it was made from.
+mod package;
