@@ -566,8 +566,10 @@ mod with_gdal {
                 dem.to_str().unwrap(),
                 "--out",
                 out.to_str().unwrap(),
+                // Level 2: 512 px a face, 5.3 km/px at the centre, finer than LDEM_4's
+                // 7.6 km: tiles sample between its pixels, across the antimeridian too.
                 "--tile-size",
-                "64",
+                "128",
                 "--levels",
                 "3",
             ][..],
@@ -653,10 +655,11 @@ mod with_gdal {
         eprintln!(
             "LDEM_4 through GDAL: PDS driver max |Δh| {pds:.3e} m, VRT mosaic {vrt_diff:.3e} m"
         );
-        // GDAL places LDEM_4 by the label's rounded MAP_SCALE (7580.84 m for 7580.8398…), the
-        // native reader by its 4 px/°: 0.15 m apart at the far edge, up to 0.6 m of height on
-        // LDEM_4's steepest 7.6-km pixels (measured 0.59 m).
-        assert!(pds <= 1.0 && vrt_diff <= 1.0, "{pds} {vrt_diff}");
+        // Both read LDEM_4 as a global grid of 4 px/° (GDAL's PDS driver says equirectangular
+        // metres with the label's rounded MAP_SCALE; read in degrees, its columns wrap across
+        // the antimeridian as the native reader's do): the same samples, so the same tiles to
+        // f32 rounding of the positions.
+        assert!(pds <= 1e-3 && vrt_diff <= 1e-3, "{pds} {vrt_diff}");
 
         // A crop declared WGS 84 (Earth) is refused for the Moon.
         let earth = d.path().join("earth.tif");
@@ -686,6 +689,39 @@ mod with_gdal {
         assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
         assert!(stderr(&o).contains("is a DEM of earth"), "{}", stderr(&o));
         assert!(!bad.exists());
+        // Projected CRSs the reader does not model: on a flattened ellipsoid (UTM on WGS 84),
+        // or a projection other than eqc / polar stere (Mercator on the Moon's sphere).
+        for (k, srs, needle) in [
+            (0, "+proj=utm +zone=33 +datum=WGS84", "flattened ellipsoid"),
+            (1, "+proj=merc +R=1737400", "is none Penumbra reads"),
+        ] {
+            let f = d.path().join(format!("proj{k}.tif"));
+            tool(
+                "gdal_translate",
+                &[
+                    "-q",
+                    "-srcwin",
+                    "0",
+                    "0",
+                    "64",
+                    "64",
+                    "-a_srs",
+                    srs,
+                    "-a_ullr",
+                    "0",
+                    "640000",
+                    "640000",
+                    "0",
+                    lbl.to_str().unwrap(),
+                    f.to_str().unwrap(),
+                ],
+                None,
+            );
+            let o = tile(&f, &bad, &["--dem-format", "gdal"]);
+            assert_eq!(o.status.code(), Some(2), "{srs}: {}", stderr(&o));
+            assert!(stderr(&o).contains(needle), "{srs}: {}", stderr(&o));
+            assert!(!bad.exists());
+        }
         // A scene source read through GDAL.
         let scene = d.path().join("s.toml");
         std::fs::write(

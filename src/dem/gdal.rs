@@ -13,6 +13,8 @@
 //!   ellipsoid would need geodetic latitudes Penumbra does not model). The ellipsoid's
 //!   semi-major axis names the body when it is within 0.5 % of a body preset's radius (WGS 84 →
 //!   earth, the IAU Moon sphere → moon), so that a DEM of one body is refused for another;
+//! - an equirectangular raster all round the body is read in degrees (geographic), as the
+//!   native PDS3 reader reads such grids: its columns wrap across the antimeridian;
 //! - the files GDAL read (a VRT's sources, a label's data file), hashed into the manifest.
 
 use std::ffi::CStr;
@@ -101,13 +103,44 @@ pub fn read(path: &Path) -> Result<DemParts> {
             limits::pixel_m(path, "geotransform y pixel size", dy.abs(), Some(*radius_m))?;
         }
     }
-    let georef = GeoRef {
+    let mut georef = GeoRef {
         crs,
         x0: gt[0] + 0.5 * gt[1],
         y0: gt[3] + 0.5 * gt[5],
         dx,
         dy,
     };
+    // An equirectangular raster all round the body (w pixels spanning the circle at its true-
+    // scale latitude to 1% of a pixel) is read in degrees, as the native PDS3 reader reads
+    // LDEM-style grids: its columns then wrap across the antimeridian (a projected grid does
+    // not), and a label's rounded MAP_SCALE (LDEM_4: 7580.84 for 7580.8398… m, which GDAL's
+    // PDS driver takes) no longer shifts the far columns. Metres become degrees by the factor
+    // that makes the span exactly 360°.
+    if let Crs::Equirectangular {
+        lat_ts_deg,
+        lon0_deg,
+        radius_m,
+    } = georef.crs
+    {
+        let circle = std::f64::consts::TAU * radius_m * lat_ts_deg.to_radians().cos();
+        let span = dx * w as f64;
+        if (span - circle).abs() < 0.01 * dx {
+            let deg_x = 360.0 / span;
+            let deg_y = deg_x * lat_ts_deg.to_radians().cos();
+            georef = GeoRef {
+                crs: Crs::Geographic,
+                x0: lon0_deg + georef.x0 * deg_x,
+                y0: georef.y0 * deg_y,
+                dx: 360.0 / w as f64,
+                // Pole to pole, too: exactly 180° (as rounded as the width).
+                dy: if (dy * deg_y * h as f64 - 180.0).abs() < 0.01 * dy * deg_y {
+                    180.0 / h as f64
+                } else {
+                    dy * deg_y
+                },
+            };
+        }
+    }
     limits::check_georef(path, &georef, w, h, "the GDAL geotransform")?;
 
     let scale = band.scale().unwrap_or(1.0);
