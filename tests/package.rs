@@ -85,15 +85,11 @@ fn zip_entries(path: &Path) -> Vec<(String, Vec<u8>)> {
     (0..z.len())
         .map(|i| {
             let mut f = z.by_index(i).unwrap();
-            assert_eq!(
-                f.compression(),
-                zip::CompressionMethod::Stored,
-                "{}",
-                f.name()
-            );
+            let name = f.name().unwrap().to_string();
+            assert_eq!(f.compression(), zip::CompressionMethod::Stored, "{name}");
             let mut b = Vec::new();
             f.read_to_end(&mut b).unwrap();
-            (f.name().to_string(), b)
+            (name, b)
         })
         .collect()
 }
@@ -242,12 +238,14 @@ fn a_package_holds_the_addon_the_tileset_and_a_deterministic_archive() {
 }
 
 /// A small embedded-terrain scene for the renderer's DP (tiles and mipmaps).
+/// (128-px tiles, levels 0..11; the package's VT levels are capped: the embedded terrain lies
+/// at the pole, where every VT level is a whole row of tiles.)
 fn scene(dir: &Path, size: u32) -> PathBuf {
     let p = dir.join("small.toml");
     std::fs::write(
         &p,
         format!(
-            "[scene]\nname = \"small\"\nbody = \"moon\"\n\n[layout]\ntile_size = 64\n\n\
+            "[scene]\nname = \"small\"\nbody = \"moon\"\n\n[layout]\ntile_size = 128\n\n\
              [[source]]\nembedded = \"south-pole\"\nsize = {size}\n\n[[region]]\nname = \
              \"all\"\nbody = true\n\n[renderer]\nmethods = [\"dp\"]\n"
         ),
@@ -289,6 +287,10 @@ fn a_scene_is_packaged_only_from_its_up_to_date_bake() {
         s(&baked),
         "--celestia",
         s(&out),
+        "--vt-tile-size",
+        "64",
+        "--vt-max-level",
+        "3",
     ];
     // Never baked: say which bake to run.
     refused(&args, &out, &["penumbra bake", "small.toml", "--out", "baked"]);

@@ -229,6 +229,19 @@ fn check_out(out: &Path, parent: &Path) -> Result<()> {
 /// The archive's path: its parent exists, it lies outside the package, and it is a new file
 /// or an archive (never another file or a folder).
 fn check_zip(z: &Path, out: &Path, parent: &Path) -> Result<()> {
+    let inside = || {
+        Error::invalid(
+            z,
+            format!(
+                "lies inside the package {}: put the archive beside it",
+                out.display()
+            ),
+        )
+    };
+    let (az, ao) = (std::path::absolute(z).at(z)?, std::path::absolute(out).at(out)?);
+    if az.starts_with(&ao) {
+        return Err(inside());
+    }
     let zparent = parent_of(z);
     if !zparent.is_dir() {
         return Err(Error::invalid(
@@ -245,13 +258,7 @@ fn check_zip(z: &Path, out: &Path, parent: &Path) -> Result<()> {
         .at(parent)?
         .join(out.file_name().unwrap_or_default());
     if real_parent.starts_with(&real_out) {
-        return Err(Error::invalid(
-            z,
-            format!(
-                "lies inside the package {}: put the archive beside it",
-                out.display()
-            ),
-        ));
+        return Err(inside());
     }
     match std::fs::symlink_metadata(z) {
         Err(_) => Ok(()),

@@ -618,6 +618,11 @@ pub struct AddonOptions {
     pub body: Option<(String, String)>,
     /// The alternate surface's name where the tileset covers part of the body.
     pub alt_surface: String,
+    /// The finest VT level written (at most [`MAX_VT_LEVEL`]): finer data is left to the
+    /// cube-face products. Near a pole every VT level is a whole row of 2^(L+1) tiles around
+    /// the pole per 180°/2^L of latitude (equirectangular tiles oversample longitude by
+    /// 1/cos(latitude)), so polar data costs far more tiles than its area: a cap bounds them.
+    pub max_vt_level: u8,
 }
 
 impl Default for AddonOptions {
@@ -626,6 +631,7 @@ impl Default for AddonOptions {
             vt_tile_size: 512,
             body: None,
             alt_surface: "Penumbra".into(),
+            max_vt_level: MAX_VT_LEVEL,
         }
     }
 }
@@ -693,7 +699,19 @@ pub fn write_addon(
             "the body's name, its parent path and the alternate surface's name must not be empty",
         ));
     }
-    let plan = level_plan(ts, size);
+    if opts.max_vt_level > MAX_VT_LEVEL {
+        return Err(Error::param(
+            "max_vt_level",
+            format!(
+                "{} is beyond Celestia's virtual-texture levels 0..={MAX_VT_LEVEL}",
+                opts.max_vt_level
+            ),
+        ));
+    }
+    let plan: Vec<LevelSource> = level_plan(ts, size)
+        .into_iter()
+        .filter(|l| l.vt_level <= opts.max_vt_level)
+        .collect();
     if plan.is_empty() {
         return Err(store.missing("the tileset lists no tile: there is nothing to package"));
     }
@@ -1515,6 +1533,26 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("power of two"));
+        // A cap on the VT levels: the coarser levels as before, none finer.
+        let capped = AddonOptions {
+            max_vt_level: 1,
+            ..opts.clone()
+        };
+        let r = write_addon(&store, &out, &capped, &NoProgress).unwrap();
+        assert_eq!(r.levels, rep.levels[..2].to_vec());
+        assert!(!out
+            .join(TEXTURES_DIR)
+            .join("penumbra-normal/level2")
+            .exists());
+        let over = AddonOptions {
+            max_vt_level: MAX_VT_LEVEL + 1,
+            ..opts.clone()
+        };
+        assert!(write_addon(&store, &out, &over, &NoProgress)
+            .unwrap_err()
+            .to_string()
+            .contains("0..=12"));
+        write_addon(&store, &out, &opts, &NoProgress).unwrap();
 
         // The checker sees what is missing.
         std::fs::remove_file(out.join(TEXTURES_DIR).join("penumbra-albedo.ctx")).unwrap();

@@ -296,6 +296,11 @@ struct PackageArgs {
     /// Pixels per side of a virtual-texture tile: a power of two from 64 to 4096.
     #[arg(long, default_value_t = 512)]
     vt_tile_size: u32,
+    /// The finest virtual-texture level written (0..=12): finer data stays in the cube-face
+    /// products. Polar data needs whole rows of tiles around the pole at every level
+    /// (docs/packaging.md, "Sizes and times"); a cap bounds them.
+    #[arg(long, default_value_t = penumbra::package::celestia::MAX_VT_LEVEL)]
+    vt_max_level: u8,
     /// The body as Celestia's catalogs name it (such as "Moon"), with --celestia-parent; by
     /// default from the tileset's body (moon, mercury, venus, earth, mars, pluto, ceres, vesta).
     #[arg(long, requires = "celestia_parent")]
@@ -1422,6 +1427,7 @@ fn package(
             vt_tile_size: a.vt_tile_size,
             body: a.celestia_body.clone().zip(a.celestia_parent.clone()),
             alt_surface: a.alt_surface.clone(),
+            max_vt_level: a.vt_max_level,
         },
         zip,
         command: package_command(a),
@@ -1456,6 +1462,9 @@ fn package_command(a: &PackageArgs) -> String {
     }
     if a.vt_tile_size != 512 {
         v.push(format!("--vt-tile-size={}", a.vt_tile_size));
+    }
+    if a.vt_max_level != penumbra::package::celestia::MAX_VT_LEVEL {
+        v.push(format!("--vt-max-level={}", a.vt_max_level));
     }
     if let (Some(b), Some(p)) = (&a.celestia_body, &a.celestia_parent) {
         v.extend([
