@@ -238,7 +238,10 @@ fn check_zip(z: &Path, out: &Path, parent: &Path) -> Result<()> {
             ),
         )
     };
-    let (az, ao) = (std::path::absolute(z).at(z)?, std::path::absolute(out).at(out)?);
+    let (az, ao) = (
+        std::path::absolute(z).at(z)?,
+        std::path::absolute(out).at(out)?,
+    );
     if az.starts_with(&ao) {
         return Err(inside());
     }
