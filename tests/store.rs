@@ -132,10 +132,13 @@ pub(crate) fn kill_trials(
     let full = first.min(t1.elapsed());
     let mut rng = Rng(seed);
     let mut interrupted = 0;
+    // Kill times spread over the first 10/11 of an uninterrupted run's time. Runs vary on a
+    // loaded machine (a test run beside other tests): a kill that finds the run already ended
+    // shrinks the span for the kills after it, so that they land inside the run again.
+    let mut span = full;
     for k in 0..10 {
         fresh(&out);
-        // Spread over the first 10/11 of an uninterrupted run's time (machines vary).
-        let at = full.mul_f64((k as f64 + rng.unit()) / 11.0);
+        let at = span.mul_f64((k as f64 + rng.unit()) / 11.0);
         let mut child = cmd(&out)
             .stdout(Stdio::null())
             .stderr(Stdio::null())
@@ -144,6 +147,8 @@ pub(crate) fn kill_trials(
         std::thread::sleep(at);
         if child.try_wait().unwrap().is_none() {
             interrupted += 1;
+        } else {
+            span = span.mul_f64(0.7);
         }
         child.kill().unwrap(); // SIGKILL
         child.wait().unwrap();

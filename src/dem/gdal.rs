@@ -37,8 +37,17 @@ const BODY_MATCH: f64 = 0.005;
 
 /// Read `path` through GDAL.
 pub fn read(path: &Path) -> Result<DemParts> {
-    let ds = Dataset::open(path)
-        .map_err(|e| Error::unsupported(path, format!("GDAL cannot open it as a raster: {e}")))?;
+    read_or(path, |e| {
+        Error::unsupported(path, format!("GDAL cannot open it as a raster: {e}"))
+    })
+}
+
+/// [`read`], with `cannot_open` making the error where GDAL cannot open the file at all.
+pub fn read_or(
+    path: &Path,
+    cannot_open: impl FnOnce(gdal::errors::GdalError) -> Error,
+) -> Result<DemParts> {
+    let ds = Dataset::open(path).map_err(cannot_open)?;
     let (w, h) = ds.raster_size();
     check_dimensions(path, w as u64, h as u64)?;
     match ds.raster_count() {

@@ -90,6 +90,27 @@ fn read_gdal(path: &Path) -> Result<DemParts> {
     self::gdal::read(path)
 }
 
+/// A name no native reader claims, tried through GDAL: where GDAL cannot open it either, the
+/// error says both (what the native readers expect, and GDAL's refusal).
+#[cfg(feature = "gdal")]
+fn read_unknown_through_gdal(path: &Path) -> Result<DemParts> {
+    self::gdal::read_or(path, |e| {
+        Error::unsupported(
+            path,
+            format!("{UNKNOWN_FORMAT}; GDAL cannot open it as a raster either ({e})"),
+        )
+    })
+}
+
+#[cfg(not(feature = "gdal"))]
+fn read_unknown_through_gdal(path: &Path) -> Result<DemParts> {
+    read_gdal(path)
+}
+
+/// What the native readers take, for a file none of them claims.
+const UNKNOWN_FORMAT: &str = "unknown DEM format: expected .LBL/.IMG (PDS3), .hgt (SRTM), .tif \
+     (GeoTIFF), .exr, or a raw file with a JSON sidecar (see docs/formats.md)";
+
 /// Without GDAL, nothing but the shared message ([`Error::no_gdal`]; keep this trivial: CI
 /// builds with GDAL and does not compile it).
 #[cfg(not(feature = "gdal"))]
@@ -125,14 +146,8 @@ pub fn open(path: &Path, max_fill_px: u32) -> Result<Dem> {
         "bin" | "raw" | "dat" => raw::read(path)?,
         _ => match sidecar::sidecar_for(path) {
             Some(_) => read_with_sidecar(path)?,
-            None if DemFormat::gdal_available() => read_gdal(path)?,
-            None => {
-                return Err(Error::unsupported(
-                    path,
-                    "unknown DEM format: expected .LBL/.IMG (PDS3), .hgt (SRTM), .tif \
-                     (GeoTIFF), .exr, or a raw file with a JSON sidecar (see docs/formats.md)",
-                ))
-            }
+            None if DemFormat::gdal_available() => read_unknown_through_gdal(path)?,
+            None => return Err(Error::unsupported(path, UNKNOWN_FORMAT)),
         },
     };
     Dem::new(parts, max_fill_px)

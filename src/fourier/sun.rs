@@ -296,14 +296,20 @@ pub fn lit_fraction(frame: &Frame, sun: &Sun, model: Model, horizon: &dyn Fn(f64
             segment_fraction(m / disc.r_deg.hypot(k))
         }
         Model::Slices => {
-            let mut lit = 0.0;
+            let (mut lit, mut whole) = (0.0, 0);
             for i in 0..SLICES {
                 let (a, b) = strip_bounds(i, SLICES);
                 let d = disc.dir((a + b) / 2.0, 0.0);
                 let c = (hor(d) - frame.elevation_deg(d)) / disc.r_deg;
+                whole += usize::from(c <= -1.0);
                 lit += strip_area_above(a, b, c);
             }
-            lit / PI
+            // Every strip lit: exactly 1 (the strips' areas sum to π within rounding).
+            if whole == SLICES {
+                1.0
+            } else {
+                lit / PI
+            }
         }
         Model::Exact => exact(frame, &disc, &hor),
     };
@@ -322,7 +328,7 @@ fn exact(frame: &Frame, disc: &Disc, hor: &dyn Fn(Vec3) -> f64) -> f64 {
         let d = disc.dir(x, y);
         frame.elevation_deg(d) - hor(d)
     };
-    let mut lit = 0.0;
+    let (mut lit, mut whole) = (0.0, 0);
     for i in 0..EXACT_STRIPS {
         let (a, b) = strip_bounds(i, EXACT_STRIPS);
         let x = (a + b) / 2.0;
@@ -334,6 +340,7 @@ fn exact(frame: &Frame, disc: &Disc, hor: &dyn Fn(Vec3) -> f64) -> f64 {
         let (lit_b, lit_t) = (gb > 0.0, gt > 0.0);
         if lit_b == lit_t {
             if lit_b {
+                whole += 1;
                 lit += strip_area_above(a, b, -1.0);
             }
             continue;
@@ -363,7 +370,12 @@ fn exact(frame: &Frame, disc: &Disc, hor: &dyn Fn(Vec3) -> f64) -> f64 {
             strip_area_above(a, b, -1.0) - above
         };
     }
-    lit / PI
+    // Every strip lit: exactly 1 (the strips' areas sum to π within rounding).
+    if whole == EXACT_STRIPS {
+        1.0
+    } else {
+        lit / PI
+    }
 }
 
 /// Bounds (in units of the radius) of vertical strip `i` of `n` equal-width strips of the disc.
@@ -598,6 +610,26 @@ mod tests {
                                 "{m} at {face} ({u}, {v}), az {az}, α {a0}, el {el}: {got} vs {want}"
                             );
                         }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_disc_wholly_above_or_below_the_horizon_is_exactly_lit_or_dark() {
+        // Sums of strip areas are π only within rounding; a whole disc must still read
+        // exactly 1 or 0 (callers compare with 1.0 and 0.0, and a shadow mask must not show
+        // 0.9999999999999999 as partly lit).
+        for (face, u, v) in points() {
+            let frame = Frame::at(face, u, v);
+            for &az in &[0.0, 123.0, 359.99] {
+                for &(el, a0, want) in &[(1.0, -0.6, 1.0), (45.0, 3.0, 1.0), (-2.0, 4.0, 0.0)] {
+                    let hor = move |phi: f64| a0 + 0.3 * (2.0 * phi).sin();
+                    let sun = sun_at(&frame, az, el, R_MOON);
+                    for m in Model::ALL {
+                        let got = lit_fraction(&frame, &sun, m, &hor);
+                        assert_eq!(got, want, "{m} at {face} ({u}, {v}), az {az}, el {el}");
                     }
                 }
             }
