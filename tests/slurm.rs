@@ -386,13 +386,14 @@ fn slurm_chain_bakes_the_bytes_of_one_bake() {
     }
 }
 
-/// An LDEM_4 scene with horizons: a 16° box at 4 px/° in 64² tiles (levels to 3), 8 azimuths.
+/// An LDEM_4 scene with horizons: docs/scenes/equatorial.toml's 60° box at 4 px/° in 64² tiles
+/// (64 tiles at levels 0–3, each with horizons), 32 azimuths: about 8 core-s in the test build.
 fn ldem_scene(data: &Path) -> String {
     format!(
         "[scene]\nname = \"slurm-ldem\"\nbody = \"moon\"\n\n[layout]\ntile_size = 64\n\n\
          [[source]]\npath = \"{}\"\n\n\
-         [[region]]\nname = \"box\"\nlat_deg = [-8.0, 8.0]\nlon_deg = [0.0, 16.0]\n\n\
-         [renderer]\nmethods = [\"dp\", \"fourier\"]\n\n[horizon]\nazimuths = 8\n",
+         [[region]]\nname = \"box\"\nlat_deg = [-30.0, 30.0]\nlon_deg = [-10.0, 50.0]\n\n\
+         [renderer]\nmethods = [\"dp\", \"fourier\"]\n\n[horizon]\nazimuths = 32\n",
         data.join("lola_ldem4/LDEM_4.LBL").display()
     )
 }
@@ -473,7 +474,7 @@ fn slurm_requeued_task_resumes_its_shard() {
         .skip(1)
         .filter_map(|j| {
             let end = j.find("\n}")?;
-            serde_json::from_str(&format!("{{{}}}", &j[..end + 2])).ok()
+            serde_json::from_str(&format!("{{{}", &j[..end + 2])).ok()
         })
         .collect();
     assert_eq!(reports.len(), 1, "one report, the rerun's: {log}");
