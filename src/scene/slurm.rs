@@ -43,7 +43,9 @@ pub const CPU_TARGET_S: f64 = 3600.0;
 /// The most CPUs per task chosen without `--cpus-per-task` (one node of a typical cluster).
 pub const MAX_DEFAULT_CPUS: u32 = 32;
 /// Memory: what every task holds whatever its work (the binary, the plan, the manifest).
-const MEM_BASE: u64 = 256 << 20;
+const MEM_BASE: u64 = 64 << 20;
+/// The most the sun rule's bound cache holds (`horizon/bound.rs`).
+const BOUND_CACHE: u64 = 256 << 20;
 /// Memory is asked for with this margin over the model, in steps of [`MEM_STEP`].
 const MEM_SAFETY: f64 = 1.5;
 const MEM_STEP: u64 = 64 << 20;
@@ -221,7 +223,7 @@ pub fn jobs(plan: &Plan, table: &ShardTable, o: &SlurmOptions) -> Result<Vec<Job
             ),
             None => format!("the plan's estimate of tiling: {est:.1} core-s"),
         };
-        let res = resources(plan, *st, est, &est_why, n, o, mem_override, &time_override);
+        let res = resources(plan, *st, est, &est_why, o, mem_override, &time_override);
         let index = jobs.len() + 1;
         match sharded {
             None => {
@@ -286,16 +288,7 @@ pub fn jobs(plan: &Plan, table: &ShardTable, o: &SlurmOptions) -> Result<Vec<Job
                     bytes / 1e6,
                     FINISH_READ_BYTES_PER_S / 1e6
                 );
-                let fres = resources(
-                    plan,
-                    *st,
-                    est_s,
-                    &fin_why,
-                    n,
-                    o,
-                    mem_override,
-                    &time_override,
-                );
+                let fres = resources(plan, *st, est_s, &fin_why, o, mem_override, &time_override);
                 let fname = format!("{name}-finish");
                 let mut s = header(&format!(
                     "The {name} stage's finish: checks every shard's work and commits the stage \
@@ -337,7 +330,6 @@ fn resources(
     stage: Stage,
     est_core_s: f64,
     est_why: &str,
-    n: usize,
     o: &SlurmOptions,
     mem_override: Option<u64>,
     time_override: &Option<u64>,
@@ -355,7 +347,7 @@ fn resources(
             )
         }
     };
-    let (mem_bytes, mem_model) = memory(plan, stage, cpus, n);
+    let (mem_bytes, mem_model) = memory(plan, stage, cpus);
     let (mem_mib, mem_why) = match mem_override {
         Some(m) => (m, "--mem".to_string()),
         None => {
@@ -392,7 +384,7 @@ fn resources(
 }
 
 /// The plan's model of a task's memory (bytes) and how it was reckoned.
-fn memory(plan: &Plan, stage: Stage, threads: u32, n: usize) -> (u64, String) {
+fn memory(plan: &Plan, stage: Stage, threads: u32) -> (u64, String) {
     let stored = plan.layout.stored_size() as u64;
     let tile_bytes = stored * stored * 5; // heights f32 + mip bytes, as the tile cache counts
     let tiles = plan.tiles.len() as u64;
@@ -407,16 +399,19 @@ fn memory(plan: &Plan, stage: Stage, threads: u32, n: usize) -> (u64, String) {
             // Per thread: the context raster (heights and a working copy, f32) and the tile's
             // maps in f32 with their pyramid buffers.
             let per = 2 * ctx * ctx * 4 + 2 * side * side * az * 4;
-            let bound = 256 << 20; // the sun rule's bound cache (horizon/bound.rs)
+            // The sun rule's bounds: at most one per tile, smaller than the tile.
+            let bound = cache.min(BOUND_CACHE);
             (
                 MEM_BASE + cache + bound + t * per,
                 format!(
                     "{} MiB base + {} MiB tile cache (the smaller of the scene's {tiles} tiles \
-                     and 1 GiB) + 256 MiB bound cache + {t} thread(s) × {} MiB (a {ctx}² px \
-                     context twice, the {side}² px × {az} az maps twice, f32)",
+                     and 1 GiB) + {} MiB bound cache (at most the tile cache, at most 256 MiB) + \
+                     {t} thread(s) × {} MiB (a {ctx}² px context twice, the {side}² px × {az} \
+                     az maps twice, f32)",
                     MEM_BASE >> 20,
-                    cache >> 20,
-                    per >> 20
+                    cache.div_ceil(1 << 20),
+                    bound.div_ceil(1 << 20),
+                    per.div_ceil(1 << 20)
                 ),
             )
         }
@@ -426,9 +421,9 @@ fn memory(plan: &Plan, stage: Stage, threads: u32, n: usize) -> (u64, String) {
                 MEM_BASE + cache + t * per,
                 format!(
                     "{} MiB base + {} MiB tile cache + {t} thread(s) × {} MiB (four {stored}² px \
-                     f32 rasters); shards: {n}",
+                     f32 rasters)",
                     MEM_BASE >> 20,
-                    cache >> 20,
+                    cache.div_ceil(1 << 20),
                     per.div_ceil(1 << 20)
                 ),
             )
