@@ -450,7 +450,7 @@ fn slurm_requeued_task_resumes_its_shard() {
             })
         });
         if recorded
-            && c.queued(&[task.clone()])
+            && c.queued(std::slice::from_ref(&task))
                 .iter()
                 .any(|l| l.ends_with("RUNNING"))
         {
