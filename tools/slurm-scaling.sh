@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Scaling of a scene's bake under Slurm (docs/cluster.md, "Scaling measured"):
-#   tools/slurm-scaling.sh PENUMBRA SCENE [N ...]      (default N: 1 2 4)
+#   tools/slurm-scaling.sh PENUMBRA SCENE [N ...]      (default N: 1 2 4; repeats allowed)
 # starts a single-node Slurm cluster in a temp folder (as tests/slurm.rs does: munged,
 # slurmctld, slurmd, free ports, stopped by their pid files), bakes SCENE once in one process
 # (`--threads 1`, GNU time: wall and peak RSS), then for each N writes `plan --slurm --shards N
@@ -74,9 +74,11 @@ echo "== one process, --threads 1: $pen bake $scene"
 
 echo "| N | chain wall s | horizon array wall s | horizon shards wall_s (each) | finishes s | finishes' share | measured slowest ÷ mean | plan's slowest ÷ mean |"
 echo "|---:|---:|---:|---|---:|---:|---:|---:|"
+k=0
 for n in "${ns[@]}"; do
-  plan=$D/plan-$n
-  "$pen" --quiet plan "$scene" --slurm "$plan" --out "$D/tiles-$n" --shards "$n" \
+  k=$((k + 1))
+  plan=$D/plan-$k
+  "$pen" --quiet plan "$scene" --slurm "$plan" --out "$D/tiles-$k" --shards "$n" \
     --cpus-per-task 1 >/dev/null
   predicted=$("$pen" --quiet plan "$scene" --shards "$n" --json | python3 -c '
 import json, sys
@@ -91,7 +93,7 @@ print("%.3f" % [s for s in v["shards"]["stages"] if s["stage"] == "horizon"][0][
       echo "job $id did not complete:"; tail -n 20 "$plan"/logs/*; exit 1
     fi
   done
-  diff -r --exclude=.penumbra "$D/single" "$D/tiles-$n" >/dev/null ||
+  diff -r --exclude=.penumbra "$D/single" "$D/tiles-$k" >/dev/null ||
     { echo "N=$n: the tileset differs from the single bake's"; exit 1; }
   python3 - "$plan" "$t0" "$n" "$predicted" <<'PY'
 import glob, json, os, re, sys
