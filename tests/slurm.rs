@@ -552,7 +552,9 @@ fn slurm_plan_scripts() {
         format!(
             "'{}' --quiet --threads 1 bake '{}' --out '{}' --stage horizon --shard \
              \"${{SLURM_ARRAY_TASK_ID}}/4\" --json\n",
-            env!("CARGO_BIN_EXE_penumbra"),
+            std::fs::canonicalize(env!("CARGO_BIN_EXE_penumbra"))
+                .unwrap()
+                .display(),
             scene.display(),
             tiles.display()
         ),
