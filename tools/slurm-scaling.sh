@@ -114,9 +114,21 @@ fin = spans("*-finish-*.out")
 finishes = sum(e - s for s, e, _ in fin)
 walls = [w for _, _, w in h]
 mean = sum(walls) / len(walls)
+# Where the chain's time went: each job's span (first start to last end) and the waits
+# between one job's end and the next one's start (Slurm's scheduling of the dependency).
+order = ["tile-*", "mip-[0-9]*_*", "mip-finish-*", "horizon-[0-9]*_*", "horizon-finish-*"]
+parts, prev_end = [], t0
+for pat in order:
+    sp = spans(pat + ".out")
+    if not sp:
+        continue
+    s0, e0 = min(s for s, _, _ in sp), max(e for _, e, _ in sp)
+    parts.append("wait %.1f, %s %.1f" % (s0 - prev_end, pat.split("-")[0] + ("-finish" if "finish" in pat else ""), e0 - s0))
+    prev_end = e0
 print("| %d | %.1f | %.1f | %s | %.1f | %.1f %% | %.3f | %s |" % (
     n, end - t0, max(e for _, e, _ in h) - min(s for s, _, _ in h),
     " / ".join("%.1f" % w for w in walls), finishes, 100 * finishes / (end - t0),
     max(walls) / mean, predicted))
+print("  N=%d: %s" % (n, "; ".join(parts)), file=sys.stderr)
 PY
 done
