@@ -645,9 +645,11 @@ pub fn check_dir(dir: &Path) -> Result<()> {
              previous `plan --slurm` wrote",
         )),
         Ok(_) => {
+            // A small regular file holding exactly the mark (not a product file: read here).
             let marker = abs.join(MARKER);
-            let ours = crate::fsio::read_capped(&marker, 4096, "slurm plan marker")
-                .is_ok_and(|b| b == MARKER_TEXT.as_bytes());
+            let ours = std::fs::symlink_metadata(&marker)
+                .is_ok_and(|m| m.is_file() && m.len() == MARKER_TEXT.len() as u64)
+                && std::fs::read(&marker).is_ok_and(|b| b == MARKER_TEXT.as_bytes());
             if ours {
                 Ok(())
             } else {
@@ -683,9 +685,16 @@ pub fn write(dir: &Path, files: &[(String, String)]) -> Result<()> {
     crate::fsio::remove_tree(&tmp)?;
     let result = (|| -> Result<()> {
         std::fs::create_dir(&tmp).at(&tmp)?;
+        // The scripts are not product files: written here, synced, and made visible all at
+        // once by the folder's rename.
         for (f, text) in files {
             let p = tmp.join(f);
-            crate::fsio::write_atomic_bytes(&p, text.as_bytes())?;
+            std::fs::File::create(&p)
+                .and_then(|mut w| {
+                    std::io::Write::write_all(&mut w, text.as_bytes())?;
+                    w.sync_all()
+                })
+                .at(&p)?;
             #[cfg(unix)]
             if f.ends_with(".sh") || f.ends_with(".sbatch") {
                 use std::os::unix::fs::PermissionsExt;
