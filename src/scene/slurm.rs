@@ -714,7 +714,11 @@ pub fn write(dir: &Path, files: &[(String, String)]) -> Result<()> {
         }
         crate::fsio::sync_dir(&parent)
     })();
-    // After an exchange the temp name holds the previous plan; after a failure, the new one.
+    // After an exchange the temp name holds the previous plan; after a failure, the new one,
+    // which may hold the previous plan's logs: they go back first.
+    if result.is_err() && !abs.join("logs").exists() && abs.is_dir() {
+        let _ = std::fs::rename(tmp.join("logs"), abs.join("logs"));
+    }
     let _ = crate::fsio::remove_tree(&tmp);
     result
 }
