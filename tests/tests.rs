@@ -82,3 +82,7 @@ mod shards;
 // `penumbra package`: the Celestia addon with the tileset as its cube-face products, its
 // README and deterministic archive; bad input exits 2 and writes nothing.
 mod package;
+// `plan --slurm`: the scripts, bad flags (exit 2, nothing written), and a single-node Slurm
+// cluster (skipped without Slurm, failed under CI) running the chain to one bake's bytes, a
+// requeued array task resuming its shard.
+mod slurm;

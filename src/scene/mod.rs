@@ -9,6 +9,7 @@ pub mod bake;
 pub mod cost;
 pub mod plan;
 pub mod shards;
+pub mod slurm;
 
 use std::path::{Path, PathBuf};
 

@@ -64,6 +64,18 @@ enum Command {
         /// the mean.
         #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=penumbra::runner::MAX_SHARDS as i64))]
         shards: Option<u32>,
+        /// With --shards: write the bake as a chain of Slurm jobs into this folder (created;
+        /// or one a previous `plan --slurm` wrote, replaced): tiling as one job, each sharded
+        /// stage as a job array of N tasks and its finish, and submit.sh (docs/cluster.md).
+        #[arg(
+            long,
+            value_name = "DIR",
+            requires = "shards",
+            conflicts_with = "tileset"
+        )]
+        slurm: Option<PathBuf>,
+        #[command(flatten)]
+        slurm_flags: SlurmFlags,
         /// Print the plan as JSON.
         #[arg(long)]
         json: bool,
@@ -412,6 +424,34 @@ fn write_export(a: &ExportArgs, opts: &penumbra::export::ExportOptions) -> Resul
 #[cfg(not(feature = "gdal"))]
 fn write_export(_: &ExportArgs, _: &penumbra::export::ExportOptions) -> Result<()> {
     Err(Error::no_gdal("penumbra export").into())
+}
+
+/// How `plan --slurm` jobs run: each figure overrides the plan's estimate.
+#[derive(Args, Clone, Debug)]
+struct SlurmFlags {
+    /// With --slurm: the tileset folder the jobs bake into.
+    #[arg(long, value_name = "DIR", default_value = "tiles", requires = "slurm")]
+    out: PathBuf,
+    /// With --slurm: CPUs per task (default: from the plan's estimate of the slowest shard).
+    #[arg(long, value_name = "N", requires = "slurm")]
+    cpus_per_task: Option<u32>,
+    /// With --slurm: memory per task in Slurm's syntax (4G, 1500M; default: the plan's model).
+    #[arg(long, value_name = "SIZE", requires = "slurm")]
+    mem: Option<String>,
+    /// With --slurm: time limit per task in Slurm's syntax (90, 1:30:00, 2-00:00:00; default:
+    /// the plan's estimate with a safety factor).
+    #[arg(long, value_name = "TIME", requires = "slurm")]
+    time: Option<String>,
+    /// With --slurm: the Slurm partition to submit to.
+    #[arg(long, requires = "slurm")]
+    partition: Option<String>,
+    /// With --slurm: the Slurm account to charge.
+    #[arg(long, requires = "slurm")]
+    account: Option<String>,
+    /// With --slurm: the penumbra binary the jobs run (an absolute path the nodes see;
+    /// default: this one).
+    #[arg(long, value_name = "PATH", requires = "slurm")]
+    penumbra: Option<PathBuf>,
 }
 
 /// Run part of a stage: the selection of its units (docs/architecture.md, "Units").
@@ -1040,9 +1080,15 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
             scene,
             tileset,
             shards,
+            slurm,
+            slurm_flags,
             json,
         } => {
             let t0 = std::time::Instant::now();
+            if let Some(dir) = &slurm {
+                // Refused before the plan is computed: a folder that is not ours, no parent.
+                penumbra::scene::slurm::check_dir(dir)?;
+            }
             let mut plan = match &scene {
                 Some(p) => penumbra::scene::plan::plan_file(p)?,
                 None => penumbra::scene::plan::plan(&penumbra::scene::embedded())?,
@@ -1054,7 +1100,37 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
                 None => output::print_plan(&plan, t0.elapsed().as_secs_f64(), json)?,
                 Some(n) => {
                     let table = penumbra::scene::shards::table(&plan, n as usize);
-                    output::print_plan_shards(&plan, &table, t0.elapsed().as_secs_f64(), json)?
+                    if let Some(dir) = &slurm {
+                        let f = &slurm_flags;
+                        let penumbra = match &f.penumbra {
+                            Some(p) => p.clone(),
+                            None => std::env::current_exe()
+                                .and_then(std::fs::canonicalize)
+                                .map_err(|e| {
+                                    anyhow::anyhow!(
+                                        "cannot find this binary's path ({e}); give --penumbra"
+                                    )
+                                })?,
+                        };
+                        let opts = penumbra::scene::slurm::SlurmOptions {
+                            dir: dir.clone(),
+                            shards: n as usize,
+                            out: f.out.clone(),
+                            scene_file: scene.clone(),
+                            penumbra,
+                            cpus_per_task: f.cpus_per_task,
+                            mem: f.mem.clone(),
+                            time: f.time.clone(),
+                            partition: f.partition.clone(),
+                            account: f.account.clone(),
+                        };
+                        let jobs = penumbra::scene::slurm::jobs(&plan, &table, &opts)?;
+                        let files = penumbra::scene::slurm::files(&plan, &table, &opts)?;
+                        penumbra::scene::slurm::write(dir, &files)?;
+                        output::print_slurm(dir, &jobs, &table, t0.elapsed().as_secs_f64(), json)?
+                    } else {
+                        output::print_plan_shards(&plan, &table, t0.elapsed().as_secs_f64(), json)?
+                    }
                 }
             }
         }

@@ -988,3 +988,37 @@ pub fn print_package(
     writeln!(o, "{wall_s:.2} s")?;
     Ok(())
 }
+
+/// What `plan --slurm` wrote: its jobs in order and how to submit them.
+pub fn print_slurm(
+    dir: &std::path::Path,
+    jobs: &[penumbra::scene::slurm::Job],
+    table: &penumbra::scene::shards::ShardTable,
+    wall_s: f64,
+    json: bool,
+) -> Result<()> {
+    let dir = std::path::absolute(dir)?;
+    let submit = dir.join("submit.sh");
+    if json {
+        return print_json(&serde_json::json!({
+            "dir": dir,
+            "submit": submit,
+            "shards": table.count,
+            "jobs": jobs.iter().map(|j| serde_json::json!({"name": j.name, "script": dir.join(&j.file)})).collect::<Vec<_>>(),
+            "stages": table,
+            "plan_wall_s": wall_s,
+        }));
+    }
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "wrote a chain of {} Slurm jobs to {} ({wall_s:.2} s):",
+        jobs.len(),
+        dir.display()
+    )?;
+    for j in jobs {
+        writeln!(out, "  {:<16} {}", j.name, j.file)?;
+    }
+    writeln!(out, "submit with: {}", submit.display())?;
+    Ok(())
+}
