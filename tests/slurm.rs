@@ -364,15 +364,42 @@ fn slurm_chain_bakes_the_bytes_of_one_bake() {
     let names: Vec<&str> = jobs.iter().map(|j| j.0.as_str()).collect();
     assert_eq!(
         names,
-        ["tile", "mip", "mip-finish", "horizon", "horizon-finish"]
+        [
+            "tile",
+            "mip",
+            "mip-finish",
+            "horizon",
+            "horizon-finish",
+            "stamp"
+        ]
     );
     let ids: Vec<String> = jobs.iter().map(|j| j.1.clone()).collect();
     c.wait(&ids, &dir, Duration::from_secs(120));
     eprintln!(
-        "chain of 5 jobs (3 tasks per array) in {:.1} s",
+        "chain of 6 jobs (3 tasks per array) in {:.1} s",
         t0.elapsed().as_secs_f64()
     );
     same_bytes(&whole, &out, "slurm, 3 tasks");
+    // The last job stamped the folder: a whole bake of the scene finds nothing to do.
+    let again = ok(&penumbra_bin()
+        .arg("bake")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out)
+        .arg("--json")
+        .output()
+        .unwrap());
+    let r: serde_json::Value = serde_json::from_str(&again).unwrap();
+    assert_eq!(r["unchanged"], true, "{again}");
+    let stamp = std::fs::read_to_string(dir.join(format!("logs/stamp-{}.out", ids[5]))).unwrap();
+    assert!(stamp.contains("== end"), "{stamp}");
+    // ... and ran nothing: every stage of its report was up to date.
+    let report = &stamp[stamp.find('{').unwrap()..=stamp.rfind('}').unwrap()];
+    let r: serde_json::Value = serde_json::from_str(report).unwrap();
+    for st in ["tile", "mip", "horizon"] {
+        assert_eq!(r[st]["up_to_date"], true, "{st}: {stamp}");
+        assert_eq!(r[st]["tiles_written"], 0, "{st}: {stamp}");
+    }
     // Every array task logged its start and its shard's report.
     for (stage, id) in [("mip", &ids[1]), ("horizon", &ids[3])] {
         for i in 0..3 {
@@ -532,6 +559,7 @@ fn slurm_plan_scripts() {
             "3-mip-finish.sbatch",
             "4-horizon.sbatch",
             "5-horizon-finish.sbatch",
+            "6-stamp.sbatch",
             "logs",
             "submit.sh"
         ]
@@ -688,6 +716,10 @@ fn slurm_bad_flags_exit_2_and_write_nothing() {
         .unwrap();
     refused(&o, &["--shards"]);
     assert!(!dir.exists());
+    // A tileset folder whose parent is missing.
+    let o = plan(&f.scene, &dir, &root.join("gone/tiles"), &["--shards", "2"]);
+    refused(&o, &["gone", "--out", "does not exist"]);
+    assert!(!dir.exists() && !root.join("gone").exists());
     // A folder whose parent is missing; a path sbatch cannot carry.
     let deep = root.join("no/such/plan");
     refused(

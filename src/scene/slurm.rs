@@ -145,6 +145,18 @@ pub fn jobs(plan: &Plan, table: &ShardTable, o: &SlurmOptions) -> Result<Vec<Job
     }
     let dir = absolute(&o.dir)?;
     let out = absolute(&o.out)?;
+    // The tileset's folder is made by the first job, on the file system the nodes share: its
+    // parent must be there already (a typo here would only show as the chain's first failure).
+    if let Some(parent) = out.parent().filter(|p| !p.is_dir()) {
+        return Err(Error::invalid(
+            parent,
+            format!(
+                "--out {}: its parent folder does not exist; mkdir it on the file system the \
+                 cluster's nodes share, or give another --out",
+                out.display()
+            ),
+        ));
+    }
     let logs = dir.join("logs");
     // The logs' path goes on `#SBATCH --output=` lines, which sbatch reads itself: no shell
     // quoting there, and % starts its file name patterns. The other paths are only in the
@@ -312,6 +324,40 @@ pub fn jobs(plan: &Plan, table: &ShardTable, o: &SlurmOptions) -> Result<Vec<Job
             }
         }
     }
+    // Last, a whole bake of the scene: it finds every stage up to date (each committed by its
+    // job or its finish) and stamps the folder, so that a later `bake SCENE` answers
+    // "unchanged" at once and `package SCENE` takes the folder as the scene's bake (sharded
+    // runs leave the stamp to a whole bake).
+    let res = resources(
+        plan,
+        Stage::Tile,
+        0.0,
+        "none beyond the start: every stage is up to date, so the bake plans the scene, checks \
+         each stage's records and writes the stamp",
+        o,
+        mem_override,
+        &time_override,
+    );
+    let mut s = header(
+        "The bake's last job: a whole bake of the scene, which finds every stage up to date and \
+         stamps the folder",
+    );
+    sbatch_lines(&mut s, "penumbra-stamp", &res, o, &logs, "stamp", false);
+    let mut c = format!(
+        "{} --quiet --threads {} bake",
+        shell_quote(penumbra),
+        res.cpus
+    );
+    if let Some(f) = &scene {
+        let _ = write!(c, " {}", shell_quote(f));
+    }
+    let _ = write!(c, " --out {} --json", shell_quote(&out));
+    body(&mut s, &c, false);
+    jobs.push(Job {
+        name: "stamp".into(),
+        file: format!("{}-stamp.sbatch", jobs.len() + 1),
+        script: s,
+    });
     Ok(jobs)
 }
 
