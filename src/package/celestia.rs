@@ -32,6 +32,7 @@ use rayon::prelude::*;
 use crate::cube::{self, Vec3};
 use crate::error::{Error, Result};
 use crate::format::albedo::AlbedoTile;
+use crate::format::height::HeightTile;
 use crate::format::vt;
 use crate::layout::{Layout, TileId};
 use crate::manifest::Tileset;
@@ -259,7 +260,7 @@ pub fn latlon_deg_to_dir(lat_deg: f64, lon_deg: f64) -> Vec3 {
 }
 
 /// A height field on the body: what the normal map is derived from.
-pub trait HeightField: Sync {
+pub trait HeightField {
     /// The body's reference radius in metres.
     fn radius_m(&self) -> f64;
     /// Height in metres above the reference sphere at unit direction `d`; None where there is
@@ -275,10 +276,43 @@ pub struct Sampler<'a> {
     albedo: Mutex<HashMap<TileId, Option<Arc<AlbedoTile>>>>,
 }
 
-/// The heights of a [`Sampler`] at one cube level, as a [`HeightField`].
+/// The last tile read at each level, absent ones included.
+type LastTiles = Vec<Option<(TileId, Option<Arc<HeightTile>>)>>;
+
+/// The heights of a [`Sampler`] at one cube level, as a [`HeightField`]. It remembers the
+/// last tile it read at each level (one per thread: it is not `Sync`), so that the five
+/// samples of a pixel's normal, its neighbours', and the fallbacks to coarser levels where a
+/// finer tile is absent skip the store's shared cache (its lock and hash were half of a VT
+/// tile's time on one level).
 pub struct LevelHeights<'s, 'a> {
     pub sampler: &'s Sampler<'a>,
     pub level: u8,
+    last: std::cell::RefCell<LastTiles>,
+}
+
+impl<'s, 'a> LevelHeights<'s, 'a> {
+    pub fn new(sampler: &'s Sampler<'a>, level: u8) -> Self {
+        LevelHeights {
+            sampler,
+            level,
+            last: std::cell::RefCell::new(vec![None; usize::from(level) + 1]),
+        }
+    }
+
+    /// The store's tile `id` (None: absent), from the memo when it is its level's last read.
+    fn tile(&self, id: TileId) -> Result<Option<Arc<HeightTile>>> {
+        let l = usize::from(id.level);
+        if let Some(Some((last, t))) = self.last.borrow().get(l) {
+            if *last == id {
+                return Ok(t.clone());
+            }
+        }
+        let t = self.sampler.store.height(id)?;
+        if let Some(slot) = self.last.borrow_mut().get_mut(l) {
+            *slot = Some((id, t.clone()));
+        }
+        Ok(t)
+    }
 }
 
 impl HeightField for LevelHeights<'_, '_> {
@@ -286,7 +320,7 @@ impl HeightField for LevelHeights<'_, '_> {
         self.sampler.store.manifest().body.radius_m
     }
     fn height_m(&self, d: Vec3) -> Result<Option<f64>> {
-        self.sampler.height(d, self.level)
+        self.sampler.height_by(d, self.level, |id| self.tile(id))
     }
 }
 
@@ -308,11 +342,21 @@ impl<'a> Sampler<'a> {
     /// (halo included) of `level` that holds `d`, or of the finest coarser level that has data
     /// there; None where no level has.
     pub fn height(&self, d: Vec3, level: u8) -> Result<Option<f64>> {
+        self.height_by(d, level, |id| self.store.height(id))
+    }
+
+    /// [`Sampler::height`] with the tiles from `tile`.
+    fn height_by(
+        &self,
+        d: Vec3,
+        level: u8,
+        tile: impl Fn(TileId) -> Result<Option<Arc<HeightTile>>>,
+    ) -> Result<Option<f64>> {
         let lay = self.store.manifest().layout;
         for l in (0..=level.min(lay.levels.saturating_sub(1))).rev() {
             let loc = lay.locate(l, d);
             // The store's cache remembers absent tiles too.
-            let Some(t) = self.store.height(loc.tile)? else {
+            let Some(t) = tile(loc.tile)? else {
                 continue;
             };
             let h = lay.halo as f64;
@@ -464,13 +508,10 @@ pub fn render_tile(
 ) -> Result<Option<Vec<u8>>> {
     let lay = sampler.manifest().layout;
     let step = cube_pixel_rad(&lay, cube_level);
-    let heights = LevelHeights {
-        sampler,
-        level: cube_level,
-    };
     let rows: Vec<Result<(Vec<u8>, bool)>> = (0..size)
         .into_par_iter()
         .map(|j| {
+            let heights = LevelHeights::new(sampler, cube_level);
             let mut row = Vec::with_capacity(size as usize * 3);
             let mut any = false;
             for i in 0..size {
@@ -1243,6 +1284,7 @@ mod tests {
         let mut rnd = crate::testutil::rng(7);
         let mut worst_edge: f64 = 0.0;
         let mut worst_in: f64 = 0.0;
+        let memo = LevelHeights::new(&s, 9);
         for _ in 0..400 {
             let face = Face::ALL[(rnd() * 6.0) as usize % 6];
             // Near an edge: u within a pixel of ±1; or anywhere.
@@ -1262,6 +1304,13 @@ mod tests {
             ] {
                 let h = s.height(d, 2).unwrap().unwrap();
                 *worst = worst.max((h - terrain(d)).abs());
+                // The per-level memo of a LevelHeights answers what the store answers, for
+                // the same tile twice, at a level without tiles (coarser ones answer) and
+                // after another tile.
+                for _ in 0..2 {
+                    assert_eq!(memo.height_m(d).unwrap(), s.height(d, 9).unwrap());
+                }
+                assert_eq!(LevelHeights::new(&s, 2).height_m(d).unwrap(), Some(h));
             }
         }
         // The terrain's slope is ≲ 5 m per mrad; the level-2 pixel is 7.8 mrad and the DEM's
