@@ -128,16 +128,7 @@ fn state(dir: &Path) -> State {
 }
 
 fn same_as_whole(s: &Scene, dir: &Path, what: &str) {
-    let (want, got) = (state(&s.whole), state(dir));
-    assert_eq!(
-        want.0.keys().collect::<Vec<_>>(),
-        got.0.keys().collect::<Vec<_>>(),
-        "{what}: other files than one bake's"
-    );
-    for (k, v) in &want.0 {
-        assert!(got.0[k] == *v, "{what}: {k} differs from one bake's");
-    }
-    assert_eq!(want.1, got.1, "{what}: indexes differ from one bake's");
+    crate::util::same_tileset(&s.whole, dir, what);
     let staging = dir.join(".penumbra").join("staging");
     let left: Vec<_> = std::fs::read_dir(&staging)
         .map(|r| r.flatten().map(|e| e.file_name()).collect())

@@ -6,12 +6,11 @@
 //! Slurm reruns it, the shard resumes, the bytes are the same. Without Slurm the cluster tests
 //! skip, except under CI, where they fail. Every bad flag exits 2 and writes nothing.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-use crate::util::{indexes, penumbra_bin, shared_data, snapshot};
+use crate::util::{penumbra_bin, shared_data, snapshot};
 
 /// The embedded terrain (512² px) in 32² tiles down to level 10, with mipmaps and level 10's
 /// horizons (16 tiles, 16 azimuths): tests/shards.rs's scene, a bake of about a second.
@@ -320,25 +319,6 @@ fn submit(c: &Cluster, dir: &Path) -> Vec<(String, String)> {
         .collect()
 }
 
-/// The folder's product files and indexes, as tests/shards.rs compares them.
-type State = (BTreeMap<String, Vec<u8>>, BTreeMap<String, Vec<u8>>);
-
-fn same_bytes(want: &Path, got: &Path, what: &str) {
-    let (w, g): (State, State) = (
-        (snapshot(want), indexes(want)),
-        (snapshot(got), indexes(got)),
-    );
-    assert_eq!(
-        w.0.keys().collect::<Vec<_>>(),
-        g.0.keys().collect::<Vec<_>>(),
-        "{what}: other files than one bake's"
-    );
-    for (k, v) in &w.0 {
-        assert!(g.0[k] == *v, "{what}: {k} differs from one bake's");
-    }
-    assert_eq!(w.1, g.1, "{what}: indexes differ from one bake's");
-}
-
 fn bake_whole(scene: &Path, out: &Path) {
     ok(&penumbra_bin()
         .arg("bake")
@@ -379,7 +359,7 @@ fn slurm_chain_bakes_the_bytes_of_one_bake() {
         "chain of 6 jobs (3 tasks per array) in {:.1} s",
         t0.elapsed().as_secs_f64()
     );
-    same_bytes(&whole, &out, "slurm, 3 tasks");
+    crate::util::same_tileset(&whole, &out, "slurm, 3 tasks");
     // The last job stamped the folder: a whole bake of the scene finds nothing to do.
     let again = ok(&penumbra_bin()
         .arg("bake")
@@ -490,7 +470,7 @@ fn slurm_requeued_task_resumes_its_shard() {
     eprintln!("requeued {task} at {:.1} s", t0.elapsed().as_secs_f64());
     c.wait(&ids, &dir, Duration::from_secs(300));
     eprintln!("chain in {:.1} s", t0.elapsed().as_secs_f64());
-    same_bytes(&whole, &out, "slurm, a task requeued");
+    crate::util::same_tileset(&whole, &out, "slurm, a task requeued");
     // The task ran twice into one log (--open-mode=append): its second run did what the
     // first had not recorded, no more.
     let log = std::fs::read_to_string(dir.join(format!("logs/horizon-{task}.out"))).unwrap();

@@ -285,3 +285,21 @@ pub fn diff_stats(a: &[f32], b: &[f32]) -> (f64, f64, usize) {
     }
     ((ss / n.max(1) as f64).sqrt(), mx, n)
 }
+
+/// Assert that tileset `got` holds `want`'s product files byte for byte and the same indexes
+/// (`what` names the run in the failure).
+pub fn same_tileset(want: &Path, got: &Path, what: &str) {
+    let (w, g) = (
+        (snapshot(want), indexes(want)),
+        (snapshot(got), indexes(got)),
+    );
+    assert_eq!(
+        w.0.keys().collect::<Vec<_>>(),
+        g.0.keys().collect::<Vec<_>>(),
+        "{what}: other files than one bake's"
+    );
+    for (k, v) in &w.0 {
+        assert!(g.0[k] == *v, "{what}: {k} differs from one bake's");
+    }
+    assert_eq!(w.1, g.1, "{what}: indexes differ from one bake's");
+}

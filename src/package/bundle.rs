@@ -339,7 +339,8 @@ fn replace(tmp: &Path, out: &Path, parent: &Path, name: &str) -> Result<bool> {
     }
     // Checked again: another process may have written there since the first check.
     check_out(out, parent)?;
-    if !exchange(tmp, out) {
+    // Where the system cannot swap at once (or the swap fails), two renames instead.
+    if !matches!(crate::fsio::exchange_paths(tmp, out), Ok(true)) {
         let old = parent.join(format!(".{name}{OLD}{}", std::process::id()));
         std::fs::rename(out, &old).at(out)?;
         std::fs::rename(tmp, out).at(out)?;
@@ -351,37 +352,6 @@ fn replace(tmp: &Path, out: &Path, parent: &Path, name: &str) -> Result<bool> {
     // `tmp` now holds the earlier package.
     remove_tree(tmp)?;
     Ok(true)
-}
-
-/// Swap two folders' names at once (Linux `renameat2` with `RENAME_EXCHANGE`); false where the
-/// system or file system cannot.
-fn exchange(a: &Path, b: &Path) -> bool {
-    #[cfg(target_os = "linux")]
-    {
-        use std::os::unix::ffi::OsStrExt;
-        let (Ok(ca), Ok(cb)) = (
-            std::ffi::CString::new(a.as_os_str().as_bytes()),
-            std::ffi::CString::new(b.as_os_str().as_bytes()),
-        ) else {
-            return false;
-        };
-        // SAFETY: two NUL-terminated paths that live across the call, relative to the working
-        // folder.
-        unsafe {
-            libc::renameat2(
-                libc::AT_FDCWD,
-                ca.as_ptr(),
-                libc::AT_FDCWD,
-                cb.as_ptr(),
-                libc::RENAME_EXCHANGE,
-            ) == 0
-        }
-    }
-    #[cfg(not(target_os = "linux"))]
-    {
-        let _ = (a, b);
-        false
-    }
 }
 
 /// The report of the package written into `tmp` (to be renamed to `out`).

@@ -769,32 +769,10 @@ pub fn write(dir: &Path, files: &[(String, String)]) -> Result<()> {
     result
 }
 
-/// Swap two paths at once (Linux `renameat2(RENAME_EXCHANGE)`); elsewhere two renames.
+/// Swap two paths at once ([`crate::fsio::exchange_paths`]); elsewhere two renames.
 fn exchange(a: &Path, b: &Path) -> Result<()> {
-    #[cfg(target_os = "linux")]
-    {
-        use std::os::unix::ffi::OsStrExt;
-        let ca = std::ffi::CString::new(a.as_os_str().as_bytes())
-            .map_err(|_| Error::invalid(a, "a NUL in the path"))?;
-        let cb = std::ffi::CString::new(b.as_os_str().as_bytes())
-            .map_err(|_| Error::invalid(b, "a NUL in the path"))?;
-        // SAFETY: both are valid NUL-terminated paths for the call's duration.
-        let r = unsafe {
-            libc::renameat2(
-                libc::AT_FDCWD,
-                ca.as_ptr(),
-                libc::AT_FDCWD,
-                cb.as_ptr(),
-                libc::RENAME_EXCHANGE,
-            )
-        };
-        if r == 0 {
-            return Ok(());
-        }
-        let e = std::io::Error::last_os_error();
-        if !matches!(e.raw_os_error(), Some(libc::EINVAL) | Some(libc::ENOSYS)) {
-            return Err(Error::io(b, e));
-        }
+    if crate::fsio::exchange_paths(a, b).map_err(|e| Error::io(b, e))? {
+        return Ok(());
     }
     // No atomic exchange here: the previous plan aside, then the new one into place.
     let aside = a.with_extension("old");
