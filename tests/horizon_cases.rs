@@ -897,17 +897,24 @@ fn distant_spike_is_bounded_by_its_top() {
                     (h_sup - 2f64.sqrt() * hs * 0.25).max(0.0),
                 )
                 .max(0.0);
-                for mi in 0..2 {
+                // Fast, sweep and reference (METHODS' order). The sweep's far field
+                // interpolates two lines up to 1 px beside the ray, one of which may pass over
+                // the tent's peak: it may exceed what the ray meets, by up to 1.03° here (rays
+                // grazing the tent; on average it reports 2.4× the ray's supremum over the 90
+                // rays that cross the tent: a 1-px spike is what interpolated lines do worst).
+                // The bound is 1.5× that.
+                for mi in [0, 1, 3] {
                     let e = value(&outs[mi], rect, k, x, y) as f64;
                     over[mi] = over[mi].max(e - sup);
                     mean_ratio[mi] += e / sup;
+                    let tol = if mi == 1 { 1.5 } else { 2e-3 };
                     assert!(
-                        e <= sup + 2e-3,
+                        e <= sup + tol,
                         "{} obs ({x},{y}) k {k}: {e}° above the tent's supremum {sup}°",
                         METHODS[mi].name()
                     );
                 }
-                let e = value(&outs[1], rect, k, x, y) as f64;
+                let e = value(&outs[3], rect, k, x, y) as f64;
                 short_ref = short_ref.max(low_ref - e);
                 assert!(
                     e >= low_ref - 1e-3,
@@ -917,8 +924,8 @@ fn distant_spike_is_bounded_by_its_top() {
         }
     }
     eprintln!(
-        "far spike, 36 azimuths: {hits} rays cross the tent; max excess over the supremum fast {:.2e}° reference {:.2e}° (tol 2e-3°); mean fraction of the supremum seen fast {:.3} reference {:.3}; reference vs its lower bound {:.2e}°",
-        over[0], over[1], mean_ratio[0] / hits as f64, mean_ratio[1] / hits as f64, short_ref
+        "far spike, 36 azimuths: {hits} rays cross the tent; max excess over the supremum fast {:.2e}° reference {:.2e}° (tol 2e-3°) sweep {:.2e}° (tol 1.5°); mean fraction of the supremum seen fast {:.3} reference {:.3} sweep {:.3}; reference vs its lower bound {:.2e}°",
+        over[0], over[3], over[1], mean_ratio[0] / hits as f64, mean_ratio[3] / hits as f64, mean_ratio[1] / hits as f64, short_ref
     );
     assert!(hits > 50);
 }
@@ -1691,25 +1698,19 @@ fn summit_sees_a_wall_at_the_raster_edge() {
 
 /// The sweep method (issue 34) on the stiff cases that have no per-method loop above: Mars
 /// relief (21 km dome, 8 km basin, 1-px noise, and the maps rounded to f16 as the stage stores
-/// them), smooth terrain at the north pole and at three cube corners, and the 10-km body. It
-/// evaluates only points of each pixel's own ray, placed with its line's geometry (the line
-/// runs up to ½ px beside the ray, which changes a distance by about that offset over the face
-/// width): it never exceeds the reference by more than 0.01° (0.0066° seen on Mars; 0.042° on
-/// the 10-km body, whose curvature is 180× the Moon's per pixel). How far
-/// below it falls is bounded per case at about twice what this build gives (printed), so a
-/// lost candidate or window fails here.
+/// them), smooth terrain at the north pole and at three cube corners, and the 10-km body. Its
+/// near field is each pixel's own ray; beyond it two lines beside the ray are interpolated, so
+/// it may exceed the reference a little (≤ 0.06° here, both bodies). Its error is bounded per
+/// case at about twice what this build gives (printed), so a lost crossing or line fails here.
 #[test]
-fn sweep_on_stiff_cases_stays_below_the_reference_within_its_budget() {
+fn sweep_on_stiff_cases_stays_within_its_budget() {
     let f16 =
         |v: &[f32]| -> Vec<f32> { v.iter().map(|x| half::f16::from_f32(*x).to_f32()).collect() };
     let check = |label: &str, ctx: &Context, rect: Rect, a: usize, rms_max: f64, max_max: f64| {
-        // The line's geometry stands in for the ray's: on the 10-km body (ψ = 0.3° per pixel)
-        // that is worth up to 0.042°.
-        let above_max = if label.starts_with("10-km") {
-            0.06
-        } else {
-            0.01
-        };
+        // Beyond 24 columns two lines up to 1 px beside the ray stand in for it: this build is
+        // up to 0.042° above the reference on Mars relief, 0.029° at the corners, 0.040° on
+        // the 10-km body.
+        let above_max = 0.06;
         let sweep = horizon::horizons(ctx, rect, a, Method::Sweep);
         let reference = horizon::horizons(ctx, rect, a, Method::Reference);
         let above = sweep
@@ -1733,10 +1734,12 @@ fn sweep_on_stiff_cases_stays_below_the_reference_within_its_budget() {
         assert!(rms16 <= rms_max + 0.01, "{label}: f16 rms {rms16}");
     };
     let (ctx, rect, _, _) = mars_case();
-    check("mars relief", &ctx, rect, 16, 0.1, 3.0);
+    // This build (rms / max): Mars 0.0047° / 0.19°, the pole 0.0001° / 0.0002°, the corners
+    // 0.0022–0.0049° / 0.018–0.029°, the 10-km body 0.080° / 4.7°; the bounds about twice.
+    check("mars relief", &ctx, rect, 16, 0.01, 0.4);
     let (s, o) = pole_smooth_frame();
     let (ctx, rect, _) = smooth_case(Face::Pz, s, o);
-    check("north pole", &ctx, rect, 16, 0.05, 1.0);
+    check("north pole", &ctx, rect, 16, 0.001, 0.01);
     let s = face_pixels(MOON_R, 10.0);
     let (n, si) = (96i64, s as i64);
     for (label, face, o) in [
@@ -1744,7 +1747,7 @@ fn sweep_on_stiff_cases_stays_below_the_reference_within_its_budget() {
         ("corner pz", Face::Pz, (si - n / 2, si - n / 2)),
     ] {
         let (ctx, rect, _) = smooth_case(face, s, o);
-        check(label, &ctx, rect, 16, 0.05, 1.0);
+        check(label, &ctx, rect, 16, 0.01, 0.06);
     }
     // The 10-km body: a 1-px spike, a cone and a bowl on 50 m pixels.
     let (r, n, a) = (10_000.0, 97usize, 16usize);
@@ -1763,7 +1766,7 @@ fn sweep_on_stiff_cases_stays_below_the_reference_within_its_budget() {
         w: 64,
         h: 64,
     };
-    // The 1-px spike 500 m tall on 50 m pixels is what the sweep misses worst (16.6°): its
-    // peak lies inside a cell between the column crossings the pixels evaluate.
-    check("10-km body", &ctx, rect, a, 0.3, 20.0);
+    // The 1-px spike 500 m tall on 50 m pixels is what the sweep misses worst (4.7°): beyond
+    // the near field the lines beside the ray meet it at other heights.
+    check("10-km body", &ctx, rect, a, 0.16, 9.5);
 }

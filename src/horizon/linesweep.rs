@@ -1,28 +1,35 @@
 //! The sweep method (`--method sweep`, docs/horizons.md "Sweep"): Timonen & Westerholm's
-//! linear-time horizon extraction (Computer Graphics Forum 29(2), 2010) brought to the sphere.
+//! linear-time horizon extraction (Computer Graphics Forum 29(2), 2010) brought to the sphere,
+//! with each pixel's own ray searched exactly near it.
 //!
-//! Per plane azimuth the raster is covered with the fast method's parallel lines (straight
-//! lines of the gnomonic plane are great circles; one pixel apart along the minor axis; samples
-//! where a line crosses pixel columns and rows, exact bilinear values), each sample placed in
-//! its line's great-circle plane with the body centre at the origin (curvature exact). Each
-//! line is swept once from each end (azimuths φ and φ + π share the lines) keeping the upper
-//! convex hull of what it has passed; a sample that lies on an observer column is an observer
-//! itself, and the vertex it sees highest is what popping the hull for it leaves on top
-//! (Timonen's observation: the query and the insertion are one operation), so a line costs
-//! amortised O(1) per sample.
+//! Per plane azimuth every ray is a straight line of the gnomonic plane (a great circle), and
+//! all rays are parallel there. So every pixel's ray crosses the pixel columns at the same
+//! offsets from its observer: the ray of pixel (p, q) meets column p + k at row q + t·k. The
+//! **near field** (the first [`NEAR_COLS`] columns) is evaluated on each pixel's own ray, two
+//! taps per column (exact bilinear on the column), curvature exact, a whole column of
+//! observers at a time in SIMD lanes.
 //!
-//! A line's observer at a pixel column lies between that column's pixels. Each pixel takes
-//! the horizon vertex of the two lines that bracket it at its own column, evaluated from its
-//! own position and height (the vertex moved across to the pixel's ray at the same distance),
-//! and interpolates the two slopes linearly by the lines' offsets. Nothing is searched on the
-//! pixel's own ray, so the method is not bounded by the reference from either side; its error
-//! is measured and recorded (the stage's error budget, docs/horizons.md).
+//! The **far field** comes from Timonen's sweep: the raster is covered with parallel lines one
+//! pixel apart along the minor axis, each sampled where it crosses the columns (exact bilinear
+//! values) and placed in its own great-circle plane with the body centre at the origin
+//! (curvature exact). Each line is swept once from each end (azimuths φ and φ + π share the
+//! lines) keeping the upper convex hull of what it has passed, as a persistent chain (each
+//! sample remembers the hull vertex before it when it was added), so the hull of everything at
+//! least [`NEAR_COLS`] columns behind an observer column is still there when the sweep reaches
+//! it. Each pixel asks the two lines that bracket it for the vertex of that hull it sees highest
+//! from its own height (a walk along the chain: the elevation is unimodal on a convex chain),
+//! and interpolates the two slopes by the lines' distances from it. A line passes at most half a
+//! pixel beside a pixel's ray; beyond the near field that moves the far horizon by a fraction of
+//! what a half-pixel moves the terrain's height, and the interpolation cancels its first order.
+//!
+//! The method is bounded by the reference from neither side; its error is measured and recorded
+//! (the stage's error budget, docs/horizons.md).
 
 use rayon::prelude::*;
 
 use super::geometry::{pixel_geometry, plane_azimuth, Context, Rect};
 use super::reference::reference;
-use super::sweep::{degrees, Grid, Lines};
+use super::sweep::{degrees, Lines};
 
 /// Sweep-method horizons of every pixel of `rect` in `a` plane azimuths (layout as
 /// [`super::horizons`]): degrees, NaN where the observer has no data, −90 where no terrain
@@ -33,7 +40,8 @@ pub(super) fn horizons_sweep(ctx: &Context, rect: Rect, a: usize) -> Vec<f32> {
     if plane == 0 {
         return out;
     }
-    // The raster transposed: lines along rows (major axis y) then walk memory in order too.
+    // The raster transposed (column-major): for azimuths whose major axis is x, a column of
+    // observers and the column their rays cross are then both runs of memory.
     let (w, h) = (ctx.width, ctx.height);
     let mut tr = vec![0.0f32; w * h];
     for (y, row) in ctx.heights.chunks_exact(w).enumerate() {
@@ -63,78 +71,131 @@ pub(super) fn horizons_sweep(ctx: &Context, rect: Rect, a: usize) -> Vec<f32> {
     out
 }
 
-/// How many column crossings of its own ray next to it each pixel evaluates.
-const NEAR_COLS: usize = 4;
+/// Columns next to each pixel searched on its own ray; the lines' hulls cover the rest.
+///
+/// Development runs of 2026-12-06 (`penumbra-bench sweep`, the six real-DEM blocks and the
+/// synthetic 1024², 36 azimuths, against the exact method): at 8 the synthetic DEM is 0.058°
+/// RMS (the far field's lines stand in for rays 8 columns out), at 16 0.030°, at 24 0.024°
+/// with every real block ≤ 0.016°; past 64 nothing changes (the near field's own sampling).
+pub(super) const NEAR_COLS: i64 = 24;
 
-/// Lines per pixel along the minor axis: at 2 a pixel is at most ¼ px from a line. Against
-/// 1 (development runs of 2026-12-04 on the six real-DEM blocks, 36 azimuths) the RMS error
-/// falls by about 30 % (LDEM_4 0.084° → 0.060°, Gale 0.032° → 0.022°) for ≈ 1.3× the time.
-const LINES_PER_PX: usize = 2;
+/// Steps next to each pixel where its ray is also evaluated inside the cells, midway between
+/// crossings: the bilinear surface bulges between grid lines, which the crossings alone miss
+/// (LDEM_4's 7.6-km cells: 0.038° RMS without, 0.017° with 4, 0.011° with all 16).
+const MID_COLS: f64 = 4.0;
 
-/// Column crossings on either side of a candidate's distance that are evaluated too: a crest
-/// crossing the ray obliquely peaks a little nearer or farther on the ray than on the line
-/// (synthetic DEM 0.065° → 0.048° RMS, worst 6.6° → 3.9°).
-const WINDOW_COLS: i64 = 1;
+const NONE: u32 = u32::MAX;
 
-/// Per-thread buffers, one azimuth pair at a time.
+/// Per-thread buffers, one azimuth pair at a time; per-pixel arrays are in (major, minor)
+/// order of the pair's lines.
 struct Buffers {
-    /// Best slope per pixel for `phi` and for `phi` + π.
-    ahead: Vec<f64>,
-    back: Vec<f64>,
-    p: Vec<f64>,
-    h: Vec<f32>,
+    /// Near-field slopes, and the far field's weighted sums (slope × weight, weight), for φ
+    /// and φ + π.
+    near_u: [Vec<f32>; 2],
+    near_h: [Vec<f32>; 2],
+    far_num: [Vec<f32>; 2],
+    far_den: [Vec<f32>; 2],
+    /// Per pixel: the ground angle per column step along the ray (α) and its rate (β):
+    /// tan γ_k = k·α / (1 + k·β) at the k-th column (β changes sign with the direction).
+    alpha: Vec<f32>,
+    beta: Vec<f32>,
+    /// One line's samples by column: position in its plane, unit direction, height.
     x: Vec<f64>,
     y: Vec<f64>,
     ux: Vec<f64>,
     uy: Vec<f64>,
-    cols: Vec<Col>,
-    /// Unit directions in the line's plane at each column of the line's span.
-    cu: Vec<(f64, f64)>,
-    hull: Vec<(f64, f64, u32)>,
+    h: Vec<f32>,
+    /// The persistent hull: the vertex before each sample when it was added, and the hull's
+    /// top after each column.
+    pred: Vec<u32>,
+    top: Vec<u32>,
+    slope: Vec<f64>,
     deg: Vec<f32>,
 }
 
 impl Buffers {
     fn new(plane: usize) -> Buffers {
+        let v = || vec![0.0f32; plane];
         Buffers {
-            ahead: vec![f64::NEG_INFINITY; plane],
-            back: vec![f64::NEG_INFINITY; plane],
-            p: Vec::new(),
-            h: Vec::new(),
+            near_u: [v(), v()],
+            near_h: [v(), v()],
+            far_num: [v(), v()],
+            far_den: [v(), v()],
+            alpha: v(),
+            beta: v(),
             x: Vec::new(),
             y: Vec::new(),
             ux: Vec::new(),
             uy: Vec::new(),
-            cols: Vec::new(),
-            cu: Vec::new(),
-            hull: Vec::new(),
+            h: Vec::new(),
+            pred: Vec::new(),
+            top: Vec::new(),
+            slope: vec![0.0; plane],
             deg: Vec::new(),
         }
     }
 }
 
-/// An observer column of one line: its sample's index, the line's minor coordinate there and
-/// the ground metres per plane pixel along the ray per metre of radius (dψ/ds).
-#[derive(Clone, Copy)]
-struct Col {
-    at: usize,
-    p: i64,
-    y: f64,
-    dpsi: f64,
+/// The raster as (major, minor) = (p, q) with q contiguous: `d[p * nq + q]`.
+struct Cols<'a> {
+    d: &'a [f32],
+    np: i64,
+    nq: i64,
 }
 
-/// One line's samples: line parameters, heights, positions and unit directions in the line's
-/// plane.
-struct Samples<'a> {
-    p: &'a [f64],
-    h: &'a [f32],
-    x: &'a [f64],
-    y: &'a [f64],
-    ux: &'a [f64],
-    uy: &'a [f64],
-    /// Unit directions (ux, uy) at column `c0 + i`, every column of the line's span.
-    cu: &'a [(f64, f64)],
-    c0: i64,
+impl Cols<'_> {
+    #[inline(always)]
+    fn col(&self, p: i64) -> &[f32] {
+        &self.d[p as usize * self.nq as usize..][..self.nq as usize]
+    }
+
+    /// Bilinear height on column `p` at minor coordinate `y` (0 ≤ y ≤ nq − 1).
+    #[inline(always)]
+    fn on_col(&self, p: i64, y: f64) -> f32 {
+        let q0 = y as i64;
+        let f = (y - q0 as f64) as f32;
+        let c = self.col(p);
+        let a = c[q0 as usize];
+        if f == 0.0 {
+            return a;
+        }
+        let b = c[q0 as usize + 1];
+        let v = a + f * (b - a);
+        if v.is_nan() {
+            // A no-data tap is left out, as the reference's bilinear does where a ray leaves a
+            // cell.
+            if a.is_nan() {
+                b
+            } else {
+                a
+            }
+        } else {
+            v
+        }
+    }
+}
+
+/// One step along every ray of an azimuth: its distance in columns, its taps (column and row
+/// offsets from the observer, weight) and whether all four are used (inside a cell).
+type Step = (f64, [(i64, i64, f32); 4], bool);
+
+/// One azimuth pair's lines, raster and observers.
+struct Pair<'a> {
+    lines: Lines<'a>,
+    g: Cols<'a>,
+    /// The look direction's step along p for φ, and dq/dp.
+    look: i64,
+    t: f64,
+    rp0: i64,
+    rp1: i64,
+    rq0: i64,
+    rq1: i64,
+    /// Observers per column of the rect.
+    nr: usize,
+    radius: f64,
+    near_k: i64,
+    /// Directions done: 1 (φ) or 2 (φ and φ + π).
+    dirs: usize,
 }
 
 /// Plane azimuth `phi` into `dst` and, where given, `phi` + π into `back_dst`.
@@ -149,311 +210,740 @@ fn pair(
     dst: &mut [f32],
     back_dst: Option<&mut [f32]>,
 ) {
-    b.ahead.fill(f64::NEG_INFINITY);
-    b.back.fill(f64::NEG_INFINITY);
-    let mut lines = Lines::new(ctx, rect, phi);
-    if !lines.xmajor {
-        // Major axis y: the transposed raster, and the pixels' findings transposed too.
-        lines.g = Grid {
-            h: transposed,
-            sp: 1,
-            sq: ctx.height,
+    let lines = Lines::new(ctx, rect, phi);
+    let g = if lines.xmajor {
+        Cols {
+            d: transposed,
+            np: ctx.width as i64,
+            nq: ctx.height as i64,
+        }
+    } else {
+        Cols {
+            d: &ctx.heights,
             np: ctx.height as i64,
             nq: ctx.width as i64,
-        };
-        lines.si = 1;
-        lines.sj = rect.h;
+        }
+    };
+    let pr = Pair {
+        look: -lines.step,
+        t: lines.t,
+        rp0: lines.rp0,
+        rp1: lines.rp1,
+        rq0: lines.rq0,
+        rq1: lines.rq1,
+        nr: (lines.rq1 - lines.rq0) as usize,
+        radius: ctx.radius_m,
+        near_k: NEAR_COLS,
+        dirs: if back_dst.is_some() { 2 } else { 1 },
+        lines,
+        g,
+    };
+    pr.geometry(b);
+    for dir in 0..pr.dirs {
+        pr.near(dir, b);
     }
-    let lines = lines;
-    let g = &lines.g;
-    let radius = ctx.radius_m;
-    let both = back_dst.is_some();
-    let (cos, sin) = (phi.cos(), phi.sin());
-    let adp = lines.dp.abs();
-    let per = LINES_PER_PX as i64;
-    for m in lines.m_lo * per..=lines.m_hi * per {
-        let mf = m as f64 / per as f64;
-        let Some((start, stop)) = lines.span(mf, 0, g.np - 1) else {
-            continue;
+    pr.far(b);
+    let tr = pr.lines.xmajor;
+    let dsts: [Option<&mut [f32]>; 2] = [Some(dst), back_dst];
+    for (dir, d) in dsts.into_iter().enumerate() {
+        let Some(d) = d else { continue };
+        pr.combine(dir, phi, b);
+        let az = if dir == 0 {
+            phi
+        } else {
+            phi + std::f64::consts::PI
         };
-        let (a0, a1, b0, b1) = lines.frame(mf, start, stop);
-        let cross = (a0 * b1 - a1 * b0).abs();
-        b.p.clear();
-        b.h.clear();
-        b.cols.clear();
-        let cols = &mut b.cols;
-        lines.samples(mf, start, stop, &mut b.p, &mut b.h, |at, p, y, own| {
-            if own {
-                let (a, bb) = (a0 + p as f64 * a1, b0 + p as f64 * b1);
-                cols.push(Col {
-                    at,
-                    p,
-                    y,
-                    dpsi: cross / (a * a + bb * bb) * adp,
-                });
+        finish(ctx, rect, hmax, &b.slope, tr, az, &mut b.deg, d);
+    }
+}
+
+impl Pair<'_> {
+    /// Per-pixel ray geometry: X(k) = X0 + k·D along the ray in the gnomonic plane (k in
+    /// columns), so tan γ_k = k·|X0 × D| / (|X0|² + k·X0·D) = k·α / (1 + k·β).
+    #[inline(never)]
+    fn geometry(&self, b: &mut Buffers) {
+        let pl = |p: i64, q: f64| self.lines.plane(p as f64, q);
+        let o = pl(0, 0.0);
+        let d3 = sub(pl(self.look, self.t * self.look as f64), o);
+        let eq = sub(pl(0, 1.0), o);
+        let dd = dot3(d3, d3);
+        let (ed, ee) = (dot3(eq, d3), dot3(eq, eq));
+        for p in self.rp0..self.rp1 {
+            // X0 = B + q·E along the column: |X0|² and X0·D are polynomials in q.
+            let base = pl(p, self.rq0 as f64);
+            let (bb, be, bd) = (dot3(base, base), dot3(base, eq), dot3(base, d3));
+            let row = (p - self.rp0) as usize * self.nr;
+            let al = &mut b.alpha[row..row + self.nr];
+            let be_ = &mut b.beta[row..row + self.nr];
+            for (i, (a, bt)) in al.iter_mut().zip(be_.iter_mut()).enumerate() {
+                let q = i as f64;
+                let n2 = bb + q * (2.0 * be + q * ee);
+                let xd = bd + q * ed;
+                let cr = (n2 * dd - xd * xd).max(0.0).sqrt();
+                *a = (cr / n2) as f32;
+                *bt = (xd / n2) as f32;
             }
-        });
-        if b.cols.is_empty() {
-            continue;
-        }
-        let len = b.p.len();
-        b.x.resize(len, 0.0);
-        b.y.resize(len, 0.0);
-        b.ux.resize(len, 0.0);
-        b.uy.resize(len, 0.0);
-        for i in 0..len {
-            let pp = b.p[i];
-            let (a, bb) = (a0 + pp * a1, b0 + pp * b1);
-            let inv = 1.0 / (a * a + bb * bb).sqrt();
-            let k = (radius + b.h[i] as f64) * inv;
-            b.ux[i] = bb * inv;
-            b.uy[i] = a * inv;
-            b.x[i] = bb * k;
-            b.y[i] = a * k;
-        }
-        let c0 = start.min(stop);
-        b.cu.clear();
-        b.cu.extend((c0..=start.max(stop)).map(|p| {
-            let (a, bb) = (a0 + p as f64 * a1, b0 + p as f64 * b1);
-            let inv = 1.0 / (a * a + bb * bb).sqrt();
-            (bb * inv, a * inv)
-        }));
-        let smp = Samples {
-            p: &b.p,
-            h: &b.h,
-            x: &b.x,
-            y: &b.y,
-            ux: &b.ux,
-            uy: &b.uy,
-            cu: &b.cu,
-            c0,
-        };
-        let view = View {
-            ctx,
-            lines: &lines,
-            smp: &smp,
-            cos,
-            sin,
-        };
-        line_sweep(&view, &b.cols, 1.0, &mut b.hull, &mut b.ahead);
-        if both {
-            line_sweep(&view, &b.cols, -1.0, &mut b.hull, &mut b.back);
         }
     }
-    let tr = !lines.xmajor;
-    finish(ctx, rect, hmax, &b.ahead, tr, phi, &mut b.deg, dst);
-    if let Some(d) = back_dst {
-        let back = phi + std::f64::consts::PI;
-        finish(ctx, rect, hmax, &b.back, tr, back, &mut b.deg, d);
+
+    /// The near field of direction `dir` (0: φ, 1: φ + π) on each pixel's own ray: where it
+    /// crosses the next `near_k` columns and the rows between them, and inside each cell it
+    /// passes through, midway between its crossings.
+    #[inline(never)]
+    fn near(&self, dir: usize, b: &mut Buffers) {
+        let (g, t, rq0, rq1, nr) = (&self.g, self.t, self.rq0, self.rq1, self.nr);
+        let s = if dir == 0 { self.look } else { -self.look };
+        let sign = if dir == 0 { 1.0f32 } else { -1.0 };
+        let k_max = self.near_k;
+        // Series in place of the divisions and the root where the near field spans little of
+        // the body (tan γ ≤ 0.1 and |k·β| ≤ 0.1: truncation below 1e-6 of the slope).
+        let amax = b.alpha.iter().fold(0.0f32, |m, v| m.max(*v)) as f64;
+        let bmax = b.beta.iter().fold(0.0f32, |m, v| m.max(v.abs())) as f64;
+        let xk = k_max as f64 * bmax;
+        let tmax = k_max as f64 * amax / (1.0 - xk.min(0.5));
+        let series = if xk <= 1e-3 && tmax <= 3e-3 {
+            // Truncation |x|³ ≤ 1e-9 and q²/16 ≤ 6e-12 of the terms kept.
+            TINY
+        } else if xk <= 0.1 && tmax <= 0.1 {
+            SERIES5
+        } else {
+            EXACT
+        };
+        let radius = self.radius as f32;
+        // The steps along every ray: (k, column offset, row offset, weights) of each tap set.
+        let mut steps: Vec<Step> = Vec::new();
+        let mut ks: Vec<f64> = (1..=k_max).map(|k| k as f64).collect();
+        if t != 0.0 {
+            for r in 1.. {
+                let kr = r as f64 / t.abs();
+                if kr > k_max as f64 {
+                    break;
+                }
+                if kr.fract() != 0.0 {
+                    ks.push(kr);
+                }
+            }
+        }
+        ks.sort_by(f64::total_cmp);
+        let mut prev = 0.0;
+        for &k in &ks {
+            if k <= MID_COLS {
+                // Inside the cell between the previous crossing and this one.
+                let km = 0.5 * (prev + k);
+                let (pp, qq) = ((s as f64) * km, grid(t * (s as f64) * km));
+                let (c0, r0) = (pp.floor(), qq.floor());
+                let (fp, fq) = ((pp - c0) as f32, (qq - r0) as f32);
+                let (c0, r0) = (c0 as i64, r0 as i64);
+                steps.push((
+                    km,
+                    [
+                        (c0, r0, (1.0 - fp) * (1.0 - fq)),
+                        (c0 + 1, r0, fp * (1.0 - fq)),
+                        (c0, r0 + 1, (1.0 - fp) * fq),
+                        (c0 + 1, r0 + 1, fp * fq),
+                    ],
+                    true,
+                ));
+            }
+            prev = k;
+            let (pp, qq) = ((s as f64) * k, grid(t * (s as f64) * k));
+            if k.fract() == 0.0 {
+                // A column: two taps along it.
+                let r0 = qq.floor();
+                let f = (qq - r0) as f32;
+                let (c, r0) = (pp as i64, r0 as i64);
+                steps.push((
+                    k,
+                    [(c, r0, 1.0 - f), (c, r0 + 1, f), (c, r0, 0.0), (c, r0, 0.0)],
+                    false,
+                ));
+            } else {
+                // A row: two taps along it.
+                let (c0, r) = (pp.floor(), qq.round());
+                let f = (pp - c0) as f32;
+                let (c0, r) = (c0 as i64, r as i64);
+                steps.push((
+                    k,
+                    [(c0, r, 1.0 - f), (c0 + 1, r, f), (c0, r, 0.0), (c0, r, 0.0)],
+                    false,
+                ));
+            }
+        }
+        let (bu, bh) = (&mut b.near_u[dir], &mut b.near_h[dir]);
+        bu.fill(-1.0);
+        bh.fill(0.0);
+        let (alpha, beta) = (&b.alpha, &b.beta);
+        for p in self.rp0..self.rp1 {
+            let obs = &g.col(p)[rq0 as usize..rq1 as usize];
+            let row = (p - self.rp0) as usize * nr;
+            for (k, taps, four) in &steps {
+                let nt = if *four { 4 } else { 2 };
+                // Taps with no weight are not read (a column crossing's second tap may lie
+                // beyond the raster's last row).
+                let used = |i: usize| i < nt && taps[i].2 != 0.0;
+                let (mut lo, mut hi) = (rq0, rq1);
+                let mut inside = true;
+                for (i, &(dc, dr, _)) in taps.iter().enumerate() {
+                    if !used(i) {
+                        continue;
+                    }
+                    let pc = p + dc;
+                    if pc < 0 || pc >= g.np {
+                        inside = false;
+                    }
+                    lo = lo.max(-dr);
+                    hi = hi.min(g.nq - dr);
+                }
+                if !inside || lo >= hi {
+                    continue;
+                }
+                let n = (hi - lo) as usize;
+                let i0 = row + (lo - rq0) as usize;
+                // (An unused tap reads a used one's run: its weight is zero.)
+                let any = (0..4).find(|&i| used(i)).unwrap_or(0);
+                let slice = |i: usize| -> &[f32] {
+                    let (dc, dr, _) = taps[if used(i) { i } else { any }];
+                    &g.col(p + dc)[(lo + dr) as usize..][..n]
+                };
+                let tp = Taps {
+                    obs: &obs[(lo - rq0) as usize..][..n],
+                    taps: [slice(0), slice(1), slice(2), slice(3)],
+                    w: [taps[0].2, taps[1].2, taps[2].2, taps[3].2],
+                    k: *k as f32,
+                    sign,
+                    radius,
+                    alpha: &alpha[i0..i0 + n],
+                    beta: &beta[i0..i0 + n],
+                };
+                let mut best = Best {
+                    up: &mut bu[i0..i0 + n],
+                    hor: &mut bh[i0..i0 + n],
+                };
+                near_run(&tp, *four, series, &mut best);
+            }
+        }
+    }
+
+    /// The far field from the lines' hulls, both directions: per pixel the two bracketing
+    /// lines' slopes weighted by their nearness (sums in `far_num`, weights in `far_den`).
+    #[inline(never)]
+    fn far(&self, b: &mut Buffers) {
+        let (g, t, lines) = (&self.g, self.t, &self.lines);
+        let (rp0, rp1, rq0, rq1, nr) = (self.rp0, self.rp1, self.rq0, self.rq1, self.nr);
+        let radius = self.radius;
+        for dir in 0..self.dirs {
+            b.far_num[dir].fill(0.0);
+            b.far_den[dir].fill(0.0);
+        }
+        let (np, nq) = (g.np, g.nq);
+        for m in lines.m_lo..=lines.m_hi {
+            let mf = m as f64;
+            let Some((start, stop)) = lines.span(mf, 0, np - 1) else {
+                continue;
+            };
+            let (pa, pb) = (start.min(stop), start.max(stop));
+            // Does the line bracket any observer?
+            let (ylo, yhi) = (mf + t * rp0 as f64, mf + t * (rp1 - 1) as f64);
+            if ylo.max(yhi) <= (rq0 - 1) as f64 || ylo.min(yhi) >= rq1 as f64 {
+                continue;
+            }
+            let (a0, a1, b0, b1) = lines.frame(mf, start, stop);
+            let len = (pb - pa + 1) as usize;
+            for v in [&mut b.x, &mut b.y, &mut b.ux, &mut b.uy] {
+                v.resize(len, 0.0);
+            }
+            b.h.resize(len, 0.0);
+            b.pred.resize(len, NONE);
+            b.top.resize(len, NONE);
+            for (i, p) in (pa..=pb).enumerate() {
+                let y = grid(mf + t * p as f64);
+                b.h[i] = if y >= 0.0 && y <= (nq - 1) as f64 {
+                    g.on_col(p, y)
+                } else {
+                    f32::NAN
+                };
+            }
+            for i in 0..len {
+                let pf = (pa + i as i64) as f64;
+                let (a, bb) = (a0 + pf * a1, b0 + pf * b1);
+                let inv = 1.0 / (a * a + bb * bb).sqrt();
+                let (ux, uy) = (bb * inv, a * inv);
+                let k = radius + b.h[i] as f64;
+                b.ux[i] = ux;
+                b.uy[i] = uy;
+                b.x[i] = ux * k;
+                b.y[i] = uy * k;
+            }
+            for dir in 0..self.dirs {
+                // dir 0 sweeps from `start` to `stop` (x grows along it), dir 1 back (x
+                // mirrored).
+                let (mirror, from, to, step) = if dir == 0 {
+                    (1.0, start, stop, lines.step)
+                } else {
+                    (-1.0, stop, start, -lines.step)
+                };
+                let line = Line {
+                    x: &b.x,
+                    y: &b.y,
+                    ux: &b.ux,
+                    uy: &b.uy,
+                    mirror,
+                };
+                let mut top = NONE;
+                let mut p = from;
+                // The last observer column in this sweep's order.
+                let end = if step > 0 { rp1 - 1 } else { rp0 };
+                loop {
+                    let i = (p - pa) as usize;
+                    if !b.h[i].is_nan() {
+                        while top != NONE {
+                            let u = b.pred[top as usize];
+                            if u == NONE || line.cross(u, top, i as u32) < 0.0 {
+                                break;
+                            }
+                            top = u;
+                        }
+                        b.pred[i] = top;
+                        top = i as u32;
+                    }
+                    b.top[i] = top;
+                    // The hull of the samples at least `near_k` columns behind.
+                    let fs = p - step * self.near_k;
+                    if p >= rp0 && p < rp1 && fs >= pa && fs <= pb {
+                        let from = b.top[(fs - pa) as usize];
+                        if from != NONE {
+                            let y = mf + t * p as f64;
+                            let q0 = y.floor() as i64;
+                            // One walk for the line's observer, at its own height (it serves
+                            // the pixel above it as a start).
+                            let hl = if b.h[i].is_nan() {
+                                g.col(p)[q0.clamp(0, nq - 1) as usize]
+                            } else {
+                                b.h[i]
+                            };
+                            let vw = if hl.is_nan() {
+                                NONE
+                            } else {
+                                line.walk(i, radius + hl as f64, from, &b.pred)
+                            };
+                            for q in [q0, q0 + 1] {
+                                let wgt = 1.0 - (q as f64 - y).abs();
+                                if wgt <= 0.0 || q < rq0 || q >= rq1 {
+                                    continue;
+                                }
+                                let h0 = g.col(p)[q as usize];
+                                if h0.is_nan() {
+                                    continue;
+                                }
+                                let r0 = radius + h0 as f64;
+                                // The line's observer lies between this pixel and the other
+                                // one at its column. From above it a pixel sees farther back:
+                                // its walk goes on from the observer's vertex. From below it
+                                // may see a nearer vertex: its own walk from the start.
+                                let v = if vw != NONE && h0 >= hl {
+                                    line.walk(i, r0, vw, &b.pred)
+                                } else {
+                                    line.walk(i, r0, from, &b.pred)
+                                };
+                                // Nothing the pixel's own ray cannot reach: near the raster's
+                                // edge a line beside it runs on after the ray has left.
+                                let dq = -t * step as f64;
+                                let reach = if dq > 1e-12 {
+                                    ((nq - 1 - q) as f64 + 1e-6) / dq
+                                } else if dq < -1e-12 {
+                                    (q as f64 + 1e-6) / -dq
+                                } else {
+                                    f64::INFINITY
+                                };
+                                let dist = |v: u32| ((pa + v as i64) - p).abs() as f64;
+                                let o_px =
+                                    |p: i64, q: i64| (p - rp0) as usize * nr + (q - rq0) as usize;
+                                let s = if dist(v) <= reach {
+                                    line.slope(i, r0, v)
+                                } else {
+                                    // The line's best lies beyond where the pixel's own ray
+                                    // leaves the raster (the line runs on beside it there):
+                                    // the ray itself is scanned up to its exit instead.
+                                    let s = if dir == 0 { self.look } else { -self.look };
+                                    let (kf, kt) = (self.near_k as f64, reach.min(dist(v)));
+                                    if kt < kf {
+                                        continue;
+                                    }
+                                    self.scan(
+                                        p,
+                                        q,
+                                        s,
+                                        kf,
+                                        kt,
+                                        b.alpha[o_px(p, q)],
+                                        b.beta[o_px(p, q)] * if dir == 0 { 1.0 } else { -1.0 },
+                                    )
+                                };
+                                if s == f64::NEG_INFINITY {
+                                    continue;
+                                }
+                                let o = (p - rp0) as usize * nr + (q - rq0) as usize;
+                                b.far_num[dir][o] += (wgt * s) as f32;
+                                b.far_den[dir][o] += wgt as f32;
+                            }
+                        }
+                    }
+                    if p == end || p == to {
+                        break;
+                    }
+                    p += step;
+                }
+            }
+        }
+    }
+
+    /// The best slope on pixel (p, q)'s own ray (direction `s` along p) where it crosses
+    /// columns and rows between `kf` and `kt` columns out: what the near field does, one
+    /// pixel at a time, for the few rays near the raster's edge that the lines cannot serve.
+    #[allow(clippy::too_many_arguments)]
+    fn scan(&self, p: i64, q: i64, s: i64, kf: f64, kt: f64, alpha: f32, beta: f32) -> f64 {
+        let (g, t, radius) = (&self.g, self.t, self.radius);
+        let h0 = g.col(p)[q as usize] as f64;
+        let (alpha, beta) = (alpha as f64, beta as f64);
+        let mut best = f64::NEG_INFINITY;
+        let mut eval = |k: f64, hk: f32| {
+            if hk.is_nan() {
+                return;
+            }
+            let hk = hk as f64;
+            let tt = k * alpha / (1.0 + k * beta);
+            let q2 = tt * tt;
+            let drop = (radius + h0) * q2 / (1.0 + (1.0 + q2).sqrt());
+            let v = ((hk - h0) - drop) / ((radius + hk) * tt);
+            if v > best {
+                best = v;
+            }
+        };
+        let at = |pc: i64, qv: f64| -> Option<f32> {
+            if pc < 0 || pc >= g.np || !(0.0..=(g.nq - 1) as f64).contains(&qv) {
+                return None;
+            }
+            Some(g.on_col(pc, qv))
+        };
+        let mut k = kf.ceil().max(1.0);
+        while k <= kt {
+            if let Some(h) = at(p + s * k as i64, grid(q as f64 + t * (s as f64) * k)) {
+                eval(k, h);
+            }
+            k += 1.0;
+        }
+        if t != 0.0 {
+            let rho = if t * s as f64 > 0.0 { 1.0 } else { -1.0 };
+            let r0 = (kf * t.abs()).ceil().max(1.0) as i64;
+            for r in r0.. {
+                let kr = r as f64 / t.abs();
+                if kr > kt {
+                    break;
+                }
+                let qr = q + (rho * r as f64) as i64;
+                if qr < 0 || qr >= g.nq {
+                    break;
+                }
+                let pp = p as f64 + s as f64 * kr;
+                let c0 = pp.floor();
+                let f = (pp - c0) as f32;
+                let c0 = c0 as i64;
+                if c0 < 0 || c0 + 1 >= g.np {
+                    break;
+                }
+                let (a, b2) = (g.col(c0)[qr as usize], g.col(c0 + 1)[qr as usize]);
+                let v = a + f * (b2 - a);
+                eval(
+                    kr,
+                    if v.is_nan() {
+                        if a.is_nan() {
+                            b2
+                        } else {
+                            a
+                        }
+                    } else {
+                        v
+                    },
+                );
+            }
+        }
+        best
+    }
+
+    /// Each pixel's best of the near field, the far field and the zero-distance slope for
+    /// direction `dir`, into `b.slope`.
+    #[inline(never)]
+    fn combine(&self, dir: usize, phi: f64, b: &mut Buffers) {
+        let (g, nr) = (&self.g, self.nr);
+        let mirror = if dir == 0 { 1.0 } else { -1.0 };
+        // The direction in raster (x right, y down), then in (p, q).
+        let (cx, cy) = (mirror * phi.cos(), -mirror * phi.sin());
+        let (cp, cq) = if self.lines.xmajor {
+            (cx, cy)
+        } else {
+            (cy, cx)
+        };
+        let adp = self.lines.dp.abs();
+        let step = |c: f64| -> Option<(i64, f64)> {
+            (c.abs() > 1e-12).then(|| (c.signum() as i64, c.abs()))
+        };
+        let (sp, sq) = (step(cp), step(cq));
+        let nan = vec![f32::NAN; nr];
+        for p in self.rp0..self.rp1 {
+            let col = g.col(p);
+            let obs = &col[self.rq0 as usize..self.rq1 as usize];
+            let row = (p - self.rp0) as usize * nr;
+            // Neighbours one pixel along p and along q, NaN beyond the raster.
+            let np_ = sp.map(|(d, _)| p + d);
+            let along_p: &[f32] = match np_ {
+                Some(pn) if pn >= 0 && pn < g.np => {
+                    &g.col(pn)[self.rq0 as usize..self.rq1 as usize]
+                }
+                _ => &nan,
+            };
+            let (nu, nh) = (&b.near_u[dir][row..row + nr], &b.near_h[dir][row..row + nr]);
+            let (num, den) = (
+                &b.far_num[dir][row..row + nr],
+                &b.far_den[dir][row..row + nr],
+            );
+            let alpha = &b.alpha[row..row + nr];
+            let out = &mut b.slope[row..row + nr];
+            for i in 0..nr {
+                let h0 = obs[i] as f64;
+                let mut s = if nh[i] > 0.0 {
+                    (nu[i] / nh[i]) as f64
+                } else {
+                    f64::NEG_INFINITY
+                };
+                if den[i] > 0.0 {
+                    s = s.max((num[i] / den[i]) as f64);
+                }
+                // The zero-distance slope ([`Context::slope0_g`]).
+                let mut dh = 0.0;
+                if let Some((_, w)) = sp {
+                    dh += (along_p[i] as f64 - h0) * w;
+                }
+                if let Some((d, w)) = sq {
+                    let q = self.rq0 + i as i64 + d;
+                    let hq = if q >= 0 && q < g.nq {
+                        col[q as usize] as f64
+                    } else {
+                        f64::NAN
+                    };
+                    dh += (hq - h0) * w;
+                }
+                let gm = (self.radius + h0) * alpha[i] as f64 * adp;
+                let s0 = dh / gm;
+                if s0 > s {
+                    s = s0;
+                }
+                out[i] = s;
+            }
+        }
     }
 }
 
-/// What a line's sweep needs to hand its findings to the pixels.
-struct View<'a> {
-    ctx: &'a Context,
-    lines: &'a Lines<'a>,
-    smp: &'a Samples<'a>,
-    cos: f64,
-    sin: f64,
+/// `v` moved onto the grid line it is within 1e-9 px of: a rounding error's weight on a tap
+/// beyond the raster's edge would otherwise leave an edge pixel's ray unevaluated there.
+fn grid(v: f64) -> f64 {
+    let r = v.round();
+    if (v - r).abs() < 1e-9 {
+        r
+    } else {
+        v
+    }
 }
 
-/// One line swept in sample order (`mirror` = 1) or backwards with x mirrored (−1), the
-/// observers' horizon vertices evaluated on the rays of the pixels the line brackets.
-#[inline(always)]
-fn line_sweep(
-    v: &View,
-    cols: &[Col],
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn dot3(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// One line's samples as one sweep sees them (`mirror` −1: x mirrored, for the sweep back).
+struct Line<'a> {
+    x: &'a [f64],
+    y: &'a [f64],
+    ux: &'a [f64],
+    uy: &'a [f64],
     mirror: f64,
-    hull: &mut Vec<(f64, f64, u32)>,
-    acc: &mut [f64],
-) {
-    hull.clear();
-    let s = v.smp;
-    let len = s.p.len();
-    let mut visit = |i: usize, col: Option<&Col>| {
-        if s.h[i].is_nan() {
-            return;
-        }
-        let q = (mirror * s.x[i], s.y[i], i as u32);
-        while hull.len() >= 2 {
-            let n = hull.len();
-            let (o, a) = (hull[n - 2], hull[n - 1]);
-            if (a.0 - o.0) * (q.1 - o.1) - (a.1 - o.1) * (q.0 - o.0) >= 0.0 {
-                hull.pop();
+}
+
+impl Line<'_> {
+    /// (b − a) × (c − a) of samples a, b, c: ≥ 0 where b lies on or below the chord a–c.
+    #[inline(always)]
+    fn cross(&self, a: u32, b: u32, c: u32) -> f64 {
+        let (a, b, c) = (a as usize, b as usize, c as usize);
+        let m = self.mirror;
+        let (ax, ay) = (m * self.x[a], self.y[a]);
+        ((m * self.x[b] - ax) * (self.y[c] - ay)) - ((self.y[b] - ay) * (m * self.x[c] - ax))
+    }
+
+    /// The hull vertex that an observer on the line at sample `at`, `r0` from the body
+    /// centre, sees highest, walking the chain from `from` (the elevation is unimodal along
+    /// a convex chain seen from outside it).
+    #[inline(always)]
+    fn walk(&self, at: usize, r0: f64, from: u32, pred: &[u32]) -> u32 {
+        let m = self.mirror;
+        let (ox, oy) = (m * self.ux[at] * r0, self.uy[at] * r0);
+        let vec = |i: u32| (m * self.x[i as usize] - ox, self.y[i as usize] - oy);
+        let (mut best, mut bi) = (vec(from), from);
+        let mut v = pred[from as usize];
+        while v != NONE {
+            let c = vec(v);
+            // c sees higher than best from the observer: best × c < 0 (both lie behind).
+            if best.0 * c.1 - best.1 * c.0 < 0.0 {
+                best = c;
+                bi = v;
+                v = pred[v as usize];
             } else {
                 break;
             }
         }
-        if let Some(c) = col {
-            hand_out(v, c, mirror, hull, acc);
-        }
-        hull.push(q);
-    };
-    if mirror > 0.0 {
-        let mut ci = 0;
-        for i in 0..len {
-            let col = if ci < cols.len() && cols[ci].at == i {
-                ci += 1;
-                Some(&cols[ci - 1])
-            } else {
-                None
-            };
-            visit(i, col);
-        }
-    } else {
-        let mut ci = cols.len();
-        for i in (0..len).rev() {
-            let col = if ci > 0 && cols[ci - 1].at == i {
-                ci -= 1;
-                Some(&cols[ci])
-            } else {
-                None
-            };
-            visit(i, col);
+        bi
+    }
+
+    /// The slope (tan of elevation) of sample `v` from an observer on the line at sample
+    /// `at`, `r0` from the body centre; −∞ where it does not lie ahead.
+    #[inline(always)]
+    fn slope(&self, at: usize, r0: f64, v: u32) -> f64 {
+        let m = self.mirror;
+        let (ux, uy) = (m * self.ux[at], self.uy[at]);
+        let (dx, dy) = (
+            m * self.x[v as usize] - ux * r0,
+            self.y[v as usize] - uy * r0,
+        );
+        let up = dx * ux + dy * uy;
+        let hor = -dx * uy + dy * ux;
+        if hor > 0.0 {
+            up / hor
+        } else {
+            f64::NEG_INFINITY
         }
     }
 }
 
-/// The pixels line column `c` brackets evaluate the line's horizon vertices (`cand`, sample
-/// indices) on their own rays at the same distance, and the pixel at or above the line the
-/// zero-distance slope too: every value is a point of the pixel's own ray.
-///
-/// An evaluation places the height found on the pixel's ray at the line's direction there
-/// (the line's plane stands in for the ray's, as everywhere in this method): at a column the
-/// direction comes from the line's column table and the height from the two taps of that
-/// column, so no evaluation takes a square root and most read two heights, not four.
+/// How [`near_body`] finds tan γ = kα/(1 + kβ) and sec γ − 1: exactly (a division and a
+/// root), by five terms of each series (|kβ|, tan γ ≤ 0.1), or by two (|kβ| ≤ 1e-3,
+/// tan γ ≤ 3e-3): truncation below 1e-6 of the slope in each case.
+const EXACT: u8 = 0;
+const SERIES5: u8 = 1;
+const TINY: u8 = 2;
+
+/// A run of observers and where their rays meet the terrain one step out: `obs` their
+/// heights, the height there `Σ w_i · tap_i` over up to four taps (`taps[i][j]` for observer
+/// j), `k` columns out; `alpha`/`beta` their rays' geometry (β times `sign`, the direction's).
+struct Taps<'a> {
+    obs: &'a [f32],
+    taps: [&'a [f32]; 4],
+    w: [f32; 4],
+    k: f32,
+    sign: f32,
+    radius: f32,
+    alpha: &'a [f32],
+    beta: &'a [f32],
+}
+
+/// The best slope so far of a run of observers, as (up, hor): compared by cross-multiplying,
+/// divided once at the end. (−1, 0) is nothing yet.
+struct Best<'a> {
+    up: &'a mut [f32],
+    hor: &'a mut [f32],
+}
+
+/// The slopes of one step for a run of observers, kept where higher than `best`. With `N`
+/// taps (2: along a column or row; 4: inside a cell). With `SERIES`, 1/(1 + kβ) and
+/// sec γ − 1 are truncated series (callers check they converge).
 #[inline(always)]
-fn hand_out(v: &View, c: &Col, mirror: f64, hull: &[(f64, f64, u32)], acc: &mut [f64]) {
-    let (lines, s) = (v.lines, v.smp);
-    let g = &lines.g;
-    let radius = v.ctx.radius_m;
-    let qa = c.y.ceil();
-    let f = qa - c.y;
-    let qa = qa as i64;
-    let (upx, upy) = (mirror * s.ux[c.at], s.uy[c.at]);
-    let spacing = 1.0 / LINES_PER_PX as f64;
-    let qmax = (g.nq - 1) as f64;
-    for (side, (q0, w)) in [(qa, spacing - f), (qa - 1, f + spacing - 1.0)]
-        .into_iter()
-        .enumerate()
-    {
-        if w <= 0.0 || q0 < lines.rq0 || q0 >= lines.rq1 {
-            continue;
-        }
-        let h0 = g.at(c.p, q0) as f64;
-        if h0.is_nan() {
-            continue;
-        }
-        let idx = (c.p - lines.rp0) as usize * lines.si + (q0 - lines.rq0) as usize * lines.sj;
-        let r0 = radius + h0;
-        // Best (up, hor) so far: compared by cross-multiplying, divided once at the end.
-        let prev = acc[idx];
-        let (mut bu, mut bh) = if prev == f64::NEG_INFINITY {
-            (-1.0, 0.0)
+fn near_body<const N: usize, const SERIES: u8>(t: &Taps, best: &mut Best) {
+    let n = t.obs.len();
+    let (alpha, beta) = (&t.alpha[..n], &t.beta[..n]);
+    let (bu, bh) = (&mut best.up[..n], &mut best.hor[..n]);
+    let (t0, t1) = (&t.taps[0][..n], &t.taps[1][..n]);
+    let (t2_, t3_) = if N == 4 {
+        (&t.taps[2][..n], &t.taps[3][..n])
+    } else {
+        (&t.taps[0][..n], &t.taps[1][..n])
+    };
+    let (k, sign, radius) = (t.k, t.sign, t.radius);
+    let w = t.w;
+    for i in 0..n {
+        let h0 = t.obs[i];
+        let hk = if N == 4 {
+            w[0] * t0[i] + w[1] * t1[i] + w[2] * t2_[i] + w[3] * t3_[i]
         } else {
-            (prev, 1.0)
-        };
-        // A point of the pixel's ray at height `hv` in direction (ux, uy) of the line plane.
-        let mut take = |hv: f64, ux: f64, uy: f64| {
-            let k = radius + hv;
-            let up = k * (mirror * ux * upx + uy * upy) - r0;
-            let hor = k * (uy * upx - mirror * ux * upy);
-            if hor > 0.0 && up * bh > bu * hor {
-                bu = up;
-                bh = hor;
-            }
-        };
-        // The pixel's ray where it crosses column `pw`: two taps along the column.
-        let at_col = |pw: i64| -> Option<(f64, f64, f64)> {
-            let qv = q0 as f64 + lines.t * (pw - c.p) as f64;
-            let ci = pw - s.c0;
-            if !(qv >= 0.0 && qv <= qmax) || ci < 0 || ci as usize >= s.cu.len() {
-                return None;
-            }
-            let (hv, ok) = g.sample(pw as f64, qv);
-            if !ok || hv.is_nan() {
-                return None;
-            }
-            let (ux, uy) = s.cu[ci as usize];
-            Some((hv as f64, ux, uy))
-        };
-        // The hull vertex the pixel, placed on the line at its own height, sees highest: at
-        // or below the line observer's (a higher observer sees farther back; what the line
-        // observer popped lies below its own chord and stays hidden from above).
-        let o = (mirror * s.ux[c.at] * r0, s.uy[c.at] * r0);
-        let better = |a: (f64, f64, u32), b: (f64, f64, u32)| {
-            (a.0 - o.0) * (b.1 - o.1) - (a.1 - o.1) * (b.0 - o.0) > 0.0
-        };
-        let n = hull.len();
-        // Columns evaluated so far (each at most once): the candidates' windows overlap.
-        let mut done = [i64::MIN; 3 * (2 * WINDOW_COLS as usize + 1)];
-        let mut nd = 0;
-        if n > 0 {
-            let mut top = n - 1;
-            while top > 0 && better(hull[top - 1], hull[top]) {
-                top -= 1;
-            }
-            let cand = [
-                Some(top),
-                (top + 1 < n).then_some(top + 1),
-                top.checked_sub(1),
-            ];
-            for k in cand.into_iter().flatten() {
-                let iv = hull[k].2 as usize;
-                let pv = s.p[iv];
-                let pc = pv.round() as i64;
-                if pv != pc as f64 {
-                    // A row crossing: its own direction, four taps on the pixel's ray.
-                    let qv = q0 as f64 + lines.t * (pv - c.p as f64);
-                    if g.inside(pv, qv) {
-                        let (hv, ok) = g.sample(pv, qv);
-                        if ok && !hv.is_nan() {
-                            take(hv as f64, s.ux[iv], s.uy[iv]);
-                        }
-                    }
+            // Where a ray leaves a cell a no-data tap is left out (renormalised, as the
+            // reference's bilinear does there); inside cells (`N` = 4) a no-data corner leaves
+            // the point unevaluated (NaN compares false), as `Context::on_complete_cell` has it.
+            let (a, b) = (t0[i], t1[i]);
+            let v = a + w[1] * (b - a);
+            if v.is_nan() {
+                if a.is_nan() {
+                    b
+                } else {
+                    a
                 }
-                for d in -WINDOW_COLS..=WINDOW_COLS {
-                    let pw = pc + d;
-                    if pw == c.p || done[..nd].contains(&pw) {
-                        continue;
-                    }
-                    done[nd] = pw;
-                    nd += 1;
-                    if let Some((hv, ux, uy)) = at_col(pw) {
-                        take(hv, ux, uy);
-                    }
-                }
-            }
-        }
-        if side == 0 {
-            // The pixel's own ray where it crosses the next columns.
-            let look = -lines.step * mirror as i64;
-            for k in 1..=NEAR_COLS as i64 {
-                let pw = c.p + look * k;
-                if done[..nd].contains(&pw) {
-                    continue;
-                }
-                if let Some((hv, ux, uy)) = at_col(pw) {
-                    take(hv, ux, uy);
-                }
-            }
-        }
-        let mut best = if bh > 0.0 { bu / bh } else { f64::NEG_INFINITY };
-        if side == 0 {
-            let (x, y) = if lines.xmajor {
-                (c.p as usize, q0 as usize)
             } else {
-                (q0 as usize, c.p as usize)
-            };
-            let s0 = v
-                .ctx
-                .slope0_g(x, y, mirror * v.cos, mirror * v.sin, r0 * c.dpsi);
-            if s0 > best {
-                best = s0;
+                v
             }
+        };
+        let x = k * sign * beta[i];
+        let tt;
+        let drop;
+        if SERIES == TINY {
+            tt = k * alpha[i] * (1.0 - x * (1.0 - x));
+            let q = tt * tt;
+            drop = (radius + h0) * q * (0.5 - q * 0.125);
+        } else if SERIES == SERIES5 {
+            tt = k * alpha[i] * (1.0 - x * (1.0 - x * (1.0 - x * (1.0 - x * (1.0 - x)))));
+            let q = tt * tt;
+            drop = (radius + h0) * q * (0.5 - q * (0.125 - q * (0.0625 - q * 0.039_062_5)));
+        } else {
+            tt = k * alpha[i] / (1.0 + x);
+            let q = tt * tt;
+            drop = (radius + h0) * q / (1.0 + (1.0 + q).sqrt());
         }
-        acc[idx] = best;
+        let up = (hk - h0) - drop;
+        let hor = (radius + hk) * tt;
+        // (Stored either way: a select, not a masked store, which is slow on some CPUs.)
+        let (ou, oh) = (bu[i], bh[i]);
+        let take = up * oh > ou * hor;
+        bu[i] = if take { up } else { ou };
+        bh[i] = if take { hor } else { oh };
     }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn near_avx2<const N: usize, const SERIES: u8>(t: &Taps, best: &mut Best) {
+    near_body::<N, SERIES>(t, best)
+}
+
+/// [`near_body`] in the widest lanes the CPU has (the same bytes: no fused operations).
+fn near_run(t: &Taps, four: bool, series: u8, best: &mut Best) {
+    macro_rules! go {
+        ($f:ident) => {
+            match (four, series) {
+                (false, TINY) => $f::<2, TINY>(t, best),
+                (false, SERIES5) => $f::<2, SERIES5>(t, best),
+                (false, _) => $f::<2, EXACT>(t, best),
+                (true, TINY) => $f::<4, TINY>(t, best),
+                (true, SERIES5) => $f::<4, SERIES5>(t, best),
+                (true, _) => $f::<4, EXACT>(t, best),
+            }
+        };
+    }
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2, checked just above.
+            unsafe { go!(near_avx2) };
+            return;
+        }
+    }
+    go!(near_body)
 }
 
 /// The pixels' slopes (`acc`, row-major or, where `transposed`, column-major) as degrees:
@@ -551,11 +1041,10 @@ mod tests {
         v
     }
 
-    /// Never above the reference by more than 0.01° (the lines' geometry stands in for the
-    /// ray's), within bounds on very rough 1-px terrain with holes, no data exactly where the
-    /// reference has none, and the same bytes on 1 and 3 threads.
+    /// Within bounds of the reference (both sides) on very rough 1-px terrain with holes, no
+    /// data exactly where the reference has none, and the same bytes on 1 and 3 threads.
     #[test]
-    fn sweep_stays_below_the_reference_and_is_deterministic() {
+    fn sweep_stays_near_the_reference_and_is_deterministic() {
         let (w, h) = (96, 80);
         for (seed, holes) in [(0x5EE9, false), (0xA11, true)] {
             let ctx = lunar_context(w, h, rough(w, h, seed, holes), 60.0);
@@ -581,6 +1070,7 @@ mod tests {
                 .zip(&again)
                 .all(|(a, b)| a.to_bits() == b.to_bits()));
             let (mut n, mut sq, mut above, mut worst) = (0usize, 0.0f64, 0.0f64, 0.0f64);
+            let mut over = 0usize;
             for (g, r) in got.iter().zip(&want) {
                 assert_eq!(
                     g.is_nan(),
@@ -595,14 +1085,34 @@ mod tests {
                 sq += d * d;
                 above = above.max(d);
                 worst = worst.max(d.abs());
+                over += usize::from(d > 0.1);
             }
             let rms = (sq / n as f64).sqrt();
-            assert!(above < 0.01, "seed {seed:x}: {above}° above the reference");
+            let over = over as f64 / n as f64;
             // 150 m of 1-px noise on 60 m pixels (slopes up to 2.5) is far rougher than any
-            // real DEM: this build gives 0.36–0.45° RMS and 11.7–14.2° at worst here; the
-            // bounds are about 1.4× that.
-            assert!(rms < 0.6, "seed {seed:x}: RMS {rms}°");
-            assert!(worst < 20.0, "seed {seed:x}: worst {worst}°");
+            // real DEM. The far field interpolates two lines that pass beside the ray, so the
+            // method is bounded from neither side. This build: without holes 0.145° RMS,
+            // 4.10° at worst, up to 1.71° above the reference, 2.9 % of samples more than 0.1°
+            // above it; with holes 0.354° RMS and 24.7° at worst, above it (a line beside the
+            // ray meets the renormalised edge of a hole the ray does not), 3.1 % more than
+            // 0.1° above. The bounds are about 1.4× that. (The real DEMs, LOLA's voids at
+            // Shoemaker included: ≤ 1.13° at worst and ≤ 0.08 % of samples more than 0.1°
+            // above the exact method, docs/benchmarks.md.)
+            let (b_rms, b_worst, b_above) = if holes {
+                (0.5, 35.0, 35.0)
+            } else {
+                (0.21, 6.0, 2.5)
+            };
+            assert!(rms < b_rms, "seed {seed:x}: RMS {rms}°");
+            assert!(worst < b_worst, "seed {seed:x}: worst {worst}°");
+            assert!(
+                above < b_above,
+                "seed {seed:x}: {above}° above the reference"
+            );
+            assert!(
+                over < 0.045,
+                "seed {seed:x}: {over} of samples > 0.1° above"
+            );
         }
     }
 

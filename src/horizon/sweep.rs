@@ -527,7 +527,7 @@ impl<'a> Lines<'a> {
     }
 
     /// The face-plane point (not normalised) of raster position (p, q).
-    fn plane(&self, p: f64, q: f64) -> Vec3 {
+    pub(super) fn plane(&self, p: f64, q: f64) -> Vec3 {
         let (n, ua, va) = self.ctx.face.axes();
         let (x, y) = if self.xmajor { (p, q) } else { (q, p) };
         let (u, v) = self.ctx.uv(x, y);

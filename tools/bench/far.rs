@@ -388,7 +388,11 @@ fn synth_context(
 /// Core seconds per 512² tile at 360 azimuths for `bake`, measured on one thread over
 /// synthetic terrain with the geometry of a tile at the face centre: the fine context and the
 /// far rings `penumbra horizon` would build for that reach (`azimuths` timed, scaled to 360).
-fn per_tile_core_s(bake: &Bake, azimuths: usize) -> Result<(f64, u64, usize)> {
+fn per_tile_core_s(
+    bake: &Bake,
+    azimuths: usize,
+    method: penumbra::horizon::Method,
+) -> Result<(f64, u64, usize)> {
     use penumbra::horizon::{FarRing, Rect};
     let n = 512i64;
     let fine = penumbra::horizon::default_fine_margin_px(n as u32) as i64;
@@ -429,13 +433,17 @@ fn per_tile_core_s(bake: &Bake, azimuths: usize) -> Result<(f64, u64, usize)> {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
     let t = std::time::Instant::now();
     pool.install(|| {
-        penumbra::horizon::horizons_far(
+        let mut far = penumbra::horizon::FarHorizons::new(
             &ctx,
             rect,
             azimuths,
             penumbra::horizon::DEFAULT_NEAR_PX,
-            &rings,
-        )
+            method,
+        );
+        for r in &rings {
+            far.add_ring(r);
+        }
+        far.finish()
     });
     let secs = t.elapsed().as_secs_f64() * 360.0 / azimuths as f64;
     Ok((secs, needed as u64, rings.len()))
@@ -446,6 +454,7 @@ pub fn extrapolate(azimuths: usize, markdown: bool, json: bool) -> Result<()> {
     #[derive(Serialize)]
     struct X {
         bake: &'static str,
+        method: &'static str,
         pixels: f64,
         tiles: f64,
         reach_px: u64,
@@ -456,13 +465,18 @@ pub fn extrapolate(azimuths: usize, markdown: bool, json: bool) -> Result<()> {
         published_cpu_hours: Option<f64>,
     }
     let mut rows = Vec::new();
-    for b in BAKES {
+    use penumbra::horizon::Method;
+    for (b, method) in BAKES
+        .iter()
+        .flat_map(|b| [(b, Method::Fast), (b, Method::Sweep)])
+    {
         let pixels = 4.0 * std::f64::consts::PI * b.radius_m * b.radius_m * b.area_fraction
             / (b.pixel_m * b.pixel_m);
         let tiles = pixels / (512.0 * 512.0);
-        let (secs, reach, rings) = per_tile_core_s(b, azimuths)?;
+        let (secs, reach, rings) = per_tile_core_s(b, azimuths, method)?;
         rows.push(X {
             bake: b.name,
+            method: method.name(),
             pixels,
             tiles,
             reach_px: reach,
@@ -477,8 +491,8 @@ pub fn extrapolate(azimuths: usize, markdown: bool, json: bool) -> Result<()> {
         return penumbra_cli::output::print_json(&rows);
     }
     if markdown {
-        println!("| bake | pixels | 512² tiles | reach px | fine margin px | far rings | core s per tile (360 az) | CPU-hours | published |");
-        println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+        println!("| bake | method | pixels | 512² tiles | reach px | fine margin px | far rings | core s per tile (360 az) | CPU-hours | published |");
+        println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
     }
     for r in &rows {
         let p = r
@@ -486,8 +500,9 @@ pub fn extrapolate(azimuths: usize, markdown: bool, json: bool) -> Result<()> {
             .map_or("–".into(), |h| format!("≈ {h:.0}"));
         if markdown {
             println!(
-                "| {} | {:.3e} | {:.0} | {} | {} | {} | {:.1} | {:.1} | {} |",
+                "| {} | {} | {:.3e} | {:.0} | {} | {} | {} | {:.1} | {:.1} | {} |",
                 r.bake,
+                r.method,
                 r.pixels,
                 r.tiles,
                 r.reach_px,
@@ -499,8 +514,8 @@ pub fn extrapolate(azimuths: usize, markdown: bool, json: bool) -> Result<()> {
             );
         } else {
             println!(
-                "{:<28} {:.3e} px, {:>7.0} tiles, reach {:>6} px, {} rings: {:.1} core-s/tile → {:.1} CPU-hours (published {p})",
-                r.bake, r.pixels, r.tiles, r.reach_px, r.rings, r.core_s_per_tile, r.cpu_hours
+                "{:<28} {:<6} {:.3e} px, {:>7.0} tiles, reach {:>6} px, {} rings: {:.1} core-s/tile → {:.1} CPU-hours (published {p})",
+                r.bake, r.method, r.pixels, r.tiles, r.reach_px, r.rings, r.core_s_per_tile, r.cpu_hours
             );
         }
     }

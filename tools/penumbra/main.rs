@@ -691,13 +691,15 @@ struct HorizonFlags {
     /// Azimuth samples per pixel (plane azimuths 360·k/A from the face's +U axis).
     #[arg(long, default_value_t = 360)]
     azimuths: usize,
-    /// fast (exact within --near-px, upper-hull sweep beyond), sweep (Timonen & Westerholm's
-    /// line sweep: each line's hull read as it passes, evaluated on each pixel's own ray; its
-    /// error is measured as it runs and recorded), exact (the reference's answer: every ray
-    /// walked over a maximum pyramid that skips what cannot win; ≈ 2–4× slower than fast) or
-    /// reference (brute-force cell-by-cell search of every ray; ≈ 35× slower).
-    #[arg(long, default_value = "fast")]
-    method: Method,
+    /// sweep (each pixel's own ray exact over 24 columns, Timonen & Westerholm's line hulls
+    /// beyond; ≤ 0.03° RMS from the reference, measured as it runs and recorded; ≈ 3–4× faster
+    /// than fast), fast (exact within --near-px, upper-hull sweep beyond; ≈ 0.001° RMS), exact
+    /// (the reference's answer: every ray walked over a maximum pyramid that skips what cannot
+    /// win; ≈ 2–4× slower than fast) or reference (brute-force cell-by-cell search of every ray;
+    /// ≈ 35× slower). [default: sweep with --fourier (the pyramids' own error is 6–25× the
+    /// sweep's), fast for raw maps]
+    #[arg(long)]
+    method: Option<Method>,
     /// Largest context margin around a tile, in pixels of its level.
     #[arg(long, default_value_t = 4096)]
     max_margin_px: u64,
@@ -716,26 +718,40 @@ struct HorizonFlags {
 }
 
 impl HorizonFlags {
+    /// `--method`, or the default for what is kept: sweep where only the Fourier pyramids are
+    /// (`fourier`), fast where raw maps are.
+    fn method(&self, fourier: bool) -> Method {
+        self.method
+            .unwrap_or(if fourier { Method::Sweep } else { Method::Fast })
+    }
+
     fn options(&self) -> penumbra::Result<HorizonOptions> {
+        let method = self.method(false);
         Ok(HorizonOptions {
             azimuths: self.azimuths,
-            method: self.method,
+            method,
             max_margin_px: self.max_margin_px,
-            near_px: self.near_px()?,
-            fine_margin_px: self.fine_margin_px()?,
+            near_px: self.near_px(method)?,
+            fine_margin_px: self.fine_margin_px(method)?,
             ..Default::default()
         })
     }
 
-    /// `--near-px`, which only the fast method takes (the others would silently ignore it).
-    fn near_px(&self) -> penumbra::Result<f64> {
+    /// `--near-px`, which only the fast method takes (the others would silently ignore it);
+    /// `method` is the one in effect (given or by default).
+    fn near_px(&self, method: Method) -> penumbra::Result<f64> {
         match self.near_px {
-            Some(_) if self.method != Method::Fast => Err(penumbra::Error::param(
+            Some(_) if method != Method::Fast => Err(penumbra::Error::param(
                 "near-px",
                 format!(
-                    "is the fast method's only: --method {} has no near field (drop \
-                     --near-px, or use --method fast)",
-                    self.method.name()
+                    "is the fast method's only: the {} method{} has no near field to set \
+                     (drop --near-px, or use --method fast)",
+                    method.name(),
+                    if self.method.is_none() {
+                        " (the default with --fourier)"
+                    } else {
+                        ""
+                    }
                 ),
             )),
             v => Ok(v.unwrap_or(penumbra::horizon::DEFAULT_NEAR_PX)),
@@ -744,14 +760,14 @@ impl HorizonFlags {
 
     /// `--fine-margin-px`, which only the methods with far rings take (fast and sweep; the
     /// others see the whole reach at full resolution, up to --max-margin-px).
-    fn fine_margin_px(&self) -> penumbra::Result<Option<u64>> {
+    fn fine_margin_px(&self, method: Method) -> penumbra::Result<Option<u64>> {
         match self.fine_margin_px {
-            Some(_) if !self.method.sees_far_rings() => Err(penumbra::Error::param(
+            Some(_) if !method.sees_far_rings() => Err(penumbra::Error::param(
                 "fine-margin-px",
                 format!(
                     "is for the methods with far rings: --method {} sees the whole reach at \
                      full resolution (drop --fine-margin-px, or use --method fast or sweep)",
-                    self.method.name()
+                    method.name()
                 ),
             )),
             v => Ok(v),
@@ -1157,6 +1173,11 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
                 if !a.no_fourier {
                     plan.fourier = Some(a.fourier.options(None, a.flags.max_output_gib));
                     plan.keep_raw = a.keep_raw;
+                    // Only the pyramids are kept: the sweep method's error is a few per cent
+                    // of theirs (docs/horizons.md, "Methods at a glance").
+                    if !a.keep_raw {
+                        plan.horizon.method = Method::Sweep;
+                    }
                 }
             }
             let input = match &a.dem {
@@ -1202,16 +1223,17 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
             shard,
             json,
         } => {
+            let method = flags.method(fourier && !keep_raw);
             let opts = HorizonOptions {
                 levels,
                 azimuths: flags.azimuths,
-                method: flags.method,
+                method,
                 precision,
                 compression,
                 max_margin_px: flags.max_margin_px,
                 max_output_gib,
-                near_px: flags.near_px()?,
-                fine_margin_px: flags.fine_margin_px()?,
+                near_px: flags.near_px(method)?,
+                fine_margin_px: flags.fine_margin_px(method)?,
                 lit_above_deg: lit_above,
                 terrain_range_m: None,
             };
