@@ -79,6 +79,11 @@ pub(super) fn horizons_sweep(ctx: &Context, rect: Rect, a: usize) -> Vec<f32> {
 /// with every real block ≤ 0.016°; past 64 nothing changes (the near field's own sampling).
 pub(super) const NEAR_COLS: i64 = 24;
 
+/// How near (columns) the raster's edge must be on a pixel's ray for the part of it that a
+/// line on the exit side never saw to be scanned on the ray itself (synthetic 1024² whole map,
+/// 360 azimuths: the worst sample 4.85° → 2.2°, all at the edges before).
+const EDGE_SCAN_COLS: f64 = 4.0 * NEAR_COLS as f64;
+
 /// Steps next to each pixel where its ray is also evaluated inside the cells, midway between
 /// crossings: the bilinear surface bulges between grid lines, which the crossings alone miss
 /// (LDEM_4's 7.6-km cells: 0.038° RMS without, 0.017° with 4, 0.011° with all 16).
@@ -578,6 +583,34 @@ impl Pair<'_> {
                                         b.alpha[o_px(p, q)],
                                         b.beta[o_px(p, q)] * if dir == 0 { 1.0 } else { -1.0 },
                                     )
+                                };
+                                // A line on the exit side of the ray leaves the raster
+                                // up to 1/|dq| columns before the ray does, without what the
+                                // ray meets last: where that is near the pixel, the ray itself
+                                // is scanned there.
+                                let line_reach = if dq > 1e-12 {
+                                    ((nq - 1) as f64 - y + 1e-6) / dq
+                                } else if dq < -1e-12 {
+                                    (y + 1e-6) / -dq
+                                } else {
+                                    f64::INFINITY
+                                };
+                                let s = if line_reach < reach && reach <= EDGE_SCAN_COLS {
+                                    let sd = if dir == 0 { self.look } else { -self.look };
+                                    let kf = (self.near_k as f64).max(line_reach.floor());
+                                    let bs = if dir == 0 { 1.0 } else { -1.0 };
+                                    let o = o_px(p, q);
+                                    s.max(self.scan(
+                                        p,
+                                        q,
+                                        sd,
+                                        kf,
+                                        reach,
+                                        b.alpha[o],
+                                        b.beta[o] * bs,
+                                    ))
+                                } else {
+                                    s
                                 };
                                 if s == f64::NEG_INFINITY {
                                     continue;
