@@ -465,6 +465,11 @@ fn cli_horizon_and_query_horizon() {
             vec!["horizon", o, "--method", "sweep", "--near-px", "8"],
             "--near-px",
         ),
+        // With --fourier the method in effect is sweep by default: --near-px is refused too.
+        (
+            vec!["horizon", o, "--fourier", "--near-px", "8"],
+            "the default with --fourier",
+        ),
         (
             vec![
                 "horizon",
