@@ -39,7 +39,19 @@ fn run_bounded(args: &[&str]) -> (Output, Duration, u64) {
     let status_path = format!("/proc/{}/status", child.id());
     let mut peak = 0u64;
     loop {
-        if let Ok(s) = std::fs::read_to_string(&status_path) {
+        // (Only once the child runs penumbra: between fork and exec its status is a copy of
+        // this test process's, whose peak can be anything the other tests in it allocated.)
+        if let Ok(s) = std::fs::read_to_string(&status_path).map(|s| {
+            let execd = s
+                .lines()
+                .find(|l| l.starts_with("Name:"))
+                .is_some_and(|l| l.split_whitespace().nth(1) == Some("penumbra"));
+            if execd {
+                s
+            } else {
+                String::new()
+            }
+        }) {
             if let Some(kib) = s
                 .lines()
                 .find(|l| l.starts_with("VmHWM:"))
