@@ -164,25 +164,27 @@ impl Cols<'_> {
         if f == 0.0 {
             return a;
         }
-        let b = c[q0 as usize + 1];
-        let v = a + f * (b - a);
-        if v.is_nan() {
-            // A no-data tap is left out, as the reference's bilinear does where a ray leaves a
-            // cell.
-            if a.is_nan() {
-                b
-            } else {
-                a
-            }
-        } else {
-            v
-        }
+        on_grid_line(a, c[q0 as usize + 1], f)
     }
 }
 
 /// One step along every ray of an azimuth: its distance in columns, its taps (column and row
 /// offsets from the observer, weight) and whether all four are used (inside a cell).
 type Step = (f64, [(i64, i64, f32); 4], bool);
+
+/// `a` + `w`·(`b` − `a`) on a grid line, a no-data tap left out (as the reference's bilinear
+/// does where a ray leaves a cell); NaN only where both are.
+#[inline(always)]
+fn on_grid_line(a: f32, b: f32, w: f32) -> f32 {
+    let v = a + w * (b - a);
+    if !v.is_nan() {
+        v
+    } else if a.is_nan() {
+        b
+    } else {
+        a
+    }
+}
 
 /// One azimuth pair's lines, raster and observers.
 struct Pair<'a> {
@@ -198,7 +200,6 @@ struct Pair<'a> {
     /// Observers per column of the rect.
     nr: usize,
     radius: f64,
-    near_k: i64,
     /// Directions done: 1 (φ) or 2 (φ and φ + π).
     dirs: usize,
 }
@@ -238,7 +239,6 @@ fn pair(
         rq1: lines.rq1,
         nr: (lines.rq1 - lines.rq0) as usize,
         radius: ctx.radius_m,
-        near_k: NEAR_COLS,
         dirs: if back_dst.is_some() { 2 } else { 1 },
         lines,
         g,
@@ -292,14 +292,14 @@ impl Pair<'_> {
     }
 
     /// The near field of direction `dir` (0: φ, 1: φ + π) on each pixel's own ray: where it
-    /// crosses the next `near_k` columns and the rows between them, and inside each cell it
+    /// crosses the next [`NEAR_COLS`] columns and the rows between them, and inside each cell it
     /// passes through, midway between its crossings.
     #[inline(never)]
     fn near(&self, dir: usize, b: &mut Buffers) {
         let (g, t, rq0, rq1, nr) = (&self.g, self.t, self.rq0, self.rq1, self.nr);
         let s = if dir == 0 { self.look } else { -self.look };
         let sign = if dir == 0 { 1.0f32 } else { -1.0 };
-        let k_max = self.near_k;
+        let k_max = NEAR_COLS;
         // Series in place of the divisions and the root where the near field spans little of
         // the body (tan γ ≤ 0.1 and |k·β| ≤ 0.1: truncation below 1e-6 of the slope).
         let amax = b.alpha.iter().fold(0.0f32, |m, v| m.max(*v)) as f64;
@@ -512,8 +512,8 @@ impl Pair<'_> {
                         top = i as u32;
                     }
                     b.top[i] = top;
-                    // The hull of the samples at least `near_k` columns behind.
-                    let fs = p - step * self.near_k;
+                    // The hull of the samples at least [`NEAR_COLS`] columns behind.
+                    let fs = p - step * NEAR_COLS;
                     if p >= rp0 && p < rp1 && fs >= pa && fs <= pb {
                         let from = b.top[(fs - pa) as usize];
                         if from != NONE {
@@ -570,7 +570,7 @@ impl Pair<'_> {
                                     // leaves the raster (the line runs on beside it there):
                                     // the ray itself is scanned up to its exit instead.
                                     let s = if dir == 0 { self.look } else { -self.look };
-                                    let (kf, kt) = (self.near_k as f64, reach.min(dist(v)));
+                                    let (kf, kt) = (NEAR_COLS as f64, reach.min(dist(v)));
                                     if kt < kf {
                                         continue;
                                     }
@@ -597,7 +597,7 @@ impl Pair<'_> {
                                 };
                                 let s = if line_reach < reach && reach <= EDGE_SCAN_COLS {
                                     let sd = if dir == 0 { self.look } else { -self.look };
-                                    let kf = (self.near_k as f64).max(line_reach.floor());
+                                    let kf = (NEAR_COLS as f64).max(line_reach.floor());
                                     let bs = if dir == 0 { 1.0 } else { -1.0 };
                                     let o = o_px(p, q);
                                     s.max(self.scan(
@@ -685,19 +685,7 @@ impl Pair<'_> {
                     break;
                 }
                 let (a, b2) = (g.col(c0)[qr as usize], g.col(c0 + 1)[qr as usize]);
-                let v = a + f * (b2 - a);
-                eval(
-                    kr,
-                    if v.is_nan() {
-                        if a.is_nan() {
-                            b2
-                        } else {
-                            a
-                        }
-                    } else {
-                        v
-                    },
-                );
+                eval(kr, on_grid_line(a, b2, f));
             }
         }
         best
@@ -907,20 +895,10 @@ fn near_body<const N: usize, const SERIES: u8>(t: &Taps, best: &mut Best) {
         let hk = if N == 4 {
             w[0] * t0[i] + w[1] * t1[i] + w[2] * t2_[i] + w[3] * t3_[i]
         } else {
-            // Where a ray leaves a cell a no-data tap is left out (renormalised, as the
-            // reference's bilinear does there); inside cells (`N` = 4) a no-data corner leaves
-            // the point unevaluated (NaN compares false), as `Context::on_complete_cell` has it.
-            let (a, b) = (t0[i], t1[i]);
-            let v = a + w[1] * (b - a);
-            if v.is_nan() {
-                if a.is_nan() {
-                    b
-                } else {
-                    a
-                }
-            } else {
-                v
-            }
+            // Where a ray leaves a cell a no-data tap is left out; inside cells (`N` = 4) a
+            // no-data corner leaves the point unevaluated (NaN compares false), as
+            // `Context::on_complete_cell` has it.
+            on_grid_line(t0[i], t1[i], w[1])
         };
         let x = k * sign * beta[i];
         let tt;
