@@ -29,8 +29,8 @@ pub use self::method::{
 pub use self::near::{DEFAULT_NEAR_PX, MAX_NEAR_PX};
 pub use self::stage::{
     build_horizons, context_for, default_fine_margin_px, prune_candidates, prune_candidates_with,
-    reach_rad, terrain_range, tile_bounds, HorizonOptions, HorizonReport, HorizonStage, Reach,
-    FINE_MARGIN_PX, STAGE,
+    reach_rad, report_context, terrain_range, tile_bounds, HorizonOptions, HorizonReport,
+    HorizonStage, Reach, FINE_MARGIN_PX, STAGE,
 };
 pub use crate::format::horizon::{
     read_horizon_exr, tile_path, write_horizon_exr, HorizonPrecision, AZIMUTH_CONVENTION, PATTERN,

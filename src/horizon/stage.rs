@@ -346,6 +346,33 @@ pub fn context_for(
     Ok((ctx, rect))
 }
 
+/// The context `penumbra report` measures tile `id`'s horizons over: the heights within the
+/// tile's reach (as the horizon stage computes it from the tileset's terrain range), at most
+/// the fast and sweep methods' default full-resolution margin around the tile, and the tile's
+/// interior within it. Every method the report compares sees this same raster (the far rings
+/// beyond it, which the fast and sweep methods share in a bake, are left out). Errors: the
+/// tile's heights cannot be read, or the tileset records no height range.
+pub fn report_context(store: &Store, id: TileId) -> Result<(Context, Rect)> {
+    let ts = store.manifest();
+    let lay = ts.layout;
+    let range = terrain_range(ts)
+        .ok_or_else(|| Error::invalid(store.manifest_path(), "tileset records no height range"))?;
+    let tile = store.height(id)?.ok_or_else(|| {
+        Error::invalid(
+            store.manifest_path(),
+            format!("tile {id} is listed but absent"),
+        )
+    })?;
+    let top =
+        interior_max(&tile, lay.halo as usize, lay.tile_size as usize).unwrap_or(range.1 as f32);
+    let rad = reach_rad(ts.body.radius_m, range.0, range.1, top as f64);
+    let opts = HorizonOptions::default();
+    let reach = margin_for(ts, id, rad, opts.max_margin_px);
+    let margin = reach.margin_px.min(default_fine_margin_px(lay.tile_size));
+    let cover = coverage_box(ts, id.level, id.face);
+    context_for(store, id, margin, cover)
+}
+
 /// One far ring ([`FarRing`]) of a tile, planned but not read: level `level`'s heights in the
 /// global window `win` around the tile's footprint `foot` (pixels of that level), with what the
 /// previous (finer) window `prev` holds blanked out; `factor` pixels of the tile's level per

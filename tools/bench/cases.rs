@@ -7,42 +7,8 @@ use std::path::Path;
 use anyhow::Result;
 
 use penumbra::cube::Face;
-use penumbra::fourier::sun::Frame;
-use penumbra::horizon::{Context as HzContext, Rect};
-
-use crate::common::{EARTH_RADIUS_M, MARS_RADIUS_M, MOON_RADIUS_M};
-
-/// One case: a context raster and the block of observers in it.
-pub(crate) struct Case {
-    pub(crate) name: String,
-    pub(crate) real: bool,
-    pub(crate) body: &'static str,
-    pub(crate) pixel_m: f64,
-    pub(crate) ctx: HzContext,
-    pub(crate) rect: Rect,
-    /// Lowest terrain of the context (the encoder's floor).
-    pub(crate) terrain_min_m: f64,
-    /// Pixels (block coordinates) the stiff check must include.
-    pub(crate) special: Vec<(usize, usize)>,
-    /// Extra frames the stiff check must include (exact pole or corner), with the block pixel
-    /// whose horizon they use.
-    pub(crate) extra_frames: Vec<(Frame, (usize, usize))>,
-    pub(crate) note: String,
-}
-
-fn body_radius(body: &str) -> f64 {
-    match body {
-        "moon" => MOON_RADIUS_M,
-        "mars" => MARS_RADIUS_M,
-        _ => EARTH_RADIUS_M,
-    }
-}
-
-/// Horizon reach in plane pixels: an observer on the highest terrain sees down to the tangent
-/// of the lowest sphere, and terrain beyond it can rise above that floor again.
-fn reach_px(radius_m: f64, relief_m: f64, pixel_m: f64) -> usize {
-    (2.0 * (2.0 * radius_m * relief_m.max(0.0)).sqrt() / pixel_m).ceil() as usize + 2
-}
+use penumbra::horizon::Context as HzContext;
+use penumbra_cli::measure::{dem_case, Case, EARTH_RADIUS_M};
 
 /// Pixel spacing of the peers' synthetic UTM DEMs (m).
 pub(crate) const PEER_PIXEL_M: f64 = 30.0;
@@ -98,80 +64,4 @@ pub(crate) fn real_cases(
         cases.push(dem_case(label, &dem, body, block));
     }
     Ok((cases, notes))
-}
-
-/// A case from a DEM: a `block`² block of observers at the map's centre, in a context reaching
-/// as far as a horizon could see, on a face plane whose pixels are the map's.
-pub(crate) fn dem_case(
-    label: &str,
-    dem: &penumbra::dem::Dem,
-    body: &'static str,
-    block: usize,
-) -> Case {
-    let (w, h) = (dem.width(), dem.height());
-    let radius_m = body_radius(body);
-    let pixel_m = dem.pixel_size_m(radius_m);
-    let b = block.min(w).min(h);
-    let mut all = vec![0.0f32; w * h];
-    for r in 0..h {
-        for c in 0..w {
-            all[r * w + c] = dem.value(c, r).0;
-        }
-    }
-    let (lo, hi) = all
-        .iter()
-        .filter(|v| v.is_finite())
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, u), &v| {
-            (l.min(v), u.max(v))
-        });
-    let margin = reach_px(radius_m, (hi - lo) as f64, pixel_m);
-    let (bx, by) = ((w - b) / 2, (h - b) / 2);
-    let (cx0, cy0) = (bx.saturating_sub(margin), by.saturating_sub(margin));
-    let (cx1, cy1) = ((bx + b + margin).min(w), (by + b + margin).min(h));
-    let (cw, ch) = (cx1 - cx0, cy1 - cy0);
-    let mut heights = Vec::with_capacity(cw * ch);
-    for r in cy0..cy1 {
-        heights.extend_from_slice(&all[r * w + cx0..r * w + cx1]);
-    }
-    let terrain_min_m = heights
-        .iter()
-        .filter(|v| v.is_finite())
-        .fold(f64::INFINITY, |m, &v| m.min(v as f64));
-    let s = (2.0 * radius_m / pixel_m).round();
-    let si = s as i64;
-    let ctx = HzContext {
-        face: Face::Px,
-        face_pixels: s,
-        origin: ((si - cw as i64) / 2, (si - ch as i64) / 2),
-        width: cw,
-        height: ch,
-        heights,
-        radius_m,
-    };
-    let rect = Rect {
-        x0: bx - cx0,
-        y0: by - cy0,
-        w: b,
-        h: b,
-    };
-    let note = if b < block {
-        format!("the whole {w}×{h} map (smaller than the block)")
-    } else {
-        format!(
-            "{b}² block at the map's centre (pixel {bx}, {by} of {w}×{h}), context \
-             {cw}×{ch} (reach {margin} px)"
-        )
-    };
-    Case {
-        name: label.into(),
-        real: true,
-        body,
-        pixel_m,
-        ctx,
-        rect,
-        terrain_min_m,
-        special: Vec::new(),
-        extra_frames: Vec::new(),
-        note,
-    }
 }

@@ -130,30 +130,9 @@ pub(crate) fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> 
         .install(f))
 }
 
-/// Earth's mean radius: r.horizon always uses it, so every tool sees the same curvature.
-pub(crate) const EARTH_RADIUS_M: f64 = 6_371_008.8;
-/// Mars's radius (m): the sphere of the Mars whole-body extrapolation and of the Mars DEMs.
-pub(crate) const MARS_RADIUS_M: f64 = 3_396_190.0;
-/// The Moon's radius (m).
-pub(crate) const MOON_RADIUS_M: f64 = 1_737_400.0;
-
-/// `n` distinct pixels of a w × h raster drawn by a fixed-seed xorshift.
-pub(crate) fn random_pixels(w: usize, h: usize, n: usize) -> Vec<(usize, usize)> {
-    let n = n.min(w * h);
-    let mut state = 0x2545_F491_4F6C_DD1Du64;
-    let mut seen = std::collections::HashSet::new();
-    let mut out = Vec::with_capacity(n);
-    while out.len() < n {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        let i = (state % (w * h) as u64) as usize;
-        if seen.insert(i) {
-            out.push((i % w, i / w));
-        }
-    }
-    out
-}
+pub(crate) use penumbra_cli::measure::{
+    random_pixels, EARTH_RADIUS_M, MARS_RADIUS_M, MOON_RADIUS_M,
+};
 
 /// A little-endian float32, C-order, 2-D .npy file: (height, width, values).
 pub(crate) fn read_npy_f32(path: &Path) -> Result<(usize, usize, Vec<f32>)> {

@@ -14,17 +14,17 @@ use anyhow::{bail, Result};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use penumbra::cube::{Face, Vec3};
-use penumbra::format::fourier::file_bytes;
+use penumbra::cube::Face;
 use penumbra::format::height::HeightTile;
 use penumbra::fourier::stage::{Encoder, FourierOptions};
 use penumbra::fourier::sun::{lit_fraction, sun_distance_au, sun_radius_deg, Frame, Model, Sun};
 use penumbra::fourier::Reduce;
-use penumbra::fourier::{evaluate, Encoding, Layout, Pyramid, Sigma};
+use penumbra::fourier::{Encoding, Layout, Pyramid, Sigma};
 use penumbra::horizon::{horizons_with, Context as HzContext, Method, Rect, DEFAULT_NEAR_PX};
 
-use crate::cases::{real_cases, Case};
+use crate::cases::real_cases;
 use crate::common::{random_pixels, MOON_RADIUS_M};
+use penumbra_cli::measure::{interp, lit_exact, sun_dir, Case, ErrStats, Horizon, Variant};
 
 /// Tile size the bytes and times are reported for.
 const TILE: usize = 256;
@@ -34,9 +34,6 @@ const SUN_EL: [f64; 3] = [1.0, 5.0, 15.0];
 const SUN_AZ: [f64; 8] = [17.0, 62.0, 107.0, 152.0, 197.0, 242.0, 287.0, 332.0];
 /// Sun elevations of the NaN / range check (degrees): below the horizon, on it, at the zenith.
 const CHECK_EL: [f64; 6] = [-2.0, 0.0, 1.0, 5.0, 15.0, 90.0];
-/// Histogram of absolute errors for the 99th percentile: 1e-4° bins to 2°, then 0.01° to 92°.
-const FINE_BINS: usize = 20_000;
-const COARSE_BINS: usize = 9_000;
 
 pub struct Args {
     pub data: PathBuf,
@@ -49,91 +46,6 @@ pub struct Args {
     pub lit_pixels: usize,
     /// Only the cases whose name contains this (case-insensitive).
     pub only: Option<String>,
-}
-
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Variant {
-    Fourier {
-        k: usize,
-        encoding: Encoding,
-        layout: Layout,
-        sigma: Sigma,
-        reduce: Reduce,
-    },
-    Classic(usize),
-}
-
-impl Variant {
-    fn all() -> Vec<Variant> {
-        let mut v = Vec::new();
-        for k in [4, 8, 16, 32] {
-            for encoding in [Encoding::F16, Encoding::Snorm16] {
-                for layout in [Layout::Full, Layout::Multires] {
-                    for sigma in [Sigma::None, Sigma::Lanczos] {
-                        v.push(Variant::Fourier {
-                            k,
-                            encoding,
-                            layout,
-                            sigma,
-                            reduce: Reduce::Mean,
-                        });
-                    }
-                }
-                // Beyond the paper: reduced groups fitted for bilinear sampling.
-                v.push(Variant::Fourier {
-                    k,
-                    encoding,
-                    layout: Layout::Multires,
-                    sigma: Sigma::None,
-                    reduce: Reduce::Fit,
-                });
-            }
-        }
-        v.push(Variant::Classic(8));
-        v.push(Variant::Classic(12));
-        v
-    }
-
-    fn name(self) -> String {
-        match self {
-            Variant::Fourier {
-                k,
-                encoding,
-                layout,
-                sigma,
-                reduce,
-            } => format!(
-                "F{k} {} {} {}{}",
-                layout.name(),
-                encoding.name(),
-                if sigma == Sigma::None {
-                    "plain"
-                } else {
-                    "lanczos"
-                },
-                if reduce == Reduce::Fit { " fit" } else { "" }
-            ),
-            Variant::Classic(n) => format!("classic {n}"),
-        }
-    }
-
-    /// The paper's configuration: 16 coefficients, multires, f16, untapered.
-    fn is_paper(self) -> bool {
-        self == Variant::Fourier {
-            k: 16,
-            encoding: Encoding::F16,
-            layout: Layout::Multires,
-            sigma: Sigma::None,
-            reduce: Reduce::Mean,
-        }
-    }
-
-    fn bytes_per_tile(self) -> usize {
-        match self {
-            Variant::Fourier { k, layout, .. } => file_bytes(TILE, k, layout),
-            Variant::Classic(n) => n * 2 * TILE * TILE,
-        }
-    }
 }
 
 #[derive(Serialize)]
@@ -178,105 +90,6 @@ struct Check {
     check: String,
     value: String,
     pass: bool,
-}
-
-/// Unit direction at elevation `el_deg` whose plane azimuth is `phi` (radians).
-fn sun_dir(f: &Frame, phi: f64, el_deg: f64) -> Vec3 {
-    let (s, c) = phi.sin_cos();
-    let w = [
-        c * f.ua[0] + s * f.va[0],
-        c * f.ua[1] + s * f.va[1],
-        c * f.ua[2] + s * f.va[2],
-    ];
-    let wu = w[0] * f.up[0] + w[1] * f.up[1] + w[2] * f.up[2];
-    let t = [
-        w[0] - wu * f.up[0],
-        w[1] - wu * f.up[1],
-        w[2] - wu * f.up[2],
-    ];
-    let tn = (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt();
-    let (se, ce) = el_deg.to_radians().sin_cos();
-    [
-        ce * t[0] / tn + se * f.up[0],
-        ce * t[1] / tn + se * f.up[1],
-        ce * t[2] / tn + se * f.up[2],
-    ]
-}
-
-/// The lit fraction by `Model::Exact`, skipping the model where the answer is plain: when the
-/// horizon over the disc's plane-azimuth span (its rim's extremes at 1.5 radii, sampled at 17
-/// points and at every 1°, 30° and 45° node, where linear interpolations have their kinks) is
-/// more than 0.05° clear of the disc's elevations el ± r, the disc is wholly lit (1) or wholly
-/// hidden (0) — what Exact returns there up to rounding (~1e-16) — at a fraction of the cost.
-fn lit_exact(f: &Frame, phi: f64, el: f64, r: f64, hor: &dyn Fn(f64) -> f64) -> f64 {
-    let s = sun_dir(f, phi, el);
-    let sun = Sun {
-        dir: s,
-        radius_deg: r,
-    };
-    if r > 0.0 && el.abs() < 80.0 && std::env::var_os("PENUMBRA_BENCH_EXACT_ALWAYS").is_none() {
-        let cr = |a: Vec3, b: Vec3| -> Vec3 {
-            [
-                a[1] * b[2] - a[2] * b[1],
-                a[2] * b[0] - a[0] * b[2],
-                a[0] * b[1] - a[1] * b[0],
-            ]
-        };
-        let nz = |a: Vec3| -> Vec3 {
-            let l = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
-            [a[0] / l, a[1] / l, a[2] / l]
-        };
-        let e_h = nz(cr(s, f.up));
-        let e_v = nz(cr(e_h, s));
-        let t = (1.5 * r).to_radians().tan();
-        let p0 = f.plane_azimuth(s);
-        let (mut lo, mut hi) = (0.0f64, 0.0f64);
-        for (x, y) in [(1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)] {
-            let d = [
-                s[0] + t * (x * e_h[0] + y * e_v[0]),
-                s[1] + t * (x * e_h[1] + y * e_v[1]),
-                s[2] + t * (x * e_h[2] + y * e_v[2]),
-            ];
-            let dp = (f.plane_azimuth(d) - p0 + std::f64::consts::PI).rem_euclid(TAU)
-                - std::f64::consts::PI;
-            lo = lo.min(dp);
-            hi = hi.max(dp);
-        }
-        let (mut hmin, mut hmax) = (f64::INFINITY, f64::NEG_INFINITY);
-        let mut take = |th: f64| {
-            let h = hor(th.rem_euclid(TAU));
-            hmin = hmin.min(h);
-            hmax = hmax.max(h);
-        };
-        for q in 0..=16 {
-            take(p0 + lo + (hi - lo) * q as f64 / 16.0);
-        }
-        for step in [1.0f64, 30.0, 45.0] {
-            let st = step.to_radians();
-            let mut k = ((p0 + lo) / st).ceil();
-            while k * st <= p0 + hi {
-                take(k * st);
-                k += 1.0;
-            }
-        }
-        if hmax < el - r - 0.05 {
-            return 1.0;
-        }
-        if hmin > el + r + 0.05 {
-            return 0.0;
-        }
-    }
-    lit_fraction(f, &sun, Model::Exact, hor)
-}
-
-/// A periodic row of samples at 2πm/len, linearly interpolated at `theta` (radians).
-#[inline]
-fn interp(row: &[f32], theta: f64) -> f64 {
-    let a = row.len();
-    let x = (theta / TAU).rem_euclid(1.0) * a as f64;
-    let i = (x.floor() as usize).min(a - 1);
-    let f = x - i as f64;
-    row[i] as f64 * (1.0 - f) + row[(i + 1) % a] as f64 * f
 }
 
 /// Rolling terrain: a sum of plane waves of wavelengths 8..2048 px with slopes of ~10°,
@@ -474,80 +287,6 @@ fn stiff_cases(block: usize) -> Vec<Case> {
 
 /// Running error statistics.
 #[derive(Clone)]
-struct ErrStats {
-    n: u64,
-    sum2: f64,
-    max: f64,
-    hist: Vec<u32>,
-    per_miss: [u64; 3],
-    per_n: u64,
-}
-
-impl ErrStats {
-    fn new() -> ErrStats {
-        ErrStats {
-            n: 0,
-            sum2: 0.0,
-            max: 0.0,
-            hist: vec![0; FINE_BINS + COARSE_BINS + 1],
-            per_miss: [0; 3],
-            per_n: 0,
-        }
-    }
-
-    #[inline]
-    fn add(&mut self, e: f64) {
-        let a = e.abs();
-        self.n += 1;
-        self.sum2 += a * a;
-        if a > self.max {
-            self.max = a;
-        }
-        let bin = if a < 2.0 {
-            (a * 1e4) as usize
-        } else {
-            (FINE_BINS + ((a - 2.0) * 100.0) as usize).min(FINE_BINS + COARSE_BINS)
-        };
-        self.hist[bin] += 1;
-    }
-
-    fn merge(mut self, o: ErrStats) -> ErrStats {
-        self.n += o.n;
-        self.sum2 += o.sum2;
-        self.max = self.max.max(o.max);
-        for (a, b) in self.hist.iter_mut().zip(&o.hist) {
-            *a += b;
-        }
-        for i in 0..3 {
-            self.per_miss[i] += o.per_miss[i];
-        }
-        self.per_n += o.per_n;
-        self
-    }
-
-    fn rms(&self) -> f64 {
-        (self.sum2 / self.n.max(1) as f64).sqrt()
-    }
-
-    /// Upper edge of the bin holding the 99th percentile.
-    fn p99(&self) -> f64 {
-        let target = (self.n as f64 * 0.99).ceil() as u64;
-        let mut acc = 0u64;
-        for (b, &c) in self.hist.iter().enumerate() {
-            acc += c as u64;
-            if acc >= target {
-                let edge = if b < FINE_BINS {
-                    (b + 1) as f64 * 1e-4
-                } else {
-                    2.0 + (b - FINE_BINS + 1) as f64 * 0.01
-                };
-                return edge.min(self.max);
-            }
-        }
-        self.max
-    }
-}
-
 /// Everything computed once per case that every variant is measured against.
 struct Truth {
     n: usize,
@@ -639,39 +378,6 @@ fn truth(case: &Case, enc: &Encoder, elev: &[f32], a: usize, lit_pixels: usize) 
     }
 }
 
-/// A variant's horizon at one pixel: Fourier coefficients or classic samples.
-enum Horizon<'a> {
-    Fourier(&'a Pyramid),
-    Classic(&'a [f32], usize),
-}
-
-impl Horizon<'_> {
-    /// Fills `buf` with what pixel (i, j) needs (coefficients as [re, im], or the samples).
-    fn load(&self, n: usize, i: usize, j: usize, buf: &mut Vec<[f64; 2]>) {
-        match self {
-            Horizon::Fourier(p) => p.coefficients_at(i as f64 + 0.5, j as f64 + 0.5, buf),
-            Horizon::Classic(s, m) => {
-                buf.clear();
-                let p = j * n + i;
-                buf.extend(s[p * m..(p + 1) * m].iter().map(|&v| [v as f64, 0.0]));
-            }
-        }
-    }
-
-    fn at(&self, buf: &[[f64; 2]], theta: f64) -> f64 {
-        match self {
-            Horizon::Fourier(_) => evaluate(buf, theta),
-            Horizon::Classic(..) => {
-                let m = buf.len();
-                let x = (theta / TAU).rem_euclid(1.0) * m as f64;
-                let i = (x.floor() as usize).min(m - 1);
-                let f = x - i as f64;
-                buf[i][0] * (1.0 - f) + buf[(i + 1) % m][0] * f
-            }
-        }
-    }
-}
-
 struct Measured {
     err: ErrStats,
     lit_mae: f64,
@@ -694,7 +400,7 @@ fn measure(t: &Truth, hz: &Horizon, constant_too: bool) -> Measured {
     let err = (0..n)
         .into_par_iter()
         .fold(
-            || (ErrStats::new(), Vec::new(), vec![0.0f32; a]),
+            || (ErrStats::new(SUN_EL.len()), Vec::new(), vec![0.0f32; a]),
             |(mut e, mut buf, mut rec), j| {
                 for i in 0..n {
                     let p = j * n + i;
@@ -737,7 +443,7 @@ fn measure(t: &Truth, hz: &Horizon, constant_too: bool) -> Measured {
             },
         )
         .map(|(e, _, _)| e)
-        .reduce(ErrStats::new, ErrStats::merge);
+        .reduce(|| ErrStats::new(SUN_EL.len()), ErrStats::merge);
     let models: &[Model] = if constant_too {
         &[Model::Exact, Model::Constant]
     } else {
@@ -974,7 +680,7 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
                 case: case.name.clone(),
                 real: case.real,
                 variant: v.name(),
-                bytes_per_tile: v.bytes_per_tile(),
+                bytes_per_tile: v.bytes_per_tile(TILE),
                 compress_ms_per_tile: t_c * per_tile * 1e3,
                 share_pct: 100.0 * t_c / t_h,
                 rms_deg: m.err.rms(),
@@ -1115,7 +821,7 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
                 case: "mean of real DEMs".into(),
                 real: true,
                 variant: v.name(),
-                bytes_per_tile: v.bytes_per_tile(),
+                bytes_per_tile: v.bytes_per_tile(TILE),
                 compress_ms_per_tile: mean(&|r| r.compress_ms_per_tile),
                 share_pct: mean(&|r| r.share_pct),
                 rms_deg: mean(&|r| r.rms_deg),

@@ -23,7 +23,8 @@ use penumbra::shadow::smap::SMap;
 use penumbra::shadow::trace::{Method, Runs, Work};
 use penumbra::shadow::Tracer;
 
-use crate::cases::{dem_case, real_cases, Case};
+use crate::cases::real_cases;
+use penumbra_cli::measure::{dem_case, Case, ErrSum};
 
 /// Sun elevations (degrees) and compass azimuths at the block's centre (degrees).
 const SUN_EL: [f64; 4] = [1.0, 5.0, 15.0, 45.0];
@@ -257,41 +258,6 @@ fn timed<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> Result<(T, f6
     let t0 = Instant::now();
     let r = pool.install(f);
     Ok((r, t0.elapsed().as_secs_f64()))
-}
-
-#[derive(Clone, Copy, Default, Serialize)]
-struct ErrSum {
-    n: u64,
-    abs_sum: f64,
-    max: f64,
-    wrong: u64,
-}
-
-impl ErrSum {
-    fn add(&mut self, v: f32, r: f32) {
-        if !(v.is_finite() && r.is_finite()) {
-            return;
-        }
-        let e = (v - r).abs() as f64;
-        self.n += 1;
-        self.abs_sum += e;
-        self.max = self.max.max(e);
-        if (v >= 0.5) != (r >= 0.5) {
-            self.wrong += 1;
-        }
-    }
-    fn merge(&mut self, o: &ErrSum) {
-        self.n += o.n;
-        self.abs_sum += o.abs_sum;
-        self.max = self.max.max(o.max);
-        self.wrong += o.wrong;
-    }
-    fn mae(&self) -> f64 {
-        self.abs_sum / self.n.max(1) as f64
-    }
-    fn per(&self) -> f64 {
-        100.0 * self.wrong as f64 / self.n.max(1) as f64
-    }
 }
 
 #[derive(Serialize)]

@@ -1,9 +1,12 @@
 //! What the `penumbra` command and the `penumbra-bench` benchmarks share: how results are shown
-//! ([`output`]: progress bars, tables, JSON) and how a run starts and ends (the thread pool, the
-//! error message and exit code 2). It lives in this package's small library so that neither
+//! ([`output`]: progress bars, tables, JSON), how a run starts and ends (the thread pool, the
+//! error message and exit code 2), and how error is measured against the references
+//! ([`measure`]), which the benchmarks use on the shared DEMs and [`report`] on a user's tileset. It lives in this package's small library so that neither
 //! binary copies it; it is no API of its own (that is the `penumbra` library).
 
+pub mod measure;
 pub mod output;
+pub mod report;
 
 use std::process::ExitCode;
 

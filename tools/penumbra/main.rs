@@ -229,9 +229,45 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Error against run time on your own terrain (docs/report.md): on a deterministic sample
+    /// of a tileset's pixels, every horizon method, Fourier variant and shadow method against
+    /// the exact reference at the scene's suns, with the Pareto front and a recommendation per
+    /// product for the error budget. Writes report.html, report.md and report.json.
+    Report(ReportArgs),
     /// Ask a tileset about one point.
     #[command(subcommand)]
     Query(QueryCommand),
+}
+
+#[derive(Args)]
+struct ReportArgs {
+    /// A tileset folder, or a scene file (TOML) whose bake --tileset names; neither: the
+    /// embedded scene, with --tileset.
+    input: Option<PathBuf>,
+    /// The tileset a scene was baked into (with a scene file or the embedded scene).
+    #[arg(long)]
+    tileset: Option<PathBuf>,
+    /// Folder the report is written into (created).
+    #[arg(long, default_value = "report")]
+    out: PathBuf,
+    /// Wall-clock seconds the measurements may take (the sample grows to fill them).
+    #[arg(long, default_value_t = 60.0)]
+    budget_s: f64,
+    /// Pixel error rate (percent) the scene can afford: the recommendations meet it.
+    #[arg(long, default_value_t = 0.5)]
+    max_per: f64,
+    /// Horizon error (degrees RMS against the reference) the scene can afford.
+    #[arg(long, default_value_t = 0.05)]
+    max_error_deg: f64,
+    /// Seed of the pixel sample (another seed: an independent sample).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Tile level to sample (default: the scene's finest horizon level, else the finest).
+    #[arg(long)]
+    level: Option<u8>,
+    /// Print the report as JSON instead of the summary table.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Args)]
@@ -1040,6 +1076,73 @@ fn dem_input(
     })
 }
 
+/// `penumbra report`: check the flags and the input, measure, write the files.
+fn report(a: &ReportArgs, progress: &output::Bars) -> Result<penumbra_cli::report::Report> {
+    use penumbra_cli::report as rp;
+    let check = |name: &'static str, v: f64, r: std::ops::RangeInclusive<f64>| -> Result<()> {
+        if !(v.is_finite() && r.contains(&v)) {
+            return Err(
+                Error::param(name, format!("{v} is outside {}..={}", r.start(), r.end())).into(),
+            );
+        }
+        Ok(())
+    };
+    check("budget_s", a.budget_s, rp::BUDGET_S)?;
+    check("max_per", a.max_per, rp::MAX_PER_PCT)?;
+    check("max_error_deg", a.max_error_deg, rp::MAX_ERROR_DEG)?;
+    let (scene, tileset) = match (&a.input, &a.tileset) {
+        (Some(p), None) if p.is_dir() => (None, p.clone()),
+        (Some(p), Some(_)) if p.is_dir() => {
+            return Err(Error::invalid(
+                p,
+                "is a tileset folder: give --tileset only with a scene file",
+            )
+            .into())
+        }
+        (Some(p), Some(t)) => (Some(penumbra::scene::load(p)?), t.clone()),
+        (None, Some(t)) => (Some(penumbra::scene::embedded()), t.clone()),
+        (Some(p), None) => {
+            if !p.exists() {
+                return Err(Error::invalid(
+                    p,
+                    "no such file or folder: give a tileset folder or a scene file",
+                )
+                .into());
+            }
+            return Err(Error::invalid(
+                p,
+                "a scene file needs the tileset it was baked into: add --tileset DIR \
+                 (penumbra bake SCENE --out DIR makes it)",
+            )
+            .into());
+        }
+        (None, None) => {
+            return Err(Error::param(
+                "tileset",
+                "is needed: give a tileset folder, or --tileset DIR with a scene (none: the \
+                 embedded scene's bake)",
+            )
+            .into())
+        }
+    };
+    let store = penumbra::tileset::Store::open_unlocked(&tileset)?;
+    let input = rp::Input {
+        store: &store,
+        tileset: tileset.clone(),
+        scene: scene.as_ref(),
+    };
+    let opts = rp::Options {
+        budget_s: a.budget_s,
+        max_per_pct: a.max_per,
+        max_error_deg: a.max_error_deg,
+        seed: a.seed,
+        level: a.level,
+    };
+    let r = rp::report(&input, &opts, progress)?;
+    rp::render::write(&r, &a.out)?;
+    Ok(r)
+}
+
 fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
     penumbra_cli::set_threads(cli.threads)?;
     let progress = output::Bars::new(cli.quiet);
@@ -1368,6 +1471,10 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
             let t0 = std::time::Instant::now();
             let report = package(&a, &progress)?;
             output::print_package(&report, t0.elapsed().as_secs_f64(), a.json)?;
+        }
+        Command::Report(a) => {
+            let r = report(&a, &progress)?;
+            output::print_report(&r, &a.out, a.json)?;
         }
         Command::Info { dir, json } => output::print_info(&dir, json)?,
         Command::Verify { dir, json } => {

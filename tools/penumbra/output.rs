@@ -1022,3 +1022,91 @@ pub fn print_slurm(
     writeln!(out, "submit with: {}", submit.display())?;
     Ok(())
 }
+
+/// `penumbra report`'s summary: where the files are, the sample, the recommendations, and
+/// each product's Pareto front (the whole report: report.md / report.json).
+pub fn print_report(r: &crate::report::Report, out: &Path, json: bool) -> Result<()> {
+    if json {
+        return print_json(r);
+    }
+    let mut o = std::io::stdout().lock();
+    writeln!(
+        o,
+        "report of {} (level {}, {} azimuths): {} pixels in {} blocks, {:.1} s of a {:.0}-s budget",
+        r.tileset,
+        r.level,
+        r.azimuths,
+        r.pixels,
+        r.blocks.len(),
+        r.elapsed_s,
+        r.budget_s
+    )?;
+    writeln!(
+        o,
+        "written: {}",
+        crate::report::files(out)
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    )?;
+    writeln!(o, "\n{:<16} {:<34} why", "product", "recommended")?;
+    for x in &r.recommendations {
+        writeln!(
+            o,
+            "{:<16} {:<34} {}",
+            x.product,
+            x.choice.as_deref().unwrap_or("none"),
+            x.why
+        )?;
+    }
+    writeln!(
+        o,
+        "\n{:<34} {:>9} {:>8} {:>8} {:>12}",
+        "horizon method", "RMS °", "p99 °", "max °", "core-ns/px·az"
+    )?;
+    for h in &r.horizons {
+        writeln!(
+            o,
+            "{:<34} {:>9.4} {:>8.3} {:>8.2} {:>12.0}{}",
+            h.method,
+            h.rms_deg,
+            h.p99_deg,
+            h.max_deg,
+            h.core_ns,
+            if h.pareto { "  ● Pareto" } else { "" }
+        )?;
+    }
+    writeln!(
+        o,
+        "\n{:<34} {:>9} {:>8} {:>9} {:>10}",
+        "storage (Pareto front)", "bytes", "PER %", "lit MAE", "RMS vs ref"
+    )?;
+    for f in r.fourier.iter().filter(|f| f.pareto) {
+        writeln!(
+            o,
+            "{:<34} {:>9} {:>8.3} {:>9.5} {:>10.4}",
+            f.variant, f.bytes_per_tile, f.per_pct, f.lit_mae, f.rms_ref_deg
+        )?;
+    }
+    writeln!(
+        o,
+        "\n{:<34} {:>9} {:>8} {:>12}",
+        "shadow method", "lit MAE", "PER %", "ms/M answers"
+    )?;
+    for s in &r.shadows {
+        writeln!(
+            o,
+            "{:<34} {:>9.5} {:>8.3} {:>12.0}{}",
+            s.method,
+            s.lit_mae,
+            s.per_pct,
+            s.ms_per_mpx,
+            if s.pareto { "  ● Pareto" } else { "" }
+        )?;
+    }
+    for n in &r.notes {
+        writeln!(o, "note: {n}")?;
+    }
+    Ok(())
+}

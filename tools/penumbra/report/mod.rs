@@ -1,0 +1,1239 @@
+//! `penumbra report`: error against run time on the user's own terrain. On a deterministic
+//! sample of a tileset's pixels (blocks of observers in tiles of one level, pixels stratified by
+//! slope and by distance to the data's edge, as many blocks as the time budget allows), every
+//! horizon method, every Fourier variant and classic map, and every shadow method is measured
+//! against the exact reference at those pixels, at the scene's suns. The figures use the
+//! benchmarks' own measures ([`crate::measure`]), so that on the shared DEMs they are the
+//! benchmarks' figures up to sampling.
+//!
+//! [`render`] writes them as report.html (plots as inline SVG), report.md and report.json.
+
+pub mod render;
+
+use std::f64::consts::TAU;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use penumbra::error::{Error, Result};
+use penumbra::format::height::HeightTile;
+use penumbra::fourier::stage::{Encoder, FourierOptions};
+use penumbra::fourier::sun::{lit_fraction, sun_distance_au, sun_radius_deg, Frame, Model, Sun};
+use penumbra::fourier::{evaluate, Pyramid};
+use penumbra::horizon::{self, horizons_with, Context as HzContext, Method as HzMethod, Rect};
+use penumbra::layout::TileId;
+use penumbra::progress::Progress;
+use penumbra::scene::{Scene, SunSpec};
+use penumbra::shadow::smap::SMap;
+use penumbra::shadow::trace::{Method as TraceMethod, Work};
+use penumbra::shadow::Tracer;
+use penumbra::tileset::Store;
+
+use crate::measure::{interp, lit_exact, Case, ErrStats, ErrSum, Horizon, Variant};
+
+/// Limits of the options (exit 2 outside them).
+pub const BUDGET_S: std::ops::RangeInclusive<f64> = 5.0..=86_400.0;
+pub const MAX_PER_PCT: std::ops::RangeInclusive<f64> = 0.001..=50.0;
+pub const MAX_ERROR_DEG: std::ops::RangeInclusive<f64> = 0.0001..=10.0;
+/// Azimuths of the report's horizon maps when the scene names none (a multiple of 4, ≥ 64 so
+/// that K = 32 fits: K ≤ A/2 + 1).
+pub const DEFAULT_AZIMUTHS: usize = 360;
+/// Default sun elevations (degrees) and compass azimuths where no scene gives them: the
+/// benchmarks' (docs/fourier-bench.md, docs/shadows.md).
+pub const DEFAULT_SUN_EL: [f64; 3] = [1.0, 5.0, 15.0];
+pub const SUN_AZ: [f64; 8] = [17.0, 62.0, 107.0, 152.0, 197.0, 242.0, 287.0, 332.0];
+/// Strata of the sample: three slope classes × near or far from the data's edge.
+const EDGE_PX: usize = 16;
+/// Most blocks a report samples.
+const MAX_BLOCKS: usize = 64;
+/// Part of the budget kept for writing the report (s).
+const WRITE_RESERVE_S: f64 = 1.0;
+
+/// What `penumbra report` was asked.
+#[derive(Clone, Debug)]
+pub struct Options {
+    pub budget_s: f64,
+    /// Pixel error rate (percent) the scene can afford.
+    pub max_per_pct: f64,
+    /// Horizon error (degrees, RMS) the scene can afford.
+    pub max_error_deg: f64,
+    /// Seed of the sample (another seed: an independent sample of the same strata).
+    pub seed: u64,
+    /// Tile level sampled (None: the scene's finest horizon level, else the finest level).
+    pub level: Option<u8>,
+}
+
+/// The scene and tileset a report is about.
+pub struct Input<'a> {
+    pub store: &'a Store,
+    pub tileset: PathBuf,
+    pub scene: Option<&'a Scene>,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Report {
+    pub version: u32,
+    pub tileset: String,
+    pub scene: Option<String>,
+    pub body: String,
+    pub radius_m: f64,
+    pub level: u8,
+    pub tile_size: u32,
+    pub azimuths: usize,
+    pub sun_elevations_deg: Vec<f64>,
+    pub sun_azimuths_deg: Vec<f64>,
+    pub sun_radius_deg: f64,
+    pub max_per_pct: f64,
+    pub max_error_deg: f64,
+    pub budget_s: f64,
+    pub elapsed_s: f64,
+    pub threads: usize,
+    pub seed: u64,
+    pub blocks: Vec<BlockInfo>,
+    pub pixels: usize,
+    pub horizons: Vec<HorizonRow>,
+    pub fourier: Vec<FourierRow>,
+    pub shadows: Vec<ShadowRow>,
+    pub recommendations: Vec<Recommendation>,
+    pub notes: Vec<String>,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct BlockInfo {
+    pub tile: String,
+    /// Block origin within the tile and its side (pixels).
+    pub x0: usize,
+    pub y0: usize,
+    pub size: usize,
+    pub context: String,
+    /// Sampled pixels per stratum: slope low/mid/high × far/near the data's edge.
+    pub strata: [usize; 6],
+    pub seconds: f64,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct HorizonRow {
+    pub method: String,
+    pub samples: u64,
+    pub rms_deg: f64,
+    pub p99_deg: f64,
+    pub max_deg: f64,
+    /// Core-nanoseconds per pixel·azimuth (wall time × threads).
+    pub core_ns: f64,
+    pub pareto: bool,
+    pub default: bool,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct FourierRow {
+    pub variant: String,
+    pub bytes_per_tile: usize,
+    pub encode_ms_per_tile: f64,
+    /// Against the raw map it compresses (the compression's own error).
+    pub rms_deg: f64,
+    pub p99_deg: f64,
+    pub max_deg: f64,
+    /// Against the reference (the horizon method's error and the compression's together).
+    pub rms_ref_deg: f64,
+    pub p99_ref_deg: f64,
+    /// Lit-fraction mean absolute error (exact disc model) and pixel error rate (%) at the
+    /// scene's suns, against the raw map's.
+    pub lit_mae: f64,
+    pub per_pct: f64,
+    pub pareto: bool,
+    pub paper: bool,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ShadowRow {
+    pub method: String,
+    pub hard: bool,
+    pub samples: u64,
+    pub lit_mae: f64,
+    pub lit_max: f64,
+    pub per_pct: f64,
+    /// Milliseconds per million (pixel, sun) answers on all threads.
+    pub ms_per_mpx: f64,
+    pub pareto: bool,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Recommendation {
+    pub product: String,
+    pub choice: Option<String>,
+    pub why: String,
+    /// The scene-file setting it amounts to (for `plan`), where there is one.
+    pub setting: Option<String>,
+}
+
+/// The suns a report uses: elevations (degrees) and compass azimuths (degrees).
+fn suns_of(scene: Option<&Scene>, notes: &mut Vec<String>) -> (Vec<f64>, Vec<f64>) {
+    let az: Vec<f64> = SUN_AZ.to_vec();
+    match scene.and_then(|s| s.sun.as_ref()) {
+        Some(SunSpec::Range {
+            elevation_deg: (lo, hi),
+            azimuth_deg,
+            ..
+        }) => {
+            // Three elevations over the range (the shadows decided at the lowest matter most),
+            // kept off 90° where the azimuth no longer means anything.
+            let (lo, hi) = (lo.clamp(-5.0, 85.0), hi.clamp(-5.0, 85.0));
+            let mut el = vec![lo, lo + (hi - lo) / 4.0, hi];
+            el.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+            let az = match azimuth_deg {
+                Some((a0, a1)) => {
+                    let span = (a1 - a0).rem_euclid(360.0);
+                    let span = if span == 0.0 { 360.0 } else { span };
+                    (0..8)
+                        .map(|m| (a0 + span * (m as f64 + 0.5) / 8.0).rem_euclid(360.0))
+                        .collect()
+                }
+                None => az,
+            };
+            (el, az)
+        }
+        Some(SunSpec::Span { .. }) => {
+            notes.push(
+                "The scene's sun is a time span: the report uses the benchmarks' suns (1°, 5° \
+                 and 15° at eight azimuths) rather than the span's positions."
+                    .into(),
+            );
+            (DEFAULT_SUN_EL.to_vec(), az)
+        }
+        None => (DEFAULT_SUN_EL.to_vec(), az),
+    }
+}
+
+/// Deterministic 64-bit mix (splitmix64).
+fn mix(mut x: u64) -> u64 {
+    x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    x ^ (x >> 31)
+}
+
+/// The tiles of `level` in a deterministic order spread over the level (sorted by a hash of
+/// the tile and the seed).
+fn tile_order(store: &Store, level: u8, seed: u64) -> Vec<TileId> {
+    let mut t: Vec<TileId> = store
+        .manifest()
+        .tile_set()
+        .into_iter()
+        .filter(|t| t.level == level)
+        .collect();
+    t.sort_by_key(|id| {
+        mix(seed ^ mix(((id.face as u64) << 48) | ((id.x as u64) << 24) | id.y as u64))
+    });
+    t
+}
+
+/// The sample of one block: `want` pixels (block coordinates), allocated to the six strata in
+/// proportion to their populations, at least a few from each non-empty one, drawn in a
+/// seeded order. Pixels without data are not drawn.
+fn stratified(
+    ctx: &HzContext,
+    rect: Rect,
+    pixel_m: f64,
+    want: usize,
+    seed: u64,
+) -> (Vec<(usize, usize)>, [usize; 6]) {
+    let n = rect.w;
+    let h = |x: i64, y: i64| ctx.at(x, y);
+    let mut slope = Vec::with_capacity(n * n);
+    for j in 0..n {
+        for i in 0..n {
+            let (x, y) = ((rect.x0 + i) as i64, (rect.y0 + j) as i64);
+            let (l, r, u, d) = (h(x - 1, y), h(x + 1, y), h(x, y - 1), h(x, y + 1));
+            let s = if h(x, y).is_finite()
+                && l.is_finite()
+                && r.is_finite()
+                && u.is_finite()
+                && d.is_finite()
+            {
+                (((r - l) as f64).hypot((d - u) as f64) / (2.0 * pixel_m))
+                    .atan()
+                    .to_degrees()
+            } else if h(x, y).is_finite() {
+                f64::INFINITY
+            } else {
+                f64::NAN
+            };
+            slope.push(s);
+        }
+    }
+    let mut sorted: Vec<f64> = slope.iter().copied().filter(|s| s.is_finite()).collect();
+    sorted.sort_by(f64::total_cmp);
+    let q = |f: f64| {
+        sorted
+            .get(((sorted.len() as f64 * f) as usize).min(sorted.len().saturating_sub(1)))
+            .copied()
+            .unwrap_or(0.0)
+    };
+    let (t1, t2) = (q(1.0 / 3.0), q(2.0 / 3.0));
+    // Distance to the data's edge: to the context's border or the nearest void (Chebyshev,
+    // capped at EDGE_PX).
+    let near_edge = |i: usize, j: usize| -> bool {
+        let (x, y) = (rect.x0 + i, rect.y0 + j);
+        if x < EDGE_PX || y < EDGE_PX || x + EDGE_PX >= ctx.width || y + EDGE_PX >= ctx.height {
+            return true;
+        }
+        let e = EDGE_PX as i64;
+        for dy in (-e..=e).step_by(4) {
+            for dx in (-e..=e).step_by(4) {
+                if !h(x as i64 + dx, y as i64 + dy).is_finite() {
+                    return true;
+                }
+            }
+        }
+        false
+    };
+    let mut strata: [Vec<(u64, usize, usize)>; 6] = Default::default();
+    for j in 0..n {
+        for i in 0..n {
+            let s = slope[j * n + i];
+            if s.is_nan() {
+                continue;
+            }
+            let c = if s <= t1 {
+                0
+            } else if s <= t2 {
+                1
+            } else {
+                2
+            };
+            let k = c + 3 * near_edge(i, j) as usize;
+            strata[k].push((mix(seed ^ mix((j * n + i) as u64 + 1)), i, j));
+        }
+    }
+    let total: usize = strata.iter().map(|s| s.len()).sum();
+    let mut out = Vec::new();
+    let mut counts = [0usize; 6];
+    if total == 0 {
+        return (out, counts);
+    }
+    let floor = (want / 24).max(1);
+    for (k, s) in strata.iter_mut().enumerate() {
+        if s.is_empty() {
+            continue;
+        }
+        s.sort_unstable();
+        let share = ((want as f64 * s.len() as f64 / total as f64).round() as usize).max(floor);
+        for &(_, i, j) in s.iter().take(share) {
+            out.push((i, j));
+        }
+        counts[k] = share.min(s.len());
+    }
+    (out, counts)
+}
+
+const HZ_METHODS: [HzMethod; 4] = [
+    HzMethod::Reference,
+    HzMethod::Exact,
+    HzMethod::Fast,
+    HzMethod::Sweep,
+];
+
+/// The shadow methods the report measures (the reference first: the truth).
+#[derive(Clone, Debug)]
+enum Sm {
+    Trace(TraceMethod),
+    SMap,
+    /// Lookup in the raw maps (true) or the paper's Fourier pyramid (false), constant-altitude
+    /// disc model.
+    Lookup(bool),
+}
+
+impl Sm {
+    fn label(&self, a: usize) -> String {
+        match self {
+            Sm::Trace(m) => m.label(),
+            Sm::SMap => "smap".into(),
+            Sm::Lookup(true) => format!("horizon raw {a}, constant"),
+            Sm::Lookup(false) => "horizon fourier F16, constant".into(),
+        }
+    }
+    fn hard(&self) -> bool {
+        matches!(self, Sm::SMap) || matches!(self, Sm::Trace(m) if m.is_hard())
+    }
+}
+
+fn shadow_methods() -> Vec<Sm> {
+    let mut v = vec![Sm::Trace(TraceMethod::Reference)];
+    for s in [25, 50, 100, 200, 400, 800] {
+        v.push(Sm::Trace(TraceMethod::Uniform { steps: s }));
+    }
+    for (runs, dda) in [("5,5,5", false), ("auto", false), ("auto", true)] {
+        v.push(Sm::Trace(TraceMethod::Dp {
+            runs: runs.parse().expect("runs"),
+            dda,
+        }));
+    }
+    v.push(Sm::Trace(TraceMethod::Extrema));
+    v.push(Sm::Trace(TraceMethod::ExtremaSoft));
+    v.push(Sm::SMap);
+    v.push(Sm::Lookup(true));
+    v.push(Sm::Lookup(false));
+    v
+}
+
+/// Tallies over every block.
+struct Tally {
+    hz: Vec<(ErrStats, f64, f64)>,
+    fourier: Vec<FourierTally>,
+    shadow: Vec<(ErrSum, f64, f64)>,
+}
+
+struct FourierTally {
+    err: ErrStats,
+    err_ref: ErrStats,
+    lit_abs: f64,
+    lit_n: u64,
+    per_miss: u64,
+    per_n: u64,
+    encode_s: f64,
+    encode_px: f64,
+}
+
+/// Sizes of one block's work.
+#[derive(Clone, Copy, Debug)]
+struct Size {
+    block: usize,
+    pixels: usize,
+    lit_pixels: usize,
+}
+
+const SIZES: [Size; 5] = [
+    Size {
+        block: 32,
+        pixels: 24,
+        lit_pixels: 8,
+    },
+    Size {
+        block: 64,
+        pixels: 48,
+        lit_pixels: 16,
+    },
+    Size {
+        block: 96,
+        pixels: 96,
+        lit_pixels: 24,
+    },
+    Size {
+        block: 128,
+        pixels: 160,
+        lit_pixels: 32,
+    },
+    Size {
+        block: 192,
+        pixels: 256,
+        lit_pixels: 48,
+    },
+];
+
+/// Make the report.
+pub fn report(input: &Input, opts: &Options, progress: &dyn Progress) -> Result<Report> {
+    let t_all = Instant::now();
+    progress.start("report", opts.budget_s.ceil() as u64);
+    let threads = rayon::current_num_threads();
+    let ts = input.store.manifest();
+    let levels = ts.layout.levels;
+    let mut notes = Vec::new();
+    let scene_level = input
+        .scene
+        .and_then(|s| s.horizon.levels.as_ref())
+        .and_then(|l| l.iter().copied().max());
+    let level = opts
+        .level
+        .or(scene_level)
+        .unwrap_or(levels.saturating_sub(1));
+    if level >= levels {
+        return Err(Error::param(
+            "level",
+            format!("{level} is past the tileset's finest level {}", levels - 1),
+        ));
+    }
+    let order = tile_order(input.store, level, opts.seed);
+    if order.is_empty() {
+        return Err(Error::invalid(
+            &input.tileset,
+            format!("no tiles at level {level}: give --level with a level the tileset has"),
+        ));
+    }
+    let a = input
+        .scene
+        .map(|s| s.horizon.azimuths)
+        .unwrap_or(DEFAULT_AZIMUTHS);
+    let a = if a < 64 {
+        notes.push(format!(
+            "The scene's {a} azimuths are too few for K = 32 (K ≤ A/2 + 1): the report uses \
+             {DEFAULT_AZIMUTHS}."
+        ));
+        DEFAULT_AZIMUTHS
+    } else {
+        a
+    };
+    let (sun_el, sun_az) = suns_of(input.scene, &mut notes);
+    let body = ts.body.name.clone();
+    let radius_m = ts.body.radius_m;
+    let sun_r = sun_radius_deg(sun_distance_au(&body).unwrap_or(1.0));
+    let default_method = input.scene.map_or(HzMethod::Sweep, |s| s.horizon.method);
+    let variants = Variant::all();
+    let smethods = shadow_methods();
+    let mut tally = Tally {
+        hz: HZ_METHODS
+            .iter()
+            .map(|_| (ErrStats::new(1), 0.0, 0.0))
+            .collect(),
+        fourier: variants
+            .iter()
+            .map(|_| FourierTally {
+                err: ErrStats::new(1),
+                err_ref: ErrStats::new(1),
+                lit_abs: 0.0,
+                lit_n: 0,
+                per_miss: 0,
+                per_n: 0,
+                encode_s: 0.0,
+                encode_px: 0.0,
+            })
+            .collect(),
+        shadow: smethods
+            .iter()
+            .map(|_| (ErrSum::default(), 0.0, 0.0))
+            .collect(),
+    };
+    let tile_size = ts.layout.tile_size as usize;
+    let mut blocks = Vec::new();
+    let mut pixels = 0usize;
+    // The first block is small: its time sizes the rest so that about eight blocks fill the
+    // budget (each at most an eighth of it: stopping before a block that would not fit leaves
+    // at most that much unspent).
+    let mut size_ix = 0usize;
+    let mut per_unit: Option<f64> = None;
+    let budget = opts.budget_s - WRITE_RESERVE_S;
+    // Every tile once, then again with other blocks, until the budget is spent.
+    let rounds = order
+        .iter()
+        .cycle()
+        .take(order.len() * MAX_BLOCKS)
+        .enumerate();
+    for (b_ix, &id) in rounds {
+        let elapsed = t_all.elapsed().as_secs_f64();
+        if let Some(u) = per_unit {
+            // Choose the largest size whose predicted time fits an eighth of the budget, then
+            // stop if even that does not fit what is left.
+            let cost = |s: &Size| u * work_units(s, a, variants.len());
+            size_ix = SIZES
+                .iter()
+                .rposition(|s| cost(s) <= budget / 8.0)
+                .unwrap_or(0);
+            if elapsed + cost(&SIZES[size_ix]) > budget {
+                break;
+            }
+        }
+        let size = SIZES[size_ix];
+        let t_block = Instant::now();
+        let Some(info) = measure_block(
+            input,
+            id,
+            size,
+            a,
+            (&sun_el, &sun_az, sun_r),
+            default_method,
+            &variants,
+            &smethods,
+            opts.seed ^ b_ix as u64,
+            &mut tally,
+        )?
+        else {
+            continue;
+        };
+        let dt = t_block.elapsed().as_secs_f64();
+        pixels += info.strata.iter().sum::<usize>();
+        progress.inc(dt.round() as u64);
+        // Seconds per unit of work, from every block so far (the later ones weigh more).
+        let u = dt / work_units(&size, a, variants.len());
+        per_unit = Some(per_unit.map_or(u, |p| 0.5 * p + 0.5 * u));
+        blocks.push(BlockInfo {
+            seconds: dt,
+            ..info
+        });
+        if blocks.len() >= MAX_BLOCKS {
+            break;
+        }
+    }
+    if blocks.is_empty() {
+        return Err(Error::invalid(
+            &input.tileset,
+            format!("no tile of level {level} has data to sample"),
+        ));
+    }
+    if blocks.len() < order.len() {
+        notes.push(format!(
+            "{} of level {level}'s {} tiles sampled within the budget.",
+            blocks.len(),
+            order.len()
+        ));
+    }
+    progress.finish();
+    let hz_rows = horizon_rows(&tally, default_method);
+    let f_rows = fourier_rows(&tally, &variants, tile_size);
+    let s_rows = shadow_rows(&tally, &smethods, a);
+    let mut r = Report {
+        version: 1,
+        tileset: input.tileset.display().to_string(),
+        scene: input
+            .scene
+            .map(|s| format!("{} ({})", s.name, s.file.display())),
+        body,
+        radius_m,
+        level,
+        tile_size: tile_size as u32,
+        azimuths: a,
+        sun_elevations_deg: sun_el,
+        sun_azimuths_deg: sun_az,
+        sun_radius_deg: sun_r,
+        max_per_pct: opts.max_per_pct,
+        max_error_deg: opts.max_error_deg,
+        budget_s: opts.budget_s,
+        elapsed_s: 0.0,
+        threads,
+        seed: opts.seed,
+        blocks,
+        pixels,
+        horizons: hz_rows,
+        fourier: f_rows,
+        shadows: s_rows,
+        recommendations: Vec::new(),
+        notes,
+    };
+    r.recommendations = recommend(&r);
+    r.elapsed_s = t_all.elapsed().as_secs_f64();
+    Ok(r)
+}
+
+/// Relative work of a block of `s` (arbitrary units: what scales with the block's pixels and
+/// what with its sampled pixels), for sizing blocks from the first one's time.
+fn work_units(s: &Size, a: usize, variants: usize) -> f64 {
+    let block = (s.block * s.block * a) as f64 * (1.0 + 0.02 * variants as f64);
+    let sampled = (s.pixels * a) as f64 * 60.0 + (s.lit_pixels * variants) as f64 * 2000.0;
+    block + sampled
+}
+
+type SunSet<'a> = (&'a [f64], &'a [f64], f64);
+
+/// Measure one block of tile `id`; None when it has no data.
+#[allow(clippy::too_many_arguments)]
+fn measure_block(
+    input: &Input,
+    id: TileId,
+    size: Size,
+    a: usize,
+    suns: SunSet,
+    default_method: HzMethod,
+    variants: &[Variant],
+    smethods: &[Sm],
+    seed: u64,
+    tally: &mut Tally,
+) -> Result<Option<BlockInfo>> {
+    let store = input.store;
+    let (ctx, tile_rect) = horizon::report_context(store, id)?;
+    let n = size.block.min(tile_rect.w);
+    // The block: centred on a seeded pixel of the tile that has data (a tile may be mostly
+    // empty where a regional DEM ends), kept inside the tile.
+    let valid: Vec<usize> = (0..tile_rect.w * tile_rect.h)
+        .filter(|&p| {
+            ctx.heights
+                [(tile_rect.y0 + p / tile_rect.w) * ctx.width + tile_rect.x0 + p % tile_rect.w]
+                .is_finite()
+        })
+        .collect();
+    if valid.is_empty() {
+        return Ok(None);
+    }
+    let c = valid[(mix(seed ^ 0x5EED) % valid.len() as u64) as usize];
+    let room = tile_rect.w - n;
+    let (bx, by) = (
+        (c % tile_rect.w).saturating_sub(n / 2).min(room),
+        (c / tile_rect.w).saturating_sub(n / 2).min(room),
+    );
+    let rect = Rect {
+        x0: tile_rect.x0 + bx,
+        y0: tile_rect.y0 + by,
+        w: n,
+        h: n,
+    };
+    let (u, v) = ctx.uv((rect.x0 + n / 2) as f64, (rect.y0 + n / 2) as f64);
+    let pixel_m = pixel_size_m(&ctx, rect);
+    let (sample, strata) = stratified(&ctx, rect, pixel_m, size.pixels, seed);
+    if sample.is_empty() {
+        return Ok(None);
+    }
+    let terrain_min_m = ctx
+        .heights
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold(f64::INFINITY, |m, &v| m.min(v as f64));
+    let case = Case {
+        name: id.to_string(),
+        real: true,
+        body: "",
+        pixel_m,
+        ctx,
+        rect,
+        terrain_min_m,
+        special: Vec::new(),
+        extra_frames: Vec::new(),
+        note: String::new(),
+    };
+    let threads = rayon::current_num_threads() as f64;
+    let plane = n * n;
+    // Horizons: the reference and the exact method at the sampled pixels (each pixel alone),
+    // the fast and sweep methods over the whole block (their costs are per block).
+    let mut maps: Vec<Vec<f32>> = Vec::new(); // per method: sample-major, a per pixel
+    let mut block_maps: Vec<Option<Vec<f32>>> = Vec::new();
+    for (m_ix, &m) in HZ_METHODS.iter().enumerate() {
+        let t0 = Instant::now();
+        let (vals, units, full) = match m {
+            HzMethod::Reference | HzMethod::Exact => {
+                let v: Vec<f32> = sample
+                    .iter()
+                    .flat_map(|&(i, j)| {
+                        let r1 = Rect {
+                            x0: rect.x0 + i,
+                            y0: rect.y0 + j,
+                            w: 1,
+                            h: 1,
+                        };
+                        horizons_with(&case.ctx, r1, a, m, horizon::DEFAULT_NEAR_PX)
+                    })
+                    .collect();
+                (v, (sample.len() * a) as f64, None)
+            }
+            HzMethod::Fast | HzMethod::Sweep => {
+                let full = horizons_with(&case.ctx, rect, a, m, horizon::DEFAULT_NEAR_PX);
+                let v: Vec<f32> = sample
+                    .iter()
+                    .flat_map(|&(i, j)| (0..a).map(move |k| (k, j * n + i)))
+                    .map(|(k, p)| full[k * plane + p])
+                    .collect();
+                (v, (plane * a) as f64, Some(full))
+            }
+        };
+        let dt = t0.elapsed().as_secs_f64();
+        tally.hz[m_ix].1 += dt * threads;
+        tally.hz[m_ix].2 += units;
+        maps.push(vals);
+        block_maps.push(full);
+    }
+    let reference = &maps[0];
+    for (m_ix, vals) in maps.iter().enumerate() {
+        let e = &mut tally.hz[m_ix].0;
+        for (v, r) in vals.iter().zip(reference) {
+            if v.is_finite() && r.is_finite() {
+                e.add(*v as f64 - *r as f64);
+            }
+        }
+    }
+    // The raw map the pyramids compress: the default method's over the block.
+    let raw_ix = HZ_METHODS
+        .iter()
+        .position(|&m| m == default_method)
+        .unwrap_or(3);
+    let raw = block_maps[raw_ix]
+        .take()
+        .or_else(|| block_maps[3].take())
+        .expect("sweep's block map");
+    measure_fourier(
+        &case,
+        &raw,
+        reference,
+        &sample,
+        size.lit_pixels,
+        a,
+        suns,
+        variants,
+        tally,
+    );
+    measure_shadows(&case, &raw, &sample, a, suns, (u, v), smethods, tally);
+    Ok(Some(BlockInfo {
+        tile: id.to_string(),
+        x0: bx,
+        y0: by,
+        size: n,
+        context: format!("{}×{}", case.ctx.width, case.ctx.height),
+        strata,
+        seconds: 0.0,
+    }))
+}
+
+/// Metres per pixel at the block's centre (the gnomonic plane's scale there).
+fn pixel_size_m(ctx: &HzContext, rect: Rect) -> f64 {
+    let (cx, cy) = ((rect.x0 + rect.w / 2) as f64, (rect.y0 + rect.h / 2) as f64);
+    let d0 = ctx.dir(cx, cy);
+    let d1 = ctx.dir(cx + 1.0, cy);
+    let dot = d0[0] * d1[0] + d0[1] * d1[1] + d0[2] * d1[2];
+    dot.clamp(-1.0, 1.0).acos() * ctx.radius_m
+}
+
+#[allow(clippy::too_many_arguments)]
+fn measure_fourier(
+    case: &Case,
+    raw: &[f32],
+    reference: &[f32],
+    sample: &[(usize, usize)],
+    lit_pixels: usize,
+    a: usize,
+    (sun_el, _, sun_r): SunSet,
+    variants: &[Variant],
+    tally: &mut Tally,
+) {
+    let n = case.rect.w;
+    let plane = n * n;
+    let tile = HeightTile {
+        size: n,
+        height: (0..plane)
+            .map(|p| {
+                case.ctx.heights[(case.rect.y0 + p / n) * case.ctx.width + case.rect.x0 + p % n]
+            })
+            .collect(),
+        mask: vec![0; plane],
+    };
+    let floor_enc = Encoder::for_tiles(
+        &FourierOptions::default(),
+        n,
+        0,
+        a,
+        case.ctx.radius_m,
+        case.terrain_min_m,
+    );
+    // Floored raw and reference rows at the sampled pixels; which are valid.
+    let mut raw_rows = vec![0.0f32; sample.len() * a];
+    let mut ref_rows = vec![0.0f32; sample.len() * a];
+    let mut valid = vec![false; sample.len()];
+    for (q, &(i, j)) in sample.iter().enumerate() {
+        let p = j * n + i;
+        let h0 = tile.height[p];
+        let ok = h0.is_finite()
+            && (0..a).all(|k| raw[k * plane + p].is_finite() && reference[q * a + k].is_finite());
+        valid[q] = ok;
+        if ok {
+            let fl = floor_enc.floor_deg(h0 as f64) as f32;
+            for k in 0..a {
+                raw_rows[q * a + k] = raw[k * plane + p].max(fl);
+                ref_rows[q * a + k] = reference[q * a + k].max(fl);
+            }
+        }
+    }
+    // Suns as the Fourier bench sets them: plane azimuths between the classic maps' samples.
+    let sn: Vec<(f64, f64)> = sun_el
+        .iter()
+        .flat_map(|&e| SUN_AZ.iter().map(move |&z| (z.to_radians(), e)))
+        .collect();
+    let frame = |i: usize, j: usize| {
+        let (u, v) = case
+            .ctx
+            .uv((case.rect.x0 + i) as f64, (case.rect.y0 + j) as f64);
+        Frame::at(case.ctx.face, u, v)
+    };
+    let lit_q: Vec<usize> = (0..sample.len())
+        .filter(|&q| valid[q])
+        .take(lit_pixels)
+        .collect();
+    let lit_truth: Vec<f64> = lit_q
+        .par_iter()
+        .flat_map_iter(|&q| {
+            let f = frame(sample[q].0, sample[q].1);
+            let row = &raw_rows[q * a..(q + 1) * a];
+            let sn = &sn;
+            sn.iter()
+                .map(move |&(phi, e)| lit_exact(&f, phi, e, sun_r, &|t| interp(row, t)))
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    let threads = rayon::current_num_threads() as f64;
+    for (v_ix, &v) in variants.iter().enumerate() {
+        let t0 = Instant::now();
+        let (pyr, classic): (Option<Pyramid>, Option<(Vec<f32>, usize)>) = match v {
+            Variant::Fourier {
+                k,
+                encoding,
+                layout,
+                sigma,
+                reduce,
+            } => {
+                let opts = FourierOptions {
+                    coefficients: k,
+                    layout,
+                    encoding,
+                    sigma,
+                    reduce,
+                    ..Default::default()
+                };
+                let enc = Encoder::for_tiles(&opts, n, 0, a, case.ctx.radius_m, case.terrain_min_m);
+                let (p, _) = enc.encode(raw, &tile);
+                std::hint::black_box(p.encode().len());
+                (Some(p), None)
+            }
+            Variant::Classic(m) => {
+                // What the encoder would store: every pixel's floored samples at 2πq/m in f16.
+                let s: Vec<f32> = (0..plane)
+                    .into_par_iter()
+                    .flat_map_iter(|p| {
+                        let fl = floor_enc.floor_deg(tile.height[p] as f64);
+                        (0..m).map(move |q| {
+                            let x = q as f64 * a as f64 / m as f64;
+                            let k0 = x.floor() as usize % a;
+                            let w = x - x.floor();
+                            let v0 = (raw[k0 * plane + p] as f64).max(fl);
+                            let v1 = (raw[((k0 + 1) % a) * plane + p] as f64).max(fl);
+                            half::f16::from_f64(v0 + (v1 - v0) * w).to_f32()
+                        })
+                    })
+                    .collect();
+                (None, Some((s, m)))
+            }
+        };
+        let enc_s = t0.elapsed().as_secs_f64();
+        let hz = match (&pyr, &classic) {
+            (Some(p), _) => Horizon::Fourier(p),
+            (None, Some((s, m))) => Horizon::Classic(s, *m),
+            _ => unreachable!("one of the two"),
+        };
+        let ft = &mut tally.fourier[v_ix];
+        ft.encode_s += enc_s * threads;
+        ft.encode_px += plane as f64;
+        let mut buf = Vec::new();
+        for (q, &(i, j)) in sample.iter().enumerate() {
+            if !valid[q] {
+                continue;
+            }
+            hz.load(n, i, j, &mut buf);
+            for k in 0..a {
+                let th = TAU * k as f64 / a as f64;
+                let val = hz.at(&buf, th);
+                ft.err.add(val - raw_rows[q * a + k] as f64);
+                ft.err_ref.add(val - ref_rows[q * a + k] as f64);
+            }
+            let row = &raw_rows[q * a..(q + 1) * a];
+            for &(phi, el) in &sn {
+                let truth = interp(row, phi) > el;
+                if (hz.at(&buf, phi) > el) != truth {
+                    ft.per_miss += 1;
+                }
+                ft.per_n += 1;
+            }
+        }
+        let lit: Vec<f64> = lit_q
+            .par_iter()
+            .flat_map_iter(|&q| {
+                let (i, j) = sample[q];
+                let f = frame(i, j);
+                let mut buf = Vec::new();
+                hz.load(n, i, j, &mut buf);
+                let sn = &sn;
+                sn.iter()
+                    .map(|&(phi, e)| lit_exact(&f, phi, e, sun_r, &|t| hz.at(&buf, t)))
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        for (l, t) in lit.iter().zip(&lit_truth) {
+            if l.is_finite() && t.is_finite() {
+                ft.lit_abs += (l - t).abs();
+                ft.lit_n += 1;
+            }
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn measure_shadows(
+    case: &Case,
+    raw: &[f32],
+    sample: &[(usize, usize)],
+    a: usize,
+    (sun_el, sun_az, sun_r): SunSet,
+    (u, v): (f64, f64),
+    smethods: &[Sm],
+    tally: &mut Tally,
+) {
+    let n = case.rect.w;
+    let plane = n * n;
+    let rect = case.rect;
+    let tr = Tracer::new(&case.ctx, case.terrain_min_m);
+    let centre = Frame::at(case.ctx.face, u, v);
+    let suns: Vec<Sun> = sun_el
+        .iter()
+        .flat_map(|&e| sun_az.iter().map(move |&z| (z, e)))
+        .map(|(z, e)| Sun {
+            dir: centre.direction(z, e),
+            radius_deg: sun_r,
+        })
+        .collect();
+    let floor_enc = Encoder::for_tiles(
+        &FourierOptions::default(),
+        n,
+        0,
+        a,
+        case.ctx.radius_m,
+        case.terrain_min_m,
+    );
+    let tile = HeightTile {
+        size: n,
+        height: (0..plane)
+            .map(|p| case.ctx.heights[(rect.y0 + p / n) * case.ctx.width + rect.x0 + p % n])
+            .collect(),
+        mask: vec![0; plane],
+    };
+    let (pyramid, _) = floor_enc.encode(raw, &tile);
+    let threads = rayon::current_num_threads() as f64;
+    let mut truth: Vec<f32> = Vec::new();
+    for (m_ix, m) in smethods.iter().enumerate() {
+        let t0 = Instant::now();
+        let lit: Vec<f32> = match m {
+            Sm::SMap => suns
+                .iter()
+                .flat_map(|sun| {
+                    let map = SMap::build(&case.ctx, sun.dir, rect, case.terrain_min_m);
+                    let l = map.lit_region(&case.ctx);
+                    sample
+                        .iter()
+                        .map(move |&(i, j)| l[j * n + i])
+                        .collect::<Vec<_>>()
+                })
+                .collect(),
+            _ => suns
+                .par_iter()
+                .flat_map_iter(|sun| {
+                    let mut work = Work::default();
+                    let mut coef = Vec::new();
+                    sample
+                        .iter()
+                        .map(|&(i, j)| {
+                            let (x, y) = (rect.x0 + i, rect.y0 + j);
+                            match m {
+                                Sm::Trace(t) => tr.lit(x, y, sun, t, &mut work) as f32,
+                                Sm::Lookup(from_raw) => {
+                                    let h0 = case.ctx.at(x as i64, y as i64);
+                                    if h0.is_nan() {
+                                        return f32::NAN;
+                                    }
+                                    let at = tr.sun_at(x, y, sun);
+                                    let floor = floor_enc.floor_deg(h0 as f64);
+                                    if *from_raw {
+                                        let p = j * n + i;
+                                        lit_fraction(&at.frame, sun, Model::Constant, &|phi| {
+                                            let f = phi / TAU * a as f64;
+                                            let k0 = (f as usize) % a;
+                                            let w = f - f.floor();
+                                            let lo = (raw[k0 * plane + p] as f64).max(floor);
+                                            let hi =
+                                                (raw[((k0 + 1) % a) * plane + p] as f64).max(floor);
+                                            lo + (hi - lo) * w
+                                        }) as f32
+                                    } else {
+                                        pyramid.coefficients_at(
+                                            i as f64 + 0.5,
+                                            j as f64 + 0.5,
+                                            &mut coef,
+                                        );
+                                        let c = &coef;
+                                        lit_fraction(&at.frame, sun, Model::Constant, &|phi| {
+                                            evaluate(c, phi).max(floor)
+                                        }) as f32
+                                    }
+                                }
+                                Sm::SMap => unreachable!("answered above"),
+                            }
+                        })
+                        .collect::<Vec<_>>()
+                })
+                .collect(),
+        };
+        let dt = t0.elapsed().as_secs_f64();
+        if m_ix == 0 {
+            truth = lit.clone();
+        }
+        let t = &mut tally.shadow[m_ix];
+        for (l, r) in lit.iter().zip(&truth) {
+            t.0.add(*l, *r);
+        }
+        // SMap's cost is per block (it answers every pixel of it); the others' per answer.
+        let answers = if matches!(m, Sm::SMap) {
+            (plane * suns.len()) as f64
+        } else {
+            lit.len() as f64
+        };
+        t.1 += dt * if matches!(m, Sm::SMap) { 1.0 } else { threads };
+        t.2 += answers;
+    }
+}
+
+fn horizon_rows(t: &Tally, default: HzMethod) -> Vec<HorizonRow> {
+    let mut rows: Vec<HorizonRow> = HZ_METHODS
+        .iter()
+        .zip(&t.hz)
+        .map(|(&m, (e, core_s, units))| HorizonRow {
+            method: m.name().to_string(),
+            samples: e.n,
+            rms_deg: e.rms(),
+            p99_deg: e.p99(),
+            max_deg: e.max,
+            core_ns: core_s / units.max(1.0) * 1e9,
+            pareto: false,
+            default: m == default,
+        })
+        .collect();
+    let pts: Vec<(f64, f64)> = rows.iter().map(|r| (r.core_ns, r.rms_deg)).collect();
+    for (r, p) in rows.iter_mut().zip(pareto(&pts)) {
+        r.pareto = p;
+    }
+    rows
+}
+
+fn fourier_rows(t: &Tally, variants: &[Variant], tile: usize) -> Vec<FourierRow> {
+    let mut rows: Vec<FourierRow> = variants
+        .iter()
+        .zip(&t.fourier)
+        .map(|(v, f)| FourierRow {
+            variant: v.name(),
+            bytes_per_tile: v.bytes_per_tile(tile),
+            encode_ms_per_tile: f.encode_s / f.encode_px.max(1.0) * (tile * tile) as f64 * 1e3,
+            rms_deg: f.err.rms(),
+            p99_deg: f.err.p99(),
+            max_deg: f.err.max,
+            rms_ref_deg: f.err_ref.rms(),
+            p99_ref_deg: f.err_ref.p99(),
+            lit_mae: f.lit_abs / f.lit_n.max(1) as f64,
+            per_pct: 100.0 * f.per_miss as f64 / f.per_n.max(1) as f64,
+            pareto: false,
+            paper: v.is_paper(),
+        })
+        .collect();
+    let pts: Vec<(f64, f64)> = rows
+        .iter()
+        .map(|r| (r.bytes_per_tile as f64, r.per_pct))
+        .collect();
+    for (r, p) in rows.iter_mut().zip(pareto(&pts)) {
+        r.pareto = p;
+    }
+    rows
+}
+
+fn shadow_rows(t: &Tally, smethods: &[Sm], a: usize) -> Vec<ShadowRow> {
+    let mut rows: Vec<ShadowRow> = smethods
+        .iter()
+        .zip(&t.shadow)
+        .map(|(m, (e, core_s, answers))| ShadowRow {
+            method: m.label(a),
+            hard: m.hard(),
+            samples: e.n,
+            lit_mae: e.mae(),
+            lit_max: e.max,
+            per_pct: e.per(),
+            ms_per_mpx: core_s / answers.max(1.0) * 1e9 / 1e3,
+            pareto: false,
+        })
+        .collect();
+    let pts: Vec<(f64, f64)> = rows.iter().map(|r| (r.ms_per_mpx, r.lit_mae)).collect();
+    for (r, p) in rows.iter_mut().zip(pareto(&pts)) {
+        r.pareto = p;
+    }
+    rows
+}
+
+/// Which points (cost, error) no other point beats in both (lower is better in both).
+pub fn pareto(pts: &[(f64, f64)]) -> Vec<bool> {
+    pts.iter()
+        .map(|&(c, e)| {
+            c.is_finite()
+                && e.is_finite()
+                && !pts.iter().any(|&(c2, e2)| {
+                    c2.is_finite() && e2.is_finite() && c2 <= c && e2 <= e && (c2 < c || e2 < e)
+                })
+        })
+        .collect()
+}
+
+/// The cheapest choice per product that meets the budget.
+fn recommend(r: &Report) -> Vec<Recommendation> {
+    let mut out = Vec::new();
+    // Horizon method: the lowest cost whose RMS against the reference is within the budget.
+    let hz = r
+        .horizons
+        .iter()
+        .filter(|h| h.rms_deg <= r.max_error_deg)
+        .min_by(|x, y| x.core_ns.total_cmp(&y.core_ns));
+    out.push(Recommendation {
+        product: "horizon method".into(),
+        choice: hz.map(|h| h.method.clone()),
+        why: match hz {
+            Some(h) => format!(
+                "fastest with RMS ≤ {} ° against the reference: {:.4}° at {:.0} core-ns per \
+                 pixel·azimuth",
+                r.max_error_deg, h.rms_deg, h.core_ns
+            ),
+            None => format!("no method is within {}° RMS", r.max_error_deg),
+        },
+        setting: hz.map(|h| format!("[horizon] method = \"{}\"", h.method)),
+    });
+    // Fourier: fewest bytes with PER and RMS (against the reference: what a bake from the
+    // default method gives) within budget; ties by encode time.
+    let f = r
+        .fourier
+        .iter()
+        .filter(|f| f.per_pct <= r.max_per_pct && f.rms_ref_deg <= r.max_error_deg)
+        .min_by(|x, y| {
+            x.bytes_per_tile
+                .cmp(&y.bytes_per_tile)
+                .then(x.encode_ms_per_tile.total_cmp(&y.encode_ms_per_tile))
+        });
+    out.push(Recommendation {
+        product: "horizon storage".into(),
+        choice: f.map(|f| f.variant.clone()),
+        why: match f {
+            Some(f) => format!(
+                "smallest with PER ≤ {} % and RMS ≤ {}°: PER {:.3} %, RMS {:.4}° against the \
+                 reference, {} bytes per tile",
+                r.max_per_pct, r.max_error_deg, f.per_pct, f.rms_ref_deg, f.bytes_per_tile
+            ),
+            None => format!(
+                "no variant is within PER {} % and {}° RMS",
+                r.max_per_pct, r.max_error_deg
+            ),
+        },
+        setting: f.and_then(|f| {
+            f.variant
+                .strip_prefix('F')
+                .and_then(|s| s.split(' ').next())
+                .map(|k| format!("[fourier] coefficients = {k}"))
+        }),
+    });
+    // Shadows: the fastest with PER within budget (the reference excluded: it is the truth).
+    let s = r
+        .shadows
+        .iter()
+        .skip(1)
+        .filter(|s| s.per_pct <= r.max_per_pct)
+        .min_by(|x, y| x.ms_per_mpx.total_cmp(&y.ms_per_mpx));
+    out.push(Recommendation {
+        product: "shadow method".into(),
+        choice: s.map(|s| s.method.clone()),
+        why: match s {
+            Some(s) => format!(
+                "fastest with PER ≤ {} %: PER {:.3} %, lit MAE {:.4}, {:.0} ms per million answers",
+                r.max_per_pct, s.per_pct, s.lit_mae, s.ms_per_mpx
+            ),
+            None => format!("no method is within PER {} %", r.max_per_pct),
+        },
+        setting: None,
+    });
+    out
+}
+
+/// Where the report's files go.
+pub fn files(out: &Path) -> [PathBuf; 3] {
+    ["report.html", "report.md", "report.json"].map(|f| out.join(f))
+}
