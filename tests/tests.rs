@@ -86,3 +86,7 @@ mod package;
 // cluster (skipped without Slurm, failed under CI) running the chain to one bake's bytes, a
 // requeued array task resuming its shard.
 mod slurm;
+
+// `penumbra report`: every method against the reference on a tileset, the recommendation on a
+// second sample, bad input, and report.html in a headless browser.
+mod report;

@@ -251,8 +251,15 @@ struct ReportArgs {
     #[arg(long, default_value = "report")]
     out: PathBuf,
     /// Wall-clock seconds the measurements may take (the sample grows to fill them).
-    #[arg(long, default_value_t = 60.0)]
+    #[arg(long, default_value_t = 60.0, conflicts_with = "blocks")]
     budget_s: f64,
+    /// A fixed sample instead of the budget's: this many blocks (the same pixels on any
+    /// machine; report.json records the budget's sample as `blocks`).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=penumbra_cli::report::MAX_BLOCKS as i64))]
+    blocks: Option<u32>,
+    /// With --blocks: each block's side in pixels (24, 32, 64, 96, 128 or 192).
+    #[arg(long, requires = "blocks", default_value_t = 64)]
+    block_px: usize,
     /// Pixel error rate (percent) the scene can afford: the recommendations meet it.
     #[arg(long, default_value_t = 0.5)]
     max_per: f64,
@@ -1137,6 +1144,7 @@ fn report(a: &ReportArgs, progress: &output::Bars) -> Result<penumbra_cli::repor
         max_error_deg: a.max_error_deg,
         seed: a.seed,
         level: a.level,
+        fixed: a.blocks.map(|b| (b as usize, a.block_px)),
     };
     let r = rp::report(&input, &opts, progress)?;
     rp::render::write(&r, &a.out)?;

@@ -1092,7 +1092,7 @@ pub fn print_report(r: &crate::report::Report, out: &Path, json: bool) -> Result
     writeln!(
         o,
         "\n{:<34} {:>9} {:>8} {:>12}",
-        "shadow method", "lit MAE", "PER %", "ms/M answers"
+        "shadow method", "lit MAE", "PER %", "core-ms/Mpx"
     )?;
     for s in &r.shadows {
         writeln!(

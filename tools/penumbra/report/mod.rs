@@ -46,8 +46,10 @@ pub const DEFAULT_SUN_EL: [f64; 3] = [1.0, 5.0, 15.0];
 pub const SUN_AZ: [f64; 8] = [17.0, 62.0, 107.0, 152.0, 197.0, 242.0, 287.0, 332.0];
 /// Strata of the sample: three slope classes × near or far from the data's edge.
 const EDGE_PX: usize = 16;
+/// Side of the sub-block of each block the exact method is timed and measured on (pixels).
+const EXACT_PX: usize = 24;
 /// Most blocks a report samples.
-const MAX_BLOCKS: usize = 64;
+pub const MAX_BLOCKS: usize = 64;
 /// Part of the budget kept for writing the report (s).
 const WRITE_RESERVE_S: f64 = 1.0;
 
@@ -63,6 +65,18 @@ pub struct Options {
     pub seed: u64,
     /// Tile level sampled (None: the scene's finest horizon level, else the finest level).
     pub level: Option<u8>,
+    /// A fixed sample instead of the budget's: this many blocks of this side (one of
+    /// [`block_sizes`]), the same pixels whatever the machine's speed.
+    pub fixed: Option<(usize, usize)>,
+}
+
+/// The block sides a fixed sample may take, for messages.
+pub fn block_sizes() -> String {
+    SIZES
+        .iter()
+        .map(|s| s.block.to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// The scene and tileset a report is about.
@@ -122,6 +136,8 @@ pub struct HorizonRow {
     pub max_deg: f64,
     /// Core-nanoseconds per pixel·azimuth (wall time × threads).
     pub core_ns: f64,
+    /// Standard error of `rms_deg` from the spread between blocks (None: one block).
+    pub se_rms_deg: Option<f64>,
     pub pareto: bool,
     pub default: bool,
 }
@@ -142,6 +158,9 @@ pub struct FourierRow {
     /// scene's suns, against the raw map's.
     pub lit_mae: f64,
     pub per_pct: f64,
+    /// Standard errors of `per_pct` and `lit_mae` from the spread between blocks.
+    pub se_per_pct: Option<f64>,
+    pub se_lit_mae: Option<f64>,
     pub pareto: bool,
     pub paper: bool,
 }
@@ -154,8 +173,12 @@ pub struct ShadowRow {
     pub lit_mae: f64,
     pub lit_max: f64,
     pub per_pct: f64,
-    /// Milliseconds per million (pixel, sun) answers on all threads.
+    /// Core-milliseconds (wall time × threads) per million (pixel, sun) answers: about one
+    /// thread's milliseconds per megapixel, as docs/shadows.md reports them.
     pub ms_per_mpx: f64,
+    /// Standard errors of `lit_mae` and `per_pct` from the spread between blocks.
+    pub se_lit_mae: Option<f64>,
+    pub se_per_pct: Option<f64>,
     pub pareto: bool,
 }
 
@@ -396,6 +419,71 @@ struct FourierTally {
     encode_px: f64,
 }
 
+impl Tally {
+    /// The additive sums the per-block figures come from, in a fixed order: per horizon
+    /// method (n, Σe²); per variant (PER misses, PER n, Σ|lit error|, lit n); per shadow method
+    /// (n, Σ|error|, wrong).
+    fn sums(&self) -> Vec<f64> {
+        let mut v = Vec::new();
+        for (e, ..) in &self.hz {
+            v.extend([e.n as f64, e.sum2]);
+        }
+        for f in &self.fourier {
+            v.extend([f.per_miss as f64, f.per_n as f64, f.lit_abs, f.lit_n as f64]);
+        }
+        for (e, ..) in &self.shadow {
+            v.extend([e.n as f64, e.abs_sum, e.wrong as f64]);
+        }
+        v
+    }
+}
+
+/// One block's figures from the difference of two [`Tally::sums`]: per horizon method its
+/// RMS; per variant its PER (%) and lit MAE; per shadow method its lit MAE and PER (%). NaN
+/// where the block had no sample of it.
+fn block_figures(d: &[f64], hz: usize, variants: usize, shadows: usize) -> Vec<f64> {
+    let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
+    let mut v = Vec::new();
+    for m in 0..hz {
+        v.push(ratio(d[2 * m + 1], d[2 * m]).sqrt());
+    }
+    let o = 2 * hz;
+    for q in 0..variants {
+        let x = &d[o + 4 * q..o + 4 * q + 4];
+        v.push(100.0 * ratio(x[0], x[1]));
+        v.push(ratio(x[2], x[3]));
+    }
+    let o = o + 4 * variants;
+    for m in 0..shadows {
+        let x = &d[o + 3 * m..o + 3 * m + 3];
+        v.push(ratio(x[1], x[0]));
+        v.push(100.0 * ratio(x[2], x[0]));
+    }
+    v
+}
+
+/// The standard error of the mean of each figure over the blocks (blocks as clusters: the
+/// spread between blocks over √blocks); None with fewer than two blocks holding it.
+fn standard_errors(per_block: &[Vec<f64>]) -> Vec<Option<f64>> {
+    let k = per_block.first().map_or(0, |b| b.len());
+    (0..k)
+        .map(|i| {
+            let x: Vec<f64> = per_block
+                .iter()
+                .map(|b| b[i])
+                .filter(|v| v.is_finite())
+                .collect();
+            if x.len() < 2 {
+                return None;
+            }
+            let n = x.len() as f64;
+            let mean = x.iter().sum::<f64>() / n;
+            let var = x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+            Some((var / n).sqrt())
+        })
+        .collect()
+}
+
 /// Sizes of one block's work.
 #[derive(Clone, Copy, Debug)]
 struct Size {
@@ -404,7 +492,13 @@ struct Size {
     lit_pixels: usize,
 }
 
-const SIZES: [Size; 5] = [
+/// The sizes a block may take, smallest first (the first block, which times the rest).
+const SIZES: [Size; 6] = [
+    Size {
+        block: 24,
+        pixels: 12,
+        lit_pixels: 4,
+    },
     Size {
         block: 32,
         pixels: 24,
@@ -506,6 +600,7 @@ pub fn report(input: &Input, opts: &Options, progress: &dyn Progress) -> Result<
     };
     let tile_size = ts.layout.tile_size as usize;
     let mut blocks = Vec::new();
+    let mut per_block: Vec<Vec<f64>> = Vec::new();
     let mut pixels = 0usize;
     // The first block is small: its time sizes the rest so that about eight blocks fill the
     // budget (each at most an eighth of it: stopping before a block that would not fit leaves
@@ -519,9 +614,18 @@ pub fn report(input: &Input, opts: &Options, progress: &dyn Progress) -> Result<
         .cycle()
         .take(order.len() * MAX_BLOCKS)
         .enumerate();
+    if let Some((_, px)) = opts.fixed {
+        size_ix = SIZES.iter().position(|s| s.block == px).ok_or_else(|| {
+            Error::param("block_px", format!("{px} is not one of {}", block_sizes()))
+        })?;
+    }
     for (b_ix, &id) in rounds {
         let elapsed = t_all.elapsed().as_secs_f64();
-        if let Some(u) = per_unit {
+        if let Some((count, _)) = opts.fixed {
+            if blocks.len() >= count {
+                break;
+            }
+        } else if let Some(u) = per_unit {
             // Choose the largest size whose predicted time fits an eighth of the budget, then
             // stop if even that does not fit what is left.
             let cost = |s: &Size| u * work_units(s, a, variants.len());
@@ -535,6 +639,7 @@ pub fn report(input: &Input, opts: &Options, progress: &dyn Progress) -> Result<
         }
         let size = SIZES[size_ix];
         let t_block = Instant::now();
+        let before = tally.sums();
         let Some(info) = measure_block(
             input,
             id,
@@ -551,6 +656,18 @@ pub fn report(input: &Input, opts: &Options, progress: &dyn Progress) -> Result<
             continue;
         };
         let dt = t_block.elapsed().as_secs_f64();
+        let d: Vec<f64> = tally
+            .sums()
+            .iter()
+            .zip(&before)
+            .map(|(a, b)| a - b)
+            .collect();
+        per_block.push(block_figures(
+            &d,
+            HZ_METHODS.len(),
+            variants.len(),
+            smethods.len(),
+        ));
         pixels += info.strata.iter().sum::<usize>();
         progress.inc(dt.round() as u64);
         // Seconds per unit of work, from every block so far (the later ones weigh more).
@@ -578,9 +695,22 @@ pub fn report(input: &Input, opts: &Options, progress: &dyn Progress) -> Result<
         ));
     }
     progress.finish();
-    let hz_rows = horizon_rows(&tally, default_method);
-    let f_rows = fourier_rows(&tally, &variants, tile_size);
-    let s_rows = shadow_rows(&tally, &smethods, a);
+    let se = standard_errors(&per_block);
+    let (nh, nv) = (HZ_METHODS.len(), variants.len());
+    let mut hz_rows = horizon_rows(&tally, default_method);
+    for (m, r) in hz_rows.iter_mut().enumerate() {
+        r.se_rms_deg = se[m];
+    }
+    let mut f_rows = fourier_rows(&tally, &variants, tile_size);
+    for (q, r) in f_rows.iter_mut().enumerate() {
+        r.se_per_pct = se[nh + 2 * q];
+        r.se_lit_mae = se[nh + 2 * q + 1];
+    }
+    let mut s_rows = shadow_rows(&tally, &smethods, a);
+    for (m, r) in s_rows.iter_mut().enumerate() {
+        r.se_lit_mae = se[nh + 2 * nv + 2 * m];
+        r.se_per_pct = se[nh + 2 * nv + 2 * m + 1];
+    }
     let mut r = Report {
         version: 1,
         tileset: input.tileset.display().to_string(),
@@ -697,7 +827,40 @@ fn measure_block(
     for (m_ix, &m) in HZ_METHODS.iter().enumerate() {
         let t0 = Instant::now();
         let (vals, units, full) = match m {
-            HzMethod::Reference | HzMethod::Exact => {
+            HzMethod::Exact => {
+                // Over a contiguous sub-block: the method takes its first guesses from the row
+                // and column neighbours' horizons, so a pixel alone would cost it several times
+                // more. Its errors are those of the sampled pixels inside the sub-block.
+                let e = n.min(EXACT_PX);
+                // Around the first sampled pixel, so that it holds at least one.
+                let (ex, ey) = (
+                    sample[0].0.saturating_sub(e / 2).min(n - e),
+                    sample[0].1.saturating_sub(e / 2).min(n - e),
+                );
+                let sub = Rect {
+                    x0: rect.x0 + ex,
+                    y0: rect.y0 + ey,
+                    w: e,
+                    h: e,
+                };
+                let full = horizons_with(&case.ctx, sub, a, m, horizon::DEFAULT_NEAR_PX);
+                let v: Vec<f32> = sample
+                    .iter()
+                    .flat_map(|&(i, j)| {
+                        let inside = (ex..ex + e).contains(&i) && (ey..ey + e).contains(&j);
+                        let full = &full;
+                        (0..a).map(move |k| {
+                            if inside {
+                                full[k * e * e + (j - ey) * e + i - ex]
+                            } else {
+                                f32::NAN
+                            }
+                        })
+                    })
+                    .collect();
+                (v, (e * e * a) as f64, None)
+            }
+            HzMethod::Reference => {
                 let v: Vec<f32> = sample
                     .iter()
                     .flat_map(|&(i, j)| {
@@ -1066,7 +1229,7 @@ fn measure_shadows(
         } else {
             lit.len() as f64
         };
-        t.1 += dt * if matches!(m, Sm::SMap) { 1.0 } else { threads };
+        t.1 += dt * threads;
         t.2 += answers;
     }
 }
@@ -1082,6 +1245,7 @@ fn horizon_rows(t: &Tally, default: HzMethod) -> Vec<HorizonRow> {
             p99_deg: e.p99(),
             max_deg: e.max,
             core_ns: core_s / units.max(1.0) * 1e9,
+            se_rms_deg: None,
             pareto: false,
             default: m == default,
         })
@@ -1108,6 +1272,8 @@ fn fourier_rows(t: &Tally, variants: &[Variant], tile: usize) -> Vec<FourierRow>
             p99_ref_deg: f.err_ref.p99(),
             lit_mae: f.lit_abs / f.lit_n.max(1) as f64,
             per_pct: 100.0 * f.per_miss as f64 / f.per_n.max(1) as f64,
+            se_per_pct: None,
+            se_lit_mae: None,
             pareto: false,
             paper: v.is_paper(),
         })
@@ -1133,7 +1299,9 @@ fn shadow_rows(t: &Tally, smethods: &[Sm], a: usize) -> Vec<ShadowRow> {
             lit_mae: e.mae(),
             lit_max: e.max,
             per_pct: e.per(),
-            ms_per_mpx: core_s / answers.max(1.0) * 1e9 / 1e3,
+            ms_per_mpx: core_s / answers.max(1.0) * 1e9,
+            se_lit_mae: None,
+            se_per_pct: None,
             pareto: false,
         })
         .collect();
@@ -1157,14 +1325,22 @@ pub fn pareto(pts: &[(f64, f64)]) -> Vec<bool> {
         .collect()
 }
 
-/// The cheapest choice per product that meets the budget.
+/// A figure's upper bound at about 97.5 % confidence: two standard errors above it (the
+/// figure itself with one block). A recommendation meets the budget with its bound, so that
+/// it holds on another sample of the same terrain.
+fn upper(v: f64, se: Option<f64>) -> f64 {
+    v + 2.0 * se.unwrap_or(0.0)
+}
+
+/// The cheapest choice per product whose figure meets the budget with two standard errors to
+/// spare.
 fn recommend(r: &Report) -> Vec<Recommendation> {
     let mut out = Vec::new();
     // Horizon method: the lowest cost whose RMS against the reference is within the budget.
     let hz = r
         .horizons
         .iter()
-        .filter(|h| h.rms_deg <= r.max_error_deg)
+        .filter(|h| upper(h.rms_deg, h.se_rms_deg) <= r.max_error_deg)
         .min_by(|x, y| x.core_ns.total_cmp(&y.core_ns));
     out.push(Recommendation {
         product: "horizon method".into(),
@@ -1179,51 +1355,55 @@ fn recommend(r: &Report) -> Vec<Recommendation> {
         },
         setting: hz.map(|h| format!("[horizon] method = \"{}\"", h.method)),
     });
-    // Fourier: fewest bytes with PER and RMS (against the reference: what a bake from the
-    // default method gives) within budget; ties by encode time.
-    let f = r
-        .fourier
-        .iter()
-        .filter(|f| f.per_pct <= r.max_per_pct && f.rms_ref_deg <= r.max_error_deg)
-        .min_by(|x, y| {
-            x.bytes_per_tile
-                .cmp(&y.bytes_per_tile)
-                .then(x.encode_ms_per_tile.total_cmp(&y.encode_ms_per_tile))
-        });
+    // Storage: the fewest bytes whose pixel error rate at the scene's suns is within budget
+    // (the shadows it decides), among the variants a bake makes from a scene (the K of the
+    // default multires f16 layout) and, beside it, among all; ties by encode time.
+    let pick = |scene_only: bool| {
+        r.fourier
+            .iter()
+            .filter(|f| !scene_only || f.variant.ends_with(" multires f16 plain"))
+            .filter(|f| upper(f.per_pct, f.se_per_pct) <= r.max_per_pct)
+            .min_by(|x, y| {
+                x.bytes_per_tile
+                    .cmp(&y.bytes_per_tile)
+                    .then(x.encode_ms_per_tile.total_cmp(&y.encode_ms_per_tile))
+            })
+    };
+    let why = |f: Option<&FourierRow>| match f {
+        Some(f) => format!(
+            "smallest with PER ≤ {} %: PER {:.3} %, lit MAE {:.4}, RMS {:.4}° against the raw \
+             map ({:.4}° against the reference), {} bytes per tile",
+            r.max_per_pct, f.per_pct, f.lit_mae, f.rms_deg, f.rms_ref_deg, f.bytes_per_tile
+        ),
+        None => format!("no variant is within PER {} %", r.max_per_pct),
+    };
+    let f = pick(true);
     out.push(Recommendation {
         product: "horizon storage".into(),
         choice: f.map(|f| f.variant.clone()),
-        why: match f {
-            Some(f) => format!(
-                "smallest with PER ≤ {} % and RMS ≤ {}°: PER {:.3} %, RMS {:.4}° against the \
-                 reference, {} bytes per tile",
-                r.max_per_pct, r.max_error_deg, f.per_pct, f.rms_ref_deg, f.bytes_per_tile
-            ),
-            None => format!(
-                "no variant is within PER {} % and {}° RMS",
-                r.max_per_pct, r.max_error_deg
-            ),
-        },
-        setting: f.and_then(|f| {
-            f.variant
-                .strip_prefix('F')
-                .and_then(|s| s.split(' ').next())
-                .map(|k| format!("[fourier] coefficients = {k}"))
-        }),
+        why: why(f),
+        setting: f.map(|f| format!("[fourier] coefficients = {}", coefficients_of(&f.variant))),
+    });
+    let any = pick(false);
+    out.push(Recommendation {
+        product: "horizon storage, any layout".into(),
+        choice: any.map(|f| f.variant.clone()),
+        why: why(any),
+        setting: None,
     });
     // Shadows: the fastest with PER within budget (the reference excluded: it is the truth).
     let s = r
         .shadows
         .iter()
         .skip(1)
-        .filter(|s| s.per_pct <= r.max_per_pct)
+        .filter(|s| upper(s.per_pct, s.se_per_pct) <= r.max_per_pct)
         .min_by(|x, y| x.ms_per_mpx.total_cmp(&y.ms_per_mpx));
     out.push(Recommendation {
         product: "shadow method".into(),
         choice: s.map(|s| s.method.clone()),
         why: match s {
             Some(s) => format!(
-                "fastest with PER ≤ {} %: PER {:.3} %, lit MAE {:.4}, {:.0} ms per million answers",
+                "fastest with PER ≤ {} %: PER {:.3} %, lit MAE {:.4}, {:.0} core-ms per megapixel",
                 r.max_per_pct, s.per_pct, s.lit_mae, s.ms_per_mpx
             ),
             None => format!("no method is within PER {} %", r.max_per_pct),
@@ -1231,6 +1411,15 @@ fn recommend(r: &Report) -> Vec<Recommendation> {
         setting: None,
     });
     out
+}
+
+/// K of a Fourier variant's name ("F16 multires f16 plain" → 16).
+pub fn coefficients_of(variant: &str) -> usize {
+    variant
+        .strip_prefix('F')
+        .and_then(|s| s.split(' ').next())
+        .and_then(|k| k.parse().ok())
+        .unwrap_or(0)
 }
 
 /// Where the report's files go.

@@ -162,7 +162,7 @@ fn plots(r: &Report) -> Vec<Plot<'static>> {
         Plot {
             file: "report-shadows.svg",
             title: "Shadow methods: lit-fraction error against time".into(),
-            x: "ms per million (pixel, sun) answers",
+            x: "core-ms per megapixel (per pixel and sun)",
             y: "lit-fraction mean absolute error",
             points: r
                 .shadows
@@ -175,6 +175,14 @@ fn plots(r: &Report) -> Vec<Plot<'static>> {
                 .collect(),
         },
     ]
+}
+
+/// A figure with its standard error, where there is one.
+fn pm(v: f64, se: Option<f64>, digits: usize) -> String {
+    match se {
+        Some(e) => format!("{v:.digits$} ± {e:.digits$}"),
+        None => format!("{v:.digits$}"),
+    }
 }
 
 fn esc(s: &str) -> String {
@@ -209,7 +217,7 @@ fn tables(r: &Report) -> Vec<Table> {
                     vec![
                         format!("{}{}", h.method, if h.default { " (default)" } else { "" }),
                         h.samples.to_string(),
-                        format!("{:.4}", h.rms_deg),
+                        pm(h.rms_deg, h.se_rms_deg, 4),
                         format!("{:.3}", h.p99_deg),
                         format!("{:.2}", h.max_deg),
                         format!("{:.0}", h.core_ns),
@@ -245,8 +253,8 @@ fn tables(r: &Report) -> Vec<Table> {
                         format!("{:.3}", f.p99_deg),
                         format!("{:.2}", f.max_deg),
                         format!("{:.4}", f.rms_ref_deg),
-                        format!("{:.5}", f.lit_mae),
-                        format!("{:.3}", f.per_pct),
+                        pm(f.lit_mae, f.se_lit_mae, 5),
+                        pm(f.per_pct, f.se_per_pct, 3),
                         mark(f.pareto),
                     ]
                 })
@@ -261,7 +269,7 @@ fn tables(r: &Report) -> Vec<Table> {
                 "lit MAE",
                 "max",
                 "PER %",
-                "ms/M answers",
+                "core-ms/Mpx",
                 "Pareto",
             ],
             r.shadows
@@ -270,9 +278,9 @@ fn tables(r: &Report) -> Vec<Table> {
                     vec![
                         format!("{}{}", s.method, if s.hard { " (hard)" } else { "" }),
                         s.samples.to_string(),
-                        format!("{:.5}", s.lit_mae),
+                        pm(s.lit_mae, s.se_lit_mae, 5),
                         format!("{:.3}", s.lit_max),
-                        format!("{:.3}", s.per_pct),
+                        pm(s.per_pct, s.se_per_pct, 3),
                         format!("{:.0}", s.ms_per_mpx),
                         mark(s.pareto),
                     ]
@@ -312,6 +320,8 @@ fn summary_lines(r: &Report) -> Vec<String> {
             "Error budget: PER ≤ {} %, horizon RMS ≤ {}°",
             r.max_per_pct, r.max_error_deg
         ),
+        "Figures ± one standard error of the mean over the blocks (their spread over √blocks)."
+            .into(),
     ];
     v.extend(r.notes.iter().cloned());
     v
