@@ -366,3 +366,79 @@ fn report_html_shows_its_plots_in_a_headless_browser() {
         "a script error reached no console line"
     );
 }
+
+/// `[fourier] coefficients = "auto"`: `plan` takes K from the scene's report, refuses (exit 2,
+/// naming the key) a missing, damaged or other scene's report.
+#[test]
+fn plan_takes_the_reports_storage_recommendation() {
+    let tmp = tempfile::tempdir().unwrap();
+    let tiles = tileset(tmp.path());
+    let scene_text = |name: &str| {
+        format!(
+            "[scene]\nname = \"{name}\"\nbody = \"moon\"\n\n[layout]\ntile_size = 128\n\n\
+             [[source]]\nembedded = \"south-pole\"\nsize = 1024\n\n[[region]]\nname = \"all\"\n\
+             body = true\n\n[renderer]\nmethods = [\"fourier\"]\n\n[sun]\n\
+             elevation_deg = [1.0, 15.0]\n\n[fourier]\ncoefficients = \"auto\"\n\
+             report = \"rep/report.json\"\n"
+        )
+    };
+    let scene = tmp.path().join("scene.toml");
+    std::fs::write(&scene, scene_text("auto test")).unwrap();
+    let sc = scene.to_str().unwrap();
+    let refused = |needle: &str| {
+        let o = run(&["plan", sc]);
+        assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+        assert!(
+            stderr(&o).contains("fourier.coefficients"),
+            "{}",
+            stderr(&o)
+        );
+        assert!(stderr(&o).contains(needle), "{}", stderr(&o));
+    };
+    refused("penumbra report");
+    let rep = tmp.path().join("rep");
+    let r = json(&run(&[
+        "report",
+        sc,
+        "--tileset",
+        &tiles,
+        "--out",
+        rep.to_str().unwrap(),
+        "--blocks",
+        "2",
+        "--block-px",
+        "32",
+        "--max-per",
+        "5",
+        "--json",
+        "--quiet",
+    ]));
+    assert!(r["scene"].as_str().unwrap().starts_with("auto test ("));
+    let choice = rows(&r, "recommendations")
+        .iter()
+        .find(|x| x["product"] == "horizon storage")
+        .unwrap()["choice"]
+        .as_str()
+        .expect("a choice at PER ≤ 5 %")
+        .to_string();
+    assert!(choice.ends_with(" multires f16 plain"), "{choice}");
+    let k: u64 = choice[1..].split(' ').next().unwrap().parse().unwrap();
+    let plan = json(&run(&["plan", sc, "--json"]));
+    assert_eq!(
+        plan["fourier"]["coefficients"].as_u64(),
+        Some(k),
+        "{}",
+        plan["fourier"]
+    );
+    assert!(plan["fourier"]["auto_from"]
+        .as_str()
+        .unwrap()
+        .ends_with("report.json"));
+    // A report of another scene, and a damaged one.
+    let good = std::fs::read(rep.join("report.json")).unwrap();
+    std::fs::write(&scene, scene_text("another scene")).unwrap();
+    refused("not of scene 'another scene'");
+    std::fs::write(&scene, scene_text("auto test")).unwrap();
+    std::fs::write(rep.join("report.json"), &good[..good.len() / 2]).unwrap();
+    refused("not a report.json");
+}

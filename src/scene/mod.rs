@@ -160,8 +160,18 @@ struct HorizonTable {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct FourierTable {
-    coefficients: Option<Spanned<usize>>,
+    coefficients: Option<Spanned<Coefficients>>,
+    /// With `coefficients = "auto"`: the report whose recommendation gives K.
+    report: Option<Spanned<String>>,
     keep_raw: Option<Spanned<bool>>,
+}
+
+/// `coefficients = 16`, or `coefficients = "auto"` (from a `penumbra report`).
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum Coefficients {
+    K(usize),
+    Word(String),
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -367,6 +377,82 @@ pub struct HorizonSpec {
 pub struct FourierSpec {
     pub coefficients: usize,
     pub keep_raw: bool,
+    /// Where K came from with `coefficients = "auto"`: the report read.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub auto_from: Option<PathBuf>,
+    /// Why `coefficients = "auto"` found no K (no report yet, a damaged one, another
+    /// scene's): `plan` and `bake` refuse the scene with it.
+    #[serde(skip)]
+    pub auto_error: Option<String>,
+}
+
+/// The report `coefficients = "auto"` reads when the scene names none: `penumbra report`'s
+/// default output folder beside the scene file.
+pub const DEFAULT_REPORT: &str = "report/report.json";
+/// Largest report.json read (bytes).
+pub const MAX_REPORT_BYTES: u64 = 64 << 20;
+
+/// K from a `penumbra report`'s report.json: its recommendation for the horizon storage a
+/// scene can bake (the K of the multires f16 pyramids), checked to be a report of scene
+/// `name`. Errors say what is wrong with the file and what to do.
+pub fn coefficients_from_report(path: &Path, name: &str) -> std::result::Result<usize, String> {
+    let meta = std::fs::metadata(path).map_err(|e| {
+        format!(
+            "{}: {e}; run `penumbra report SCENE --tileset DIR --out {}` first",
+            path.display(),
+            path.parent()
+                .map_or(".".into(), |p| p.display().to_string())
+        )
+    })?;
+    if meta.len() > MAX_REPORT_BYTES {
+        return Err(format!(
+            "{}: larger than a report ({} bytes)",
+            path.display(),
+            meta.len()
+        ));
+    }
+    let text = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let v: serde_json::Value = serde_json::from_slice(&text)
+        .map_err(|e| format!("{}: not a report.json ({e})", path.display()))?;
+    let of = v["scene"].as_str().unwrap_or("");
+    if !(of == name || of.starts_with(&format!("{name} ("))) {
+        return Err(format!(
+            "{}: a report of {}, not of scene '{name}'; report this scene",
+            path.display(),
+            if of.is_empty() {
+                "a tileset alone".to_string()
+            } else {
+                format!("'{of}'")
+            }
+        ));
+    }
+    let rec = v["recommendations"]
+        .as_array()
+        .and_then(|a| a.iter().find(|r| r["product"] == "horizon storage"))
+        .ok_or_else(|| {
+            format!(
+                "{}: no horizon-storage recommendation in it",
+                path.display()
+            )
+        })?;
+    let Some(choice) = rec["choice"].as_str() else {
+        return Err(format!(
+            "{}: the report recommends no storage ({}); loosen --max-per or give coefficients",
+            path.display(),
+            rec["why"].as_str().unwrap_or("no reason given")
+        ));
+    };
+    choice
+        .strip_prefix('F')
+        .and_then(|s| s.split(' ').next())
+        .and_then(|k| k.parse::<usize>().ok())
+        .filter(|&k| k >= 1)
+        .ok_or_else(|| {
+            format!(
+                "{}: recommendation '{choice}' is not a Fourier variant",
+                path.display()
+            )
+        })
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -854,11 +940,42 @@ fn check(raw: File, here: &Here) -> Result<Scene> {
             .coefficients
             .min(horizon.azimuths / 2 + 1),
         keep_raw: false,
+        auto_from: None,
+        auto_error: None,
     };
     if let Some(f) = &raw.fourier {
         let f = f.get_ref();
         if let Some(k) = &f.coefficients {
-            fourier.coefficients = *k.get_ref();
+            fourier.coefficients = match k.get_ref() {
+                Coefficients::K(k) => *k,
+                Coefficients::Word(w) if w == "auto" => {
+                    let rel = f
+                        .report
+                        .as_ref()
+                        .map_or(DEFAULT_REPORT, |r| r.get_ref().as_str());
+                    let path = resolve(file, rel);
+                    fourier.auto_from = Some(path.clone());
+                    // Kept, not raised: `penumbra report` reads this scene to make the very
+                    // report K comes from; `plan` and `bake` refuse it ([`plan::plan`]).
+                    match coefficients_from_report(&path, &name) {
+                        Ok(k) => k,
+                        Err(e) => {
+                            fourier.auto_error = Some(format!(
+                                "line {}, key `fourier.coefficients`: {e}",
+                                here.line(k.span().start)
+                            ));
+                            fourier.coefficients
+                        }
+                    }
+                }
+                Coefficients::Word(w) => {
+                    return Err(here.err(
+                        k,
+                        "fourier.coefficients",
+                        format!("'{w}': give a number of coefficients or \"auto\""),
+                    ))
+                }
+            };
             if fourier.coefficients == 0 || fourier.coefficients > horizon.azimuths / 2 + 1 {
                 return Err(here.err(
                     k,
@@ -870,6 +987,19 @@ fn check(raw: File, here: &Here) -> Result<Scene> {
                     ),
                 ));
             }
+        }
+        if let (Some(r), false) = (
+            &f.report,
+            matches!(
+                f.coefficients.as_ref().map(|c| c.get_ref()),
+                Some(Coefficients::Word(_))
+            ),
+        ) {
+            return Err(here.err(
+                r,
+                "fourier.report",
+                "is read only with coefficients = \"auto\"",
+            ));
         }
         if let Some(k) = &f.keep_raw {
             fourier.keep_raw = *k.get_ref();

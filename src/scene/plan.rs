@@ -223,6 +223,8 @@ pub struct PlanReport<'a> {
     pub stages: Vec<&'static str>,
     pub tiles: BTreeMap<u8, u64>,
     pub horizon_levels: &'a [u8],
+    /// The Fourier pyramids' K, and the report it came from with `coefficients = "auto"`.
+    pub fourier: &'a super::FourierSpec,
     pub products: &'a [ProductPlan],
     pub left_out: &'a [LeftOut],
     pub made: Totals,
@@ -264,6 +266,9 @@ pub struct Totals {
 /// Plan `scene`.
 pub fn plan(scene: &Scene) -> Result<Plan> {
     let file = scene.file.clone();
+    if let Some(e) = &scene.fourier.auto_error {
+        return Err(Error::invalid(&file, e.clone()));
+    }
     let line_err = |line: usize, key: &str, msg: String| {
         Error::invalid(&file, format!("line {line}, key `{key}`: {msg}"))
     };
@@ -939,6 +944,7 @@ impl Plan {
             stages: self.stages(),
             tiles,
             horizon_levels: &self.horizon_levels,
+            fourier: &self.scene.fourier,
             products: &self.products,
             left_out: &self.left_out,
             made,

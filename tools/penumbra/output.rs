@@ -742,6 +742,14 @@ pub fn print_plan(plan: &penumbra::scene::plan::Plan, wall_s: f64, json: bool) -
     if !r.horizon_levels.is_empty() && r.stages.len() > 2 {
         writeln!(out, "horizon levels: {:?}", r.horizon_levels)?;
     }
+    if let Some(from) = &r.fourier.auto_from {
+        writeln!(
+            out,
+            "fourier: K = {} (auto: the storage {} recommends)",
+            r.fourier.coefficients,
+            from.display()
+        )?;
+    }
     if let (Some(lo), Some(rad)) = (r.sun_lowest_deg, r.sun_radius_deg) {
         writeln!(
             out,
