@@ -86,3 +86,6 @@ mod package;
 // cluster (skipped without Slurm, failed under CI) running the chain to one bake's bytes, a
 // requeued array task resuming its shard.
 mod slurm;
+// The stress catalogue (docs/stress.md): every stiff and extreme case as its own test, the
+// weakened kernels failing them, and `penumbra stress` (exit 0, 1, 2).
+mod stress;

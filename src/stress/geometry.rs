@@ -6,7 +6,7 @@ use crate::fourier::sun::{Frame, Sun};
 use crate::horizon::{self, Context, Method, Rect};
 use crate::shadow::trace::{self, Runs, Tracer, Work};
 
-use super::Weaken;
+use super::types::Weaken;
 
 pub(crate) const MOON_R: f64 = 1_737_400.0;
 pub(crate) const MARS_R: f64 = 3_396_190.0;
