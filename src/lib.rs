@@ -32,6 +32,7 @@ pub mod runner;
 pub mod scene;
 pub mod shadow;
 pub mod sink;
+pub mod stress;
 pub mod synthetic;
 pub mod tileset;
 pub mod tiling;

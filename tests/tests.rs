@@ -90,3 +90,6 @@ mod slurm;
 // `penumbra report`: every method against the reference on a tileset, the recommendation on a
 // second sample, bad input, and report.html in a headless browser.
 mod report;
+// The stress catalogue (docs/stress.md): every stiff and extreme case as its own test, the
+// weakened kernels failing them, and `penumbra stress` (exit 0, 1, 2).
+mod stress;

@@ -1118,3 +1118,83 @@ pub fn print_report(r: &crate::report::Report, out: &Path, json: bool) -> Result
     }
     Ok(())
 }
+
+/// The stress catalogue's rows: a table (case, quantity, error, bound, pass) and the failing
+/// rows named on stderr, or JSON (`size`, `weaken`, `wall_s`, `passed`, `rows`).
+pub fn print_stress(
+    rows: &[penumbra::stress::Row],
+    size: penumbra::stress::Size,
+    weaken: penumbra::stress::Weaken,
+    wall_s: f64,
+    json: bool,
+) -> Result<()> {
+    let failed: Vec<_> = rows.iter().filter(|r| !r.pass).collect();
+    if json {
+        return print_json(&serde_json::json!({
+            "size": size,
+            "weaken": weaken,
+            "wall_s": wall_s,
+            "passed": failed.is_empty(),
+            "rows": rows,
+        }));
+    }
+    let mut o = std::io::stdout().lock();
+    writeln!(
+        o,
+        "{:<28} {:<44} {:>10} {:>10} {:<5} {:<4}",
+        "case", "quantity", "error", "bound", "unit", "pass"
+    )?;
+    for r in rows {
+        let pass = if r.pass { "ok" } else { "FAIL" };
+        let nonfinite = if r.nonfinite > 0 {
+            format!(" ({} NaN/Inf)", r.nonfinite)
+        } else {
+            String::new()
+        };
+        writeln!(
+            o,
+            "{:<28} {:<44} {:>10} {:>10} {:<5} {pass}{nonfinite}",
+            r.case,
+            r.quantity,
+            sci(r.error),
+            sci(r.bound),
+            r.unit
+        )?;
+    }
+    writeln!(
+        o,
+        "{} rows, {} failed, {wall_s:.2} s ({})",
+        rows.len(),
+        failed.len(),
+        match size {
+            penumbra::stress::Size::Short => "short sizes",
+            penumbra::stress::Size::Full => "full sizes",
+        }
+    )?;
+    o.flush()?;
+    for r in &failed {
+        eprintln!(
+            "penumbra: stress: {} / {}: error {} {} exceeds its bound {}{}",
+            r.case,
+            r.quantity,
+            sci(r.error),
+            r.unit,
+            sci(r.bound),
+            if r.nonfinite > 0 {
+                format!(", {} NaN/Inf", r.nonfinite)
+            } else {
+                String::new()
+            }
+        );
+    }
+    Ok(())
+}
+
+/// A number in 3 significant digits, scientific ("1.23e-4"), 0 as "0".
+fn sci(v: f64) -> String {
+    if v == 0.0 {
+        "0".into()
+    } else {
+        format!("{v:.2e}")
+    }
+}
