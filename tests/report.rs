@@ -142,6 +142,39 @@ fn report_measures_every_method_against_the_reference_and_writes_its_files() {
     assert_eq!(html.matches("<svg").count(), 3);
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(md.contains("![") && md.contains("| variant |"));
+    // Another budget without another sample: the measurements stay, the choices follow it.
+    let again = tmp.path().join("again");
+    let loose = json(&run(&[
+        "report",
+        "--from",
+        out.join("report.json").to_str().unwrap(),
+        "--out",
+        again.to_str().unwrap(),
+        "--max-per",
+        "50",
+        "--json",
+        "--quiet",
+    ]));
+    assert_eq!(loose["fourier"], r["fourier"]);
+    assert_eq!(num(&loose, "max_per_pct"), 50.0);
+    let storage = rows(&loose, "recommendations")
+        .iter()
+        .find(|x| x["product"] == "horizon storage, any layout")
+        .unwrap()["choice"]
+        .clone();
+    // At 50 % every variant qualifies: the smallest is a 4-coefficient pyramid or classic 8.
+    let smallest = f
+        .iter()
+        .min_by_key(|x| x["bytes_per_tile"].as_u64().unwrap())
+        .unwrap();
+    assert_eq!(
+        num(
+            f.iter().find(|x| x["variant"] == storage).unwrap(),
+            "bytes_per_tile"
+        ),
+        num(smallest, "bytes_per_tile")
+    );
+    assert!(again.join("report.html").is_file());
 }
 
 /// What the report recommends for a budget meets that budget on another sample of pixels
@@ -273,6 +306,9 @@ fn bad_report_input_exits_2_and_writes_nothing() {
             "--tileset only with a scene",
         ),
         (vec!["report"], "--tileset"),
+        (vec!["report", "--from", missing], "nothing-here"),
+        (vec!["report", "--from", scene], "not a report.json"),
+        (vec!["report", "--from", scene, &tiles], "--from"),
     ] {
         let mut a = args.clone();
         a.extend(["--out", o]);

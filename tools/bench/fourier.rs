@@ -586,15 +586,7 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
         let elev = horizons_with(&case.ctx, case.rect, a, Method::Fast, DEFAULT_NEAR_PX);
         let t_h = t0.elapsed().as_secs_f64();
         let per_tile = (TILE * TILE) as f64 / (n * n) as f64;
-        let tile = HeightTile {
-            size: n,
-            height: (0..n * n)
-                .map(|p| {
-                    case.ctx.heights[(case.rect.y0 + p / n) * case.ctx.width + case.rect.x0 + p % n]
-                })
-                .collect(),
-            mask: vec![0; n * n],
-        };
+        let tile = case.block_tile();
         let floor_enc = Encoder::for_tiles(
             &FourierOptions::default(),
             n,
@@ -627,21 +619,8 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
         for &v in &variants {
             let tv = Instant::now();
             let (t_c, m) = match v {
-                Variant::Fourier {
-                    k,
-                    encoding,
-                    layout,
-                    sigma,
-                    reduce,
-                } => {
-                    let opts = FourierOptions {
-                        coefficients: k,
-                        layout,
-                        encoding,
-                        sigma,
-                        reduce,
-                        ..Default::default()
-                    };
+                Variant::Fourier { .. } => {
+                    let opts = v.options().expect("a Fourier variant");
                     let enc =
                         Encoder::for_tiles(&opts, n, 0, a, case.ctx.radius_m, case.terrain_min_m);
                     let mut best = f64::INFINITY;

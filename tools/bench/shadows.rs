@@ -14,7 +14,6 @@ use anyhow::{bail, Result};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use penumbra::format::height::HeightTile;
 use penumbra::fourier::stage::{Encoder, FourierOptions};
 use penumbra::fourier::sun::{lit_fraction, sun_radius_deg, Frame, Model, Sun};
 use penumbra::fourier::{evaluate, Pyramid};
@@ -147,7 +146,7 @@ fn bake(case: &Case) -> Baked {
         DEFAULT_NEAR_PX,
     );
     let bake_s = t0.elapsed().as_secs_f64();
-    let tile = block_tile(case);
+    let tile = case.block_tile();
     let enc = Encoder::for_tiles(
         &FourierOptions::default(),
         n,
@@ -521,7 +520,7 @@ fn mask_runs(
         HzMethod::Fast,
         DEFAULT_NEAR_PX,
     );
-    let tile = block_tile(&case);
+    let tile = case.block_tile();
     let enc = Encoder::for_tiles(
         &FourierOptions::default(),
         n,
@@ -607,20 +606,6 @@ fn mask_runs(
         }
     }
     Ok((out, bake_s))
-}
-
-/// The height tile of a case's block (for the encoder's floor and no-data pixels).
-fn block_tile(case: &Case) -> HeightTile {
-    let n = case.rect.w;
-    HeightTile {
-        size: n,
-        height: (0..n * n)
-            .map(|p| {
-                case.ctx.heights[(case.rect.y0 + p / n) * case.ctx.width + case.rect.x0 + p % n]
-            })
-            .collect(),
-        mask: vec![0; n * n],
-    }
 }
 
 /// Pictures of one sun over a 256² block of the embedded scene: the reference, DP, the

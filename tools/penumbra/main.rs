@@ -293,6 +293,10 @@ struct ReportArgs {
     /// Print the report as JSON instead of the summary table.
     #[arg(long)]
     json: bool,
+    /// Measure nothing: write the report of this report.json again, its recommendations for
+    /// --max-per and --max-error-deg (another error budget without another sample).
+    #[arg(long, value_name = "REPORT_JSON", conflicts_with_all = ["input", "tileset", "blocks", "budget_s", "seed", "level"])]
+    from: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -1115,6 +1119,12 @@ fn report(a: &ReportArgs, progress: &output::Bars) -> Result<penumbra_cli::repor
     check("budget_s", a.budget_s, rp::BUDGET_S)?;
     check("max_per", a.max_per, rp::MAX_PER_PCT)?;
     check("max_error_deg", a.max_error_deg, rp::MAX_ERROR_DEG)?;
+    if let Some(from) = &a.from {
+        let mut r = rp::read(from)?;
+        rp::rebudget(&mut r, a.max_per, a.max_error_deg);
+        rp::render::write(&r, &a.out)?;
+        return Ok(r);
+    }
     let (scene, tileset) = match (&a.input, &a.tileset) {
         (Some(p), None) if p.is_dir() => (None, p.clone()),
         (Some(p), Some(_)) if p.is_dir() => {

@@ -10,6 +10,8 @@ use serde::Serialize;
 
 use penumbra::cube::{Face, Vec3};
 use penumbra::format::fourier::file_bytes;
+use penumbra::format::height::HeightTile;
+use penumbra::fourier::stage::FourierOptions;
 use penumbra::fourier::sun::{lit_fraction, Frame, Model, Sun};
 use penumbra::fourier::{evaluate, Encoding, Layout, Pyramid, Reduce, Sigma};
 use penumbra::horizon::{Context as HzContext, Rect};
@@ -73,6 +75,50 @@ pub struct Case {
     pub note: String,
 }
 
+impl Case {
+    /// A case of a real terrain's block, with no stiff-case extras.
+    pub fn real(
+        name: String,
+        body: &'static str,
+        pixel_m: f64,
+        ctx: HzContext,
+        rect: Rect,
+    ) -> Case {
+        let terrain_min_m = ctx
+            .heights
+            .iter()
+            .filter(|v| v.is_finite())
+            .fold(f64::INFINITY, |m, &v| m.min(v as f64));
+        Case {
+            name,
+            real: true,
+            body,
+            pixel_m,
+            ctx,
+            rect,
+            terrain_min_m,
+            special: Vec::new(),
+            extra_frames: Vec::new(),
+            note: String::new(),
+        }
+    }
+
+    /// The block's heights as a height tile without halo (what the Fourier encoder reads for
+    /// the floor and the no-data pixels).
+    pub fn block_tile(&self) -> HeightTile {
+        let n = self.rect.w;
+        HeightTile {
+            size: n,
+            height: (0..n * n)
+                .map(|p| {
+                    self.ctx.heights[(self.rect.y0 + p / n) * self.ctx.width + self.rect.x0 + p % n]
+                })
+                .collect(),
+            mask: vec![0; n * n],
+        }
+    }
+}
+
 /// A case from a DEM: a `block`² block of observers at the map's centre, in a context reaching
 /// as far as a horizon could see, on a face plane whose pixels are the map's.
 pub fn dem_case(label: &str, dem: &penumbra::dem::Dem, body: &'static str, block: usize) -> Case {
@@ -101,10 +147,6 @@ pub fn dem_case(label: &str, dem: &penumbra::dem::Dem, body: &'static str, block
     for r in cy0..cy1 {
         heights.extend_from_slice(&all[r * w + cx0..r * w + cx1]);
     }
-    let terrain_min_m = heights
-        .iter()
-        .filter(|v| v.is_finite())
-        .fold(f64::INFINITY, |m, &v| m.min(v as f64));
     let s = (2.0 * radius_m / pixel_m).round();
     let si = s as i64;
     let ctx = HzContext {
@@ -131,16 +173,8 @@ pub fn dem_case(label: &str, dem: &penumbra::dem::Dem, body: &'static str, block
         )
     };
     Case {
-        name: label.into(),
-        real: true,
-        body,
-        pixel_m,
-        ctx,
-        rect,
-        terrain_min_m,
-        special: Vec::new(),
-        extra_frames: Vec::new(),
         note,
+        ..Case::real(label.into(), body, pixel_m, ctx, rect)
     }
 }
 
@@ -422,6 +456,27 @@ impl Variant {
                 if reduce == Reduce::Fit { " fit" } else { "" }
             ),
             Variant::Classic(n) => format!("classic {n}"),
+        }
+    }
+
+    /// The encoder's options of a Fourier variant (None: a classic map).
+    pub fn options(self) -> Option<FourierOptions> {
+        match self {
+            Variant::Fourier {
+                k,
+                encoding,
+                layout,
+                sigma,
+                reduce,
+            } => Some(FourierOptions {
+                coefficients: k,
+                layout,
+                encoding,
+                sigma,
+                reduce,
+                ..Default::default()
+            }),
+            Variant::Classic(_) => None,
         }
     }
 

@@ -18,7 +18,6 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use penumbra::error::{Error, Result};
-use penumbra::format::height::HeightTile;
 use penumbra::fourier::stage::{Encoder, FourierOptions};
 use penumbra::fourier::sun::{lit_fraction, sun_distance_au, sun_radius_deg, Frame, Model, Sun};
 use penumbra::fourier::{evaluate, Pyramid};
@@ -43,6 +42,9 @@ pub const DEFAULT_AZIMUTHS: usize = 360;
 /// Default sun elevations (degrees) and compass azimuths where no scene gives them: the
 /// benchmarks' (docs/fourier-bench.md, docs/shadows.md).
 pub const DEFAULT_SUN_EL: [f64; 3] = [1.0, 5.0, 15.0];
+/// The shadow benchmark's elevations (docs/shadows.md), where no scene gives them: the
+/// Fourier ones and a high sun.
+pub const DEFAULT_SHADOW_SUN_EL: [f64; 4] = [1.0, 5.0, 15.0, 45.0];
 pub const SUN_AZ: [f64; 8] = [17.0, 62.0, 107.0, 152.0, 197.0, 242.0, 287.0, 332.0];
 /// Strata of the sample: three slope classes × near or far from the data's edge.
 const EDGE_PX: usize = 16;
@@ -96,7 +98,9 @@ pub struct Report {
     pub level: u8,
     pub tile_size: u32,
     pub azimuths: usize,
+    /// Sun elevations of the horizon-storage figures and of the shadow figures (degrees).
     pub sun_elevations_deg: Vec<f64>,
+    pub shadow_sun_elevations_deg: Vec<f64>,
     pub sun_azimuths_deg: Vec<f64>,
     pub sun_radius_deg: f64,
     pub max_per_pct: f64,
@@ -569,6 +573,11 @@ pub fn report(input: &Input, opts: &Options, progress: &dyn Progress) -> Result<
         a
     };
     let (sun_el, sun_az) = suns_of(input.scene, &mut notes);
+    let shadow_el = if input.scene.and_then(|s| s.sun.as_ref()).is_some() {
+        sun_el.clone()
+    } else {
+        DEFAULT_SHADOW_SUN_EL.to_vec()
+    };
     let body = ts.body.name.clone();
     let radius_m = ts.body.radius_m;
     let sun_r = sun_radius_deg(sun_distance_au(&body).unwrap_or(1.0));
@@ -645,7 +654,7 @@ pub fn report(input: &Input, opts: &Options, progress: &dyn Progress) -> Result<
             id,
             size,
             a,
-            (&sun_el, &sun_az, sun_r),
+            (&sun_el, &shadow_el, &sun_az, sun_r),
             default_method,
             &variants,
             &smethods,
@@ -723,6 +732,7 @@ pub fn report(input: &Input, opts: &Options, progress: &dyn Progress) -> Result<
         tile_size: tile_size as u32,
         azimuths: a,
         sun_elevations_deg: sun_el,
+        shadow_sun_elevations_deg: shadow_el,
         sun_azimuths_deg: sun_az,
         sun_radius_deg: sun_r,
         max_per_pct: opts.max_per_pct,
@@ -752,7 +762,9 @@ fn work_units(s: &Size, a: usize, variants: usize) -> f64 {
     block + sampled
 }
 
-type SunSet<'a> = (&'a [f64], &'a [f64], f64);
+/// Sun elevations for the storage figures, for the shadow figures, compass azimuths (degrees),
+/// and the sun's angular radius.
+type SunSet<'a> = (&'a [f64], &'a [f64], &'a [f64], f64);
 
 /// Measure one block of tile `id`; None when it has no data.
 #[allow(clippy::too_many_arguments)]
@@ -801,23 +813,7 @@ fn measure_block(
     if sample.is_empty() {
         return Ok(None);
     }
-    let terrain_min_m = ctx
-        .heights
-        .iter()
-        .filter(|v| v.is_finite())
-        .fold(f64::INFINITY, |m, &v| m.min(v as f64));
-    let case = Case {
-        name: id.to_string(),
-        real: true,
-        body: "",
-        pixel_m,
-        ctx,
-        rect,
-        terrain_min_m,
-        special: Vec::new(),
-        extra_frames: Vec::new(),
-        note: String::new(),
-    };
+    let case = Case::real(id.to_string(), "", pixel_m, ctx, rect);
     let threads = rayon::current_num_threads() as f64;
     let plane = n * n;
     // Horizons: the reference and the exact method at the sampled pixels (each pixel alone),
@@ -949,21 +945,13 @@ fn measure_fourier(
     sample: &[(usize, usize)],
     lit_pixels: usize,
     a: usize,
-    (sun_el, _, sun_r): SunSet,
+    (sun_el, _, _, sun_r): SunSet,
     variants: &[Variant],
     tally: &mut Tally,
 ) {
     let n = case.rect.w;
     let plane = n * n;
-    let tile = HeightTile {
-        size: n,
-        height: (0..plane)
-            .map(|p| {
-                case.ctx.heights[(case.rect.y0 + p / n) * case.ctx.width + case.rect.x0 + p % n]
-            })
-            .collect(),
-        mask: vec![0; plane],
-    };
+    let tile = case.block_tile();
     let floor_enc = Encoder::for_tiles(
         &FourierOptions::default(),
         n,
@@ -1020,21 +1008,8 @@ fn measure_fourier(
     for (v_ix, &v) in variants.iter().enumerate() {
         let t0 = Instant::now();
         let (pyr, classic): (Option<Pyramid>, Option<(Vec<f32>, usize)>) = match v {
-            Variant::Fourier {
-                k,
-                encoding,
-                layout,
-                sigma,
-                reduce,
-            } => {
-                let opts = FourierOptions {
-                    coefficients: k,
-                    layout,
-                    encoding,
-                    sigma,
-                    reduce,
-                    ..Default::default()
-                };
+            Variant::Fourier { .. } => {
+                let opts = v.options().expect("a Fourier variant");
                 let enc = Encoder::for_tiles(&opts, n, 0, a, case.ctx.radius_m, case.terrain_min_m);
                 let (p, _) = enc.encode(raw, &tile);
                 std::hint::black_box(p.encode().len());
@@ -1117,7 +1092,7 @@ fn measure_shadows(
     raw: &[f32],
     sample: &[(usize, usize)],
     a: usize,
-    (sun_el, sun_az, sun_r): SunSet,
+    (_, sun_el, sun_az, sun_r): SunSet,
     (u, v): (f64, f64),
     smethods: &[Sm],
     tally: &mut Tally,
@@ -1143,13 +1118,7 @@ fn measure_shadows(
         case.ctx.radius_m,
         case.terrain_min_m,
     );
-    let tile = HeightTile {
-        size: n,
-        height: (0..plane)
-            .map(|p| case.ctx.heights[(rect.y0 + p / n) * case.ctx.width + rect.x0 + p % n])
-            .collect(),
-        mask: vec![0; plane],
-    };
+    let tile = case.block_tile();
     let (pyramid, _) = floor_enc.encode(raw, &tile);
     let threads = rayon::current_num_threads() as f64;
     let mut truth: Vec<f32> = Vec::new();
@@ -1411,6 +1380,42 @@ fn recommend(r: &Report) -> Vec<Recommendation> {
         setting: None,
     });
     out
+}
+
+/// Largest report.json read back (bytes).
+pub const MAX_REPORT_BYTES: u64 = 64 << 20;
+
+/// A report.json read back (`penumbra report --from`). Errors: unreadable, too large, or not
+/// a report of this version.
+pub fn read(path: &Path) -> Result<Report> {
+    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    if meta.len() > MAX_REPORT_BYTES {
+        return Err(Error::invalid(
+            path,
+            format!("{} bytes: larger than any report.json", meta.len()),
+        ));
+    }
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let r: Report = serde_json::from_slice(&bytes).map_err(|e| {
+        Error::invalid(
+            path,
+            format!("not a report.json of this penumbra ({e}): run `penumbra report` again"),
+        )
+    })?;
+    if r.version != 1 {
+        return Err(Error::invalid(
+            path,
+            format!("report version {} (this penumbra writes 1)", r.version),
+        ));
+    }
+    Ok(r)
+}
+
+/// The recommendations of `r` for another error budget (the measurements stay).
+pub fn rebudget(r: &mut Report, max_per_pct: f64, max_error_deg: f64) {
+    r.max_per_pct = max_per_pct;
+    r.max_error_deg = max_error_deg;
+    r.recommendations = recommend(r);
 }
 
 /// K of a Fourier variant's name ("F16 multires f16 plain" → 16).

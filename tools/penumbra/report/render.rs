@@ -53,8 +53,8 @@ fn draw(p: &Plot) -> std::result::Result<String, String> {
             .configure_mesh()
             .x_desc(p.x)
             .y_desc(p.y)
-            .x_label_formatter(&|v| format!("{v:e}"))
-            .y_label_formatter(&|v| format!("{v:e}"))
+            .x_label_formatter(&|v| format!("{v:.0e}"))
+            .y_label_formatter(&|v| format!("{v:.0e}"))
             .draw()
             .map_err(|e| e.to_string())?;
         let mut front: Vec<(f64, f64)> = p
@@ -89,14 +89,24 @@ fn draw(p: &Plot) -> std::result::Result<String, String> {
             .map_err(|e| e.to_string())?
             .label("recommended / default")
             .legend(|(x, y)| TriangleMarker::new((x + 9, y), 6, GREEN.filled()));
-        chart
-            .draw_series(
-                p.points
-                    .iter()
-                    .filter(|q| q.3 || q.4)
-                    .map(|q| Text::new(q.2.clone(), (q.0, clamp(q.1)), ("sans-serif", 11))),
-            )
-            .map_err(|e| e.to_string())?;
+        // One label per spot: variants that tie (F4 in every layout) would print on top of
+        // each other.
+        let mut labelled: Vec<(f64, f64)> = Vec::new();
+        let mut labels = Vec::new();
+        for q in p.points.iter().filter(|q| q.3 || q.4) {
+            let near = |&(x, y): &(f64, f64)| {
+                (x / q.0).ln().abs() < 0.05 && (y / clamp(q.1)).ln().abs() < 0.05
+            };
+            if q.4 || !labelled.iter().any(near) {
+                labelled.push((q.0, clamp(q.1)));
+                labels.push(Text::new(
+                    q.2.clone(),
+                    (q.0, clamp(q.1)),
+                    ("sans-serif", 11),
+                ));
+            }
+        }
+        chart.draw_series(labels).map_err(|e| e.to_string())?;
         chart
             .configure_series_labels()
             .background_style(WHITE.mix(0.85))
@@ -116,6 +126,8 @@ fn plots(r: &Report) -> Vec<Plot<'static>> {
             .find(|x| x.product == product)
             .and_then(|x| x.choice.clone())
     };
+    // The reference is the truth (error 0 by definition): it is in the tables, not on a log
+    // axis.
     let (hz, fs, sh) = (
         rec("horizon method"),
         rec("horizon storage"),
@@ -133,6 +145,7 @@ fn plots(r: &Report) -> Vec<Plot<'static>> {
             points: r
                 .horizons
                 .iter()
+                .filter(|h| h.method != "reference")
                 .map(|h| {
                     let hi = hz.as_deref() == Some(h.method.as_str());
                     (h.core_ns, h.rms_deg, h.method.clone(), h.pareto, hi)
@@ -302,8 +315,9 @@ fn summary_lines(r: &Report) -> Vec<String> {
             r.body, r.radius_m, r.level, r.tile_size, r.azimuths
         ),
         format!(
-            "Suns: elevations {:?}° at compass azimuths {:?}°; the sun's radius {:.3}°",
-            r.sun_elevations_deg, r.sun_azimuths_deg, r.sun_radius_deg
+            "Suns: elevations {:?}° (storage) and {:?}° (shadows) at compass azimuths {:?}°; \
+             the sun's radius {:.3}°",
+            r.sun_elevations_deg, r.shadow_sun_elevations_deg, r.sun_azimuths_deg, r.sun_radius_deg
         ),
         format!(
             "Sample: {} pixels in {} blocks (seed {}), stratified by slope and by distance to \
