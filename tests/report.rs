@@ -218,49 +218,24 @@ fn recommendation_holds_on_an_independent_sample() {
         let Some(choice) = rec["choice"].as_str() else {
             continue;
         };
-        match rec["product"].as_str().unwrap() {
-            "horizon method" => {
-                let h = rows(&second, "horizons")
-                    .iter()
-                    .find(|h| h["method"] == choice)
-                    .unwrap();
-                assert!(
-                    num(h, "rms_deg") <= 0.1,
-                    "{choice} on the second sample: {h}"
-                );
+        // Which rows of the second report the product's choice is in, by which key, and
+        // the figure the budget bounds.
+        let (table, key, figure, bound) = match rec["product"].as_str().unwrap() {
+            "horizon method" => ("horizons", "method", "rms_deg", 0.1),
+            "horizon storage" | "horizon storage, any layout" => {
+                ("fourier", "variant", "per_pct", 3.0)
             }
-            "horizon storage" => {
-                let f = rows(&second, "fourier")
-                    .iter()
-                    .find(|f| f["variant"] == choice)
-                    .unwrap();
-                assert!(
-                    num(f, "per_pct") <= 3.0,
-                    "{choice} on the second sample: {f}"
-                );
-            }
-            "horizon storage, any layout" => {
-                let f = rows(&second, "fourier")
-                    .iter()
-                    .find(|f| f["variant"] == choice)
-                    .unwrap();
-                assert!(
-                    num(f, "per_pct") <= 3.0,
-                    "{choice} on the second sample: {f}"
-                );
-            }
-            "shadow method" => {
-                let s = rows(&second, "shadows")
-                    .iter()
-                    .find(|s| s["method"] == choice)
-                    .unwrap();
-                assert!(
-                    num(s, "per_pct") <= 3.0,
-                    "{choice} on the second sample: {s}"
-                );
-            }
+            "shadow method" => ("shadows", "method", "per_pct", 3.0),
             p => panic!("unknown product {p}"),
-        }
+        };
+        let row = rows(&second, table)
+            .iter()
+            .find(|x| x[key] == choice)
+            .unwrap_or_else(|| panic!("{choice} not in the second report's {table}"));
+        assert!(
+            num(row, figure) <= bound,
+            "{choice} on the second sample: {row}"
+        );
         checked += 1;
     }
     assert_eq!(
