@@ -108,6 +108,13 @@ fn report_measures_every_method_against_the_reference_and_writes_its_files() {
     for h in hz {
         assert!(num(h, "core_ns") > 0.0, "{h}");
         assert!(num(h, "samples") > 0.0, "{h}");
+        // The strata partition the samples, and the worst one holds the maximum.
+        let st = h["strata"].as_array().unwrap();
+        assert_eq!(st.len(), 6);
+        let total: f64 = st.iter().map(|x| num(x, "samples")).sum();
+        assert_eq!(total, num(h, "samples"), "{h}");
+        let worst = st.iter().map(|x| num(x, "max_deg")).fold(0.0, f64::max);
+        assert_eq!(worst, num(h, "max_deg"), "{h}");
     }
     // 4 K × 2 encodings × (2 layouts × 2 tapers + fitted) + classic 8 and 12.
     let f = rows(&r, "fourier");
@@ -452,4 +459,46 @@ fn plan_takes_the_reports_storage_recommendation() {
     std::fs::write(&scene, scene_text("auto test")).unwrap();
     std::fs::write(rep.join("report.json"), &good[..good.len() / 2]).unwrap();
     refused("not a report.json");
+}
+
+/// A scene whose sun is a time span: the report's suns are the elevations the sun takes over
+/// the sampled tiles during it (a south-polar scene: low suns), not the benchmarks' defaults.
+#[test]
+fn a_time_span_sun_gives_the_spans_elevations() {
+    let tmp = tempfile::tempdir().unwrap();
+    let tiles = tileset(tmp.path());
+    let scene = tmp.path().join("span.toml");
+    std::fs::write(
+        &scene,
+        "[scene]\nname = \"span\"\nbody = \"moon\"\n\n[layout]\ntile_size = 128\n\n\
+         [[source]]\nembedded = \"south-pole\"\nsize = 1024\n\n[[region]]\nname = \"all\"\n\
+         body = true\n\n[renderer]\nmethods = [\"dp\"]\n\n[sun]\n\
+         start = \"2027-01-01T00:00:00Z\"\nend = \"2027-02-01T00:00:00Z\"\n",
+    )
+    .unwrap();
+    let r = json(&run(&[
+        "report",
+        scene.to_str().unwrap(),
+        "--tileset",
+        &tiles,
+        "--out",
+        tmp.path().join("rep").to_str().unwrap(),
+        "--blocks",
+        "1",
+        "--block-px",
+        "24",
+        "--json",
+        "--quiet",
+    ]));
+    let el: Vec<f64> = r["sun_elevations_deg"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    // Near the south pole the sun stays within ±(1.54° + the pole's distance) of the horizon.
+    assert!(!el.is_empty() && el.iter().all(|e| e.abs() < 3.0), "{el:?}");
+    assert_eq!(r["shadow_sun_elevations_deg"], r["sun_elevations_deg"]);
+    let notes = r["notes"].to_string();
+    assert!(notes.contains("time span"), "{notes}");
 }

@@ -142,9 +142,31 @@ pub struct HorizonRow {
     pub core_ns: f64,
     /// Standard error of `rms_deg` from the spread between blocks (None: one block).
     pub se_rms_deg: Option<f64>,
+    /// The same per stratum of the sample ([`STRATA`]).
+    #[serde(default)]
+    pub strata: Vec<StratumFigures>,
     pub pareto: bool,
     pub default: bool,
 }
+
+/// A horizon method's errors in one stratum of the sample.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct StratumFigures {
+    pub stratum: String,
+    pub samples: u64,
+    pub rms_deg: f64,
+    pub max_deg: f64,
+}
+
+/// The sample's strata, in the order the sample lists them.
+pub const STRATA: [&str; 6] = [
+    "low slope, inland",
+    "mid slope, inland",
+    "steep, inland",
+    "low slope, near an edge",
+    "mid slope, near an edge",
+    "steep, near an edge",
+];
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct FourierRow {
@@ -195,8 +217,25 @@ pub struct Recommendation {
     pub setting: Option<String>,
 }
 
-/// The suns a report uses: elevations (degrees) and compass azimuths (degrees).
-fn suns_of(scene: Option<&Scene>, notes: &mut Vec<String>) -> (Vec<f64>, Vec<f64>) {
+/// Three elevations over a range of sun elevations (the lowest, where shadows are decided,
+/// then a quarter of the way up, then the highest), kept within −5°..85° (near 90° the
+/// azimuth no longer means anything).
+fn elevations_over(lo: f64, hi: f64) -> Vec<f64> {
+    let (lo, hi) = (lo.clamp(-5.0, 85.0), hi.clamp(-5.0, 85.0));
+    let mut el = vec![lo, lo + (hi - lo) / 4.0, hi];
+    el.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    el
+}
+
+/// The suns a report uses: elevations (degrees) and compass azimuths (degrees). A time span
+/// is turned into the range of elevations the sun takes over `points` (latitude, longitude in
+/// degrees: the sampled level's tile centres) during it.
+fn suns_of(
+    scene: Option<&Scene>,
+    body: &str,
+    points: &[(f64, f64)],
+    notes: &mut Vec<String>,
+) -> (Vec<f64>, Vec<f64>) {
     let az: Vec<f64> = SUN_AZ.to_vec();
     match scene.and_then(|s| s.sun.as_ref()) {
         Some(SunSpec::Range {
@@ -204,11 +243,6 @@ fn suns_of(scene: Option<&Scene>, notes: &mut Vec<String>) -> (Vec<f64>, Vec<f64
             azimuth_deg,
             ..
         }) => {
-            // Three elevations over the range (the shadows decided at the lowest matter most),
-            // kept off 90° where the azimuth no longer means anything.
-            let (lo, hi) = (lo.clamp(-5.0, 85.0), hi.clamp(-5.0, 85.0));
-            let mut el = vec![lo, lo + (hi - lo) / 4.0, hi];
-            el.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
             let az = match azimuth_deg {
                 Some((a0, a1)) => {
                     let span = (a1 - a0).rem_euclid(360.0);
@@ -219,15 +253,32 @@ fn suns_of(scene: Option<&Scene>, notes: &mut Vec<String>) -> (Vec<f64>, Vec<f64
                 }
                 None => az,
             };
-            (el, az)
+            (elevations_over(*lo, *hi), az)
         }
-        Some(SunSpec::Span { .. }) => {
-            notes.push(
-                "The scene's sun is a time span: the report uses the benchmarks' suns (1°, 5° \
-                 and 15° at eight azimuths) rather than the span's positions."
-                    .into(),
-            );
-            (DEFAULT_SUN_EL.to_vec(), az)
+        Some(SunSpec::Span { start, end, .. }) => {
+            let spec = penumbra::ephemeris::SunSpec::Span {
+                body: body.to_string(),
+                start_utc: start.clone(),
+                end_utc: end.clone(),
+            };
+            match penumbra::ephemeris::elevation_range(&spec, points, None) {
+                Ok((lo, hi)) => {
+                    notes.push(format!(
+                        "The scene's sun is a time span: over it the sun's elevation at the \
+                         sampled level's {} tile centres ranges {lo:.2}° to {hi:.2}°; the \
+                         report's suns are three elevations over that range at eight azimuths.",
+                        points.len()
+                    ));
+                    (elevations_over(lo, hi), az)
+                }
+                Err(e) => {
+                    notes.push(format!(
+                        "The scene's sun span could not be evaluated ({e}): the report uses \
+                         the benchmarks' suns (1°, 5° and 15° at eight azimuths)."
+                    ));
+                    (DEFAULT_SUN_EL.to_vec(), az)
+                }
+            }
         }
         None => (DEFAULT_SUN_EL.to_vec(), az),
     }
@@ -408,6 +459,8 @@ fn shadow_methods() -> Vec<Sm> {
 /// Tallies over every block.
 struct Tally {
     hz: Vec<(ErrStats, f64, f64)>,
+    /// Per horizon method and stratum: samples, Σe², max |e|.
+    hz_strata: Vec<[(u64, f64, f64); 6]>,
     fourier: Vec<FourierTally>,
     shadow: Vec<(ErrSum, f64, f64)>,
 }
@@ -572,7 +625,16 @@ pub fn report(input: &Input, opts: &Options, progress: &dyn Progress) -> Result<
     } else {
         a
     };
-    let (sun_el, sun_az) = suns_of(input.scene, &mut notes);
+    let n = ts.layout.tile_size as i64;
+    let points: Vec<(f64, f64)> = order
+        .iter()
+        .take(256)
+        .map(|&id| {
+            let (lat, lon) = penumbra::cube::dir_to_latlon(ts.layout.pixel_dir(id, n / 2, n / 2));
+            (lat.to_degrees(), lon.to_degrees())
+        })
+        .collect();
+    let (sun_el, sun_az) = suns_of(input.scene, &ts.body.name, &points, &mut notes);
     let shadow_el = if input.scene.and_then(|s| s.sun.as_ref()).is_some() {
         sun_el.clone()
     } else {
@@ -589,6 +651,7 @@ pub fn report(input: &Input, opts: &Options, progress: &dyn Progress) -> Result<
             .iter()
             .map(|_| (ErrStats::new(1), 0.0, 0.0))
             .collect(),
+        hz_strata: vec![[(0, 0.0, 0.0); 6]; HZ_METHODS.len()],
         fourier: variants
             .iter()
             .map(|_| FourierTally {
@@ -888,11 +951,23 @@ fn measure_block(
         block_maps.push(full);
     }
     let reference = &maps[0];
+    // The sample lists its strata in order, `strata[k]` pixels each.
+    let stratum_of: Vec<usize> = strata
+        .iter()
+        .enumerate()
+        .flat_map(|(k, &c)| std::iter::repeat_n(k, c))
+        .collect();
     for (m_ix, vals) in maps.iter().enumerate() {
         let e = &mut tally.hz[m_ix].0;
-        for (v, r) in vals.iter().zip(reference) {
+        let by = &mut tally.hz_strata[m_ix];
+        for (q, (v, r)) in vals.iter().zip(reference).enumerate() {
             if v.is_finite() && r.is_finite() {
-                e.add(*v as f64 - *r as f64);
+                let d = *v as f64 - *r as f64;
+                e.add(d);
+                let st = &mut by[stratum_of[q / a]];
+                st.0 += 1;
+                st.1 += d * d;
+                st.2 = st.2.max(d.abs());
             }
         }
     }
@@ -1215,6 +1290,16 @@ fn horizon_rows(t: &Tally, default: HzMethod) -> Vec<HorizonRow> {
             max_deg: e.max,
             core_ns: core_s / units.max(1.0) * 1e9,
             se_rms_deg: None,
+            strata: STRATA
+                .iter()
+                .zip(&t.hz_strata[HZ_METHODS.iter().position(|&x| x == m).unwrap_or(0)])
+                .map(|(name, &(n, sum2, max))| StratumFigures {
+                    stratum: name.to_string(),
+                    samples: n,
+                    rms_deg: (sum2 / n.max(1) as f64).sqrt(),
+                    max_deg: max,
+                })
+                .collect(),
             pareto: false,
             default: m == default,
         })

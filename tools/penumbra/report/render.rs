@@ -303,6 +303,39 @@ fn tables(r: &Report) -> Vec<Table> {
     ]
 }
 
+/// The horizon methods' errors per stratum of the sample (where the worst ones are).
+fn strata_table(r: &Report) -> Table {
+    let names: Vec<&str> = r.horizons.iter().map(|h| h.method.as_str()).collect();
+    let mut head = vec!["stratum"];
+    head.extend(std::iter::repeat_n("RMS ° / max °", names.len()));
+    let n = r.horizons.first().map_or(0, |h| h.strata.len());
+    let rows = (0..n)
+        .map(|k| {
+            let mut row = vec![format!(
+                "{} ({} px·az)",
+                r.horizons[0].strata[k].stratum, r.horizons[0].strata[k].samples
+            )];
+            for h in &r.horizons {
+                let st = &h.strata[k];
+                row.push(if st.samples == 0 {
+                    "–".into()
+                } else {
+                    format!("{:.4} / {:.2}", st.rms_deg, st.max_deg)
+                });
+            }
+            row
+        })
+        .collect();
+    (
+        format!(
+            "Horizon methods by stratum of the sample (columns: {})",
+            names.join(", ")
+        ),
+        head,
+        rows,
+    )
+}
+
 fn summary_lines(r: &Report) -> Vec<String> {
     let mut v = vec![
         format!("Tileset: {}", r.tileset),
@@ -385,6 +418,26 @@ fn html(r: &Report, svgs: &[(Plot, String)]) -> String {
         }
         h += "</table>\n";
     }
+    {
+        let (cap, head, rows) = strata_table(r);
+        let _ = writeln!(
+            h,
+            "<h2>By stratum</h2>\n<table><caption>{}</caption><tr>",
+            esc(&cap)
+        );
+        for c in &head {
+            let _ = write!(h, "<th>{}</th>", esc(c));
+        }
+        h += "</tr>\n";
+        for row in rows {
+            h += "<tr>";
+            for c in row {
+                let _ = write!(h, "<td>{}</td>", esc(&c));
+            }
+            h += "</tr>\n";
+        }
+        h += "</table>\n";
+    }
     // Checked by the headless-browser test: every plot laid out with a size.
     h += "<script>window.addEventListener('load',function(){var s=document.querySelectorAll(\
           'figure svg'),n=0;for(var i=0;i<s.length;i++){var b=s[i].getBBox();if(b.width>0&&\
@@ -431,6 +484,12 @@ fn markdown(r: &Report, svgs: &[(Plot, String)]) -> String {
         for row in rows {
             let _ = writeln!(m, "| {} |", row.join(" | "));
         }
+    }
+    let (cap, head, rows) = strata_table(r);
+    let _ = writeln!(m, "\n## By stratum\n\n{cap}:\n\n| {} |", head.join(" | "));
+    let _ = writeln!(m, "|---|{}", "---:|".repeat(head.len() - 1));
+    for row in rows {
+        let _ = writeln!(m, "| {} |", row.join(" | "));
     }
     m
 }
