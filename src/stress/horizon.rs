@@ -352,25 +352,33 @@ fn north_pole(_: Size, weaken: Weaken) -> Vec<Row> {
 
 fn ten_km_body(_: Size, weaken: Weaken) -> Vec<Row> {
     // R = 10 km, 50 m pixels, a 500 m spike: dip −17.6°, tangent 3.2 km = 63 px < 80.
-    let (r, n) = (10_000.0, 161usize);
-    let s = face_pixels(r, 50.0);
-    let o = centred(s, n, n);
-    let mut rows = zero_rows(
-        &build(Face::Px, r, s, o, (n, n), |_, _| 0.0),
-        interior(n),
-        12,
-        weaken,
-        "bare",
-    );
-    let ctx = spike_raster(Face::Px, r, s, o, n, 500.0);
-    rows.extend(dip_rows(&ctx, n / 2, 16, weaken, [4e-5, 8e-4, 8e-4, 8e-4]));
-    rows
+    bare_then_spike(10_000.0, 50.0, 161, 500.0, weaken, [4e-5, 8e-4, 8e-4, 8e-4])
 }
 
 fn jupiter_sphere(_: Size, weaken: Weaken) -> Vec<Row> {
     // 1 km pixels, a 16 m spike: tangent √(2RH) ≈ 48 km = 48 px < 64.
-    let (r, n) = (JUPITER_R, 128usize);
-    let s = face_pixels(r, 1000.0);
+    bare_then_spike(
+        JUPITER_R,
+        1000.0,
+        128,
+        16.0,
+        weaken,
+        [1e-6, 1e-6, 1e-6, 2e-6],
+    )
+}
+
+/// A body of radius `r` in an `n`² raster of `pixel_m` pixels: the bare sphere reads 0
+/// everywhere, and from a `spike_m` spike at the centre every method sees the geometric dip
+/// (bounds per method, as [`dip_rows`] takes them).
+fn bare_then_spike(
+    r: f64,
+    pixel_m: f64,
+    n: usize,
+    spike_m: f64,
+    weaken: Weaken,
+    bounds: [f64; 4],
+) -> Vec<Row> {
+    let s = face_pixels(r, pixel_m);
     let o = centred(s, n, n);
     let mut rows = zero_rows(
         &build(Face::Px, r, s, o, (n, n), |_, _| 0.0),
@@ -379,8 +387,8 @@ fn jupiter_sphere(_: Size, weaken: Weaken) -> Vec<Row> {
         weaken,
         "bare",
     );
-    let ctx = spike_raster(Face::Px, r, s, o, n, 16.0);
-    rows.extend(dip_rows(&ctx, n / 2, 16, weaken, [1e-6, 1e-6, 1e-6, 2e-6]));
+    let ctx = spike_raster(Face::Px, r, s, o, n, spike_m);
+    rows.extend(dip_rows(&ctx, n / 2, 16, weaken, bounds));
     rows
 }
 

@@ -15,7 +15,6 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use penumbra::cube::Face;
-use penumbra::format::height::HeightTile;
 use penumbra::fourier::stage::{Encoder, FourierOptions};
 use penumbra::fourier::sun::{lit_fraction, sun_distance_au, sun_radius_deg, Frame, Model, Sun};
 use penumbra::fourier::Reduce;
@@ -1293,15 +1292,7 @@ pub(crate) fn paper_product_errors(
     lit_pixels: usize,
 ) -> Vec<ProductError> {
     let n = case.rect.w;
-    let tile = HeightTile {
-        size: n,
-        height: (0..n * n)
-            .map(|p| {
-                case.ctx.heights[(case.rect.y0 + p / n) * case.ctx.width + case.rect.x0 + p % n]
-            })
-            .collect(),
-        mask: vec![0; n * n],
-    };
+    let tile = case.block_tile();
     let opts = FourierOptions {
         coefficients: 16,
         layout: Layout::Multires,

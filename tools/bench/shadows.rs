@@ -15,7 +15,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use penumbra::fourier::stage::{Encoder, FourierOptions};
-use penumbra::fourier::sun::{lit_fraction, sun_radius_deg, Frame, Model, Sun};
+use penumbra::fourier::sun::{sun_radius_deg, Frame, Sun};
 use penumbra::fourier::{evaluate, Pyramid};
 use penumbra::horizon::{horizons_with, Method as HzMethod, DEFAULT_NEAR_PX};
 use penumbra::shadow::smap::SMap;
@@ -23,7 +23,7 @@ use penumbra::shadow::trace::{Method, Runs, Work};
 use penumbra::shadow::Tracer;
 
 use crate::cases::real_cases;
-use penumbra_cli::measure::{dem_case, Case, ErrSum};
+use penumbra_cli::measure::{dem_case, lookup_lit, Baked as Lookup, Case, ErrSum, ShadowWay as Bm};
 
 /// Sun elevations (degrees) and compass azimuths at the block's centre (degrees).
 const SUN_EL: [f64; 4] = [1.0, 5.0, 15.0, 45.0];
@@ -47,31 +47,6 @@ pub struct Args {
     pub only: Option<String>,
 }
 
-/// A method as the bench runs it.
-#[derive(Clone, Debug)]
-enum Bm {
-    Trace(Method),
-    /// Lookup in the raw maps (true) or the Fourier pyramids (false), with the constant-altitude
-    /// disc model (Jung et al.'s and Fritsch et al.'s cheapest; `exact` costs 256 strips).
-    Horizon(bool),
-    /// Sakalauskas' SMap, built once per sun over the block (its build timed with it).
-    SMap,
-}
-
-impl Bm {
-    fn label(&self) -> String {
-        match self {
-            Bm::Trace(m) => m.label(),
-            Bm::Horizon(true) => "horizon raw 360, constant".into(),
-            Bm::Horizon(false) => "horizon fourier F16, constant".into(),
-            Bm::SMap => "smap".into(),
-        }
-    }
-    fn hard(&self) -> bool {
-        matches!(self, Bm::SMap) || matches!(self, Bm::Trace(m) if m.is_hard())
-    }
-}
-
 fn methods(quick: bool) -> Vec<Bm> {
     let mut v = Vec::new();
     let steps: &[usize] = if quick { &[25, 100, 400] } else { &STEPS };
@@ -93,8 +68,8 @@ fn methods(quick: bool) -> Vec<Bm> {
     v.push(Bm::Trace(Method::Extrema));
     v.push(Bm::Trace(Method::ExtremaSoft));
     v.push(Bm::SMap);
-    v.push(Bm::Horizon(true));
-    v.push(Bm::Horizon(false));
+    v.push(Bm::Lookup(true));
+    v.push(Bm::Lookup(false));
     v
 }
 
@@ -202,7 +177,7 @@ fn eval(
                 *o = match m {
                     Bm::Trace(t) => tr.lit(x, y, sun, t, &mut work) as f32,
                     Bm::SMap => unreachable!("answered above"),
-                    Bm::Horizon(raw) => {
+                    Bm::Lookup(raw) => {
                         let b = baked.expect("baked");
                         let h0 = case.ctx.at(x as i64, y as i64);
                         if h0.is_nan() {
@@ -210,30 +185,12 @@ fn eval(
                         } else {
                             let at = tr.sun_at(x, y, sun);
                             let floor = b.floor_enc.floor_deg(h0 as f64);
-                            if *raw {
-                                let p = j * n + i;
-                                let nn = n * n;
-                                let e = &b.raw;
-                                lit_fraction(&at.frame, sun, Model::Constant, &|phi| {
-                                    let f = phi / std::f64::consts::TAU * AZIMUTHS as f64;
-                                    let k0 = (f as usize) % AZIMUTHS;
-                                    let w = f - f.floor();
-                                    let a = e[k0 * nn + p].max(floor as f32) as f64;
-                                    let c =
-                                        e[((k0 + 1) % AZIMUTHS) * nn + p].max(floor as f32) as f64;
-                                    a + (c - a) * w
-                                }) as f32
+                            let from = if *raw {
+                                Lookup::Raw(&b.raw, AZIMUTHS)
                             } else {
-                                b.pyramid.coefficients_at(
-                                    i as f64 + 0.5,
-                                    j as f64 + 0.5,
-                                    &mut coef,
-                                );
-                                let c = &coef;
-                                lit_fraction(&at.frame, sun, Model::Constant, &|phi| {
-                                    evaluate(c, phi).max(floor)
-                                }) as f32
-                            }
+                                Lookup::Pyramid(&b.pyramid)
+                            };
+                            lookup_lit(&at.frame, sun, &from, i, j, n, floor, &mut coef) as f32
                         }
                     }
                 };
@@ -381,7 +338,7 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
             say(format!(
                 "{}: {:<20} mean |err| {:.4}, PER {:.3} %, {:.0} ms/Mpx on 2 threads",
                 case.name,
-                m.label(),
+                m.label(AZIMUTHS),
                 all.mae(),
                 all.per(),
                 t2 * 1e3 / mpx
@@ -389,7 +346,7 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
             rows.push(Row {
                 case: case.name.clone(),
                 real: case.real && !case.name.starts_with("embedded"),
-                method: m.label(),
+                method: m.label(AZIMUTHS),
                 hard: m.hard(),
                 err,
                 all,

@@ -15,6 +15,7 @@ use penumbra::fourier::stage::FourierOptions;
 use penumbra::fourier::sun::{lit_fraction, Frame, Model, Sun};
 use penumbra::fourier::{evaluate, Encoding, Layout, Pyramid, Reduce, Sigma};
 use penumbra::horizon::{Context as HzContext, Rect};
+use penumbra::shadow::trace::Method as TraceMethod;
 
 /// Histogram of absolute errors for the 99th percentile: 1e-4° bins to 2°, then 0.01° to 92°.
 const FINE_BINS: usize = 20_000;
@@ -529,5 +530,75 @@ impl Horizon<'_> {
                 buf[i][0] * (1.0 - f) + buf[(i + 1) % m][0] * f
             }
         }
+    }
+}
+
+/// Baked horizons a renderer looks a pixel's horizon up in: the raw maps (`a` planes of n²
+/// elevations, linear between azimuths) or a Fourier pyramid.
+pub enum Baked<'a> {
+    Raw(&'a [f32], usize),
+    Pyramid(&'a Pyramid),
+}
+
+/// The lit fraction of `sun` at block pixel (i, j) of an `n`² block, its horizon looked up in
+/// `baked` and clamped to the pixel's floor `floor_deg`, with the constant-altitude disc model
+/// (Jung et al.'s and Fritsch et al.'s cheapest). `coef` is scratch for the pyramid.
+#[allow(clippy::too_many_arguments)]
+pub fn lookup_lit(
+    frame: &Frame,
+    sun: &Sun,
+    baked: &Baked,
+    i: usize,
+    j: usize,
+    n: usize,
+    floor_deg: f64,
+    coef: &mut Vec<[f64; 2]>,
+) -> f64 {
+    match *baked {
+        Baked::Raw(raw, a) => {
+            let (plane, p) = (n * n, j * n + i);
+            lit_fraction(frame, sun, Model::Constant, &|phi| {
+                let f = phi / TAU * a as f64;
+                let k0 = (f as usize) % a;
+                let w = f - f.floor();
+                let lo = (raw[k0 * plane + p] as f64).max(floor_deg);
+                let hi = (raw[((k0 + 1) % a) * plane + p] as f64).max(floor_deg);
+                lo + (hi - lo) * w
+            })
+        }
+        Baked::Pyramid(p) => {
+            p.coefficients_at(i as f64 + 0.5, j as f64 + 0.5, coef);
+            let c = &*coef;
+            lit_fraction(frame, sun, Model::Constant, &|phi| {
+                evaluate(c, phi).max(floor_deg)
+            })
+        }
+    }
+}
+
+/// A shadow method as the benchmarks and the report run it: a ray-marching method of the
+/// tracer, Sakalauskas' SMap (built once per sun over a block), or a lookup in baked horizons,
+/// the raw maps (true) or the paper's Fourier pyramid (false), with the constant-altitude disc.
+#[derive(Clone, Debug)]
+pub enum ShadowWay {
+    Trace(TraceMethod),
+    SMap,
+    Lookup(bool),
+}
+
+impl ShadowWay {
+    /// Its name in tables (`a`: the raw maps' azimuths).
+    pub fn label(&self, a: usize) -> String {
+        match self {
+            ShadowWay::Trace(m) => m.label(),
+            ShadowWay::SMap => "smap".into(),
+            ShadowWay::Lookup(true) => format!("horizon raw {a}, constant"),
+            ShadowWay::Lookup(false) => "horizon fourier F16, constant".into(),
+        }
+    }
+
+    /// Whether it answers 0 or 1 only.
+    pub fn hard(&self) -> bool {
+        matches!(self, ShadowWay::SMap) || matches!(self, ShadowWay::Trace(m) if m.is_hard())
     }
 }

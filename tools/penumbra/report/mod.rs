@@ -19,8 +19,8 @@ use serde::{Deserialize, Serialize};
 
 use penumbra::error::{Error, Result};
 use penumbra::fourier::stage::{Encoder, FourierOptions};
-use penumbra::fourier::sun::{lit_fraction, sun_distance_au, sun_radius_deg, Frame, Model, Sun};
-use penumbra::fourier::{evaluate, Pyramid};
+use penumbra::fourier::sun::{sun_distance_au, sun_radius_deg, Frame, Sun};
+use penumbra::fourier::Pyramid;
 use penumbra::horizon::{self, horizons_with, Context as HzContext, Method as HzMethod, Rect};
 use penumbra::layout::TileId;
 use penumbra::progress::Progress;
@@ -30,7 +30,9 @@ use penumbra::shadow::trace::{Method as TraceMethod, Work};
 use penumbra::shadow::Tracer;
 use penumbra::tileset::Store;
 
-use crate::measure::{interp, lit_exact, Case, ErrStats, ErrSum, Horizon, Variant};
+use crate::measure::{
+    self, interp, lit_exact, lookup_lit, Case, ErrStats, ErrSum, Horizon, ShadowWay, Variant,
+};
 
 /// Limits of the options (exit 2 outside them).
 pub const BUDGET_S: std::ops::RangeInclusive<f64> = 5.0..=86_400.0;
@@ -414,45 +416,22 @@ const HZ_METHODS: [HzMethod; 4] = [
 ];
 
 /// The shadow methods the report measures (the reference first: the truth).
-#[derive(Clone, Debug)]
-enum Sm {
-    Trace(TraceMethod),
-    SMap,
-    /// Lookup in the raw maps (true) or the paper's Fourier pyramid (false), constant-altitude
-    /// disc model.
-    Lookup(bool),
-}
-
-impl Sm {
-    fn label(&self, a: usize) -> String {
-        match self {
-            Sm::Trace(m) => m.label(),
-            Sm::SMap => "smap".into(),
-            Sm::Lookup(true) => format!("horizon raw {a}, constant"),
-            Sm::Lookup(false) => "horizon fourier F16, constant".into(),
-        }
-    }
-    fn hard(&self) -> bool {
-        matches!(self, Sm::SMap) || matches!(self, Sm::Trace(m) if m.is_hard())
-    }
-}
-
-fn shadow_methods() -> Vec<Sm> {
-    let mut v = vec![Sm::Trace(TraceMethod::Reference)];
+fn shadow_methods() -> Vec<ShadowWay> {
+    let mut v = vec![ShadowWay::Trace(TraceMethod::Reference)];
     for s in [25, 50, 100, 200, 400, 800] {
-        v.push(Sm::Trace(TraceMethod::Uniform { steps: s }));
+        v.push(ShadowWay::Trace(TraceMethod::Uniform { steps: s }));
     }
     for (runs, dda) in [("5,5,5", false), ("auto", false), ("auto", true)] {
-        v.push(Sm::Trace(TraceMethod::Dp {
+        v.push(ShadowWay::Trace(TraceMethod::Dp {
             runs: runs.parse().expect("runs"),
             dda,
         }));
     }
-    v.push(Sm::Trace(TraceMethod::Extrema));
-    v.push(Sm::Trace(TraceMethod::ExtremaSoft));
-    v.push(Sm::SMap);
-    v.push(Sm::Lookup(true));
-    v.push(Sm::Lookup(false));
+    v.push(ShadowWay::Trace(TraceMethod::Extrema));
+    v.push(ShadowWay::Trace(TraceMethod::ExtremaSoft));
+    v.push(ShadowWay::SMap);
+    v.push(ShadowWay::Lookup(true));
+    v.push(ShadowWay::Lookup(false));
     v
 }
 
@@ -839,7 +818,7 @@ fn measure_block(
     suns: SunSet,
     default_method: HzMethod,
     variants: &[Variant],
-    smethods: &[Sm],
+    smethods: &[ShadowWay],
     seed: u64,
     tally: &mut Tally,
 ) -> Result<Option<BlockInfo>> {
@@ -980,7 +959,7 @@ fn measure_block(
         .take()
         .or_else(|| block_maps[3].take())
         .expect("sweep's block map");
-    measure_fourier(
+    let (floor_enc, paper) = measure_fourier(
         &case,
         &raw,
         reference,
@@ -991,7 +970,12 @@ fn measure_block(
         variants,
         tally,
     );
-    measure_shadows(&case, &raw, &sample, a, suns, (u, v), smethods, tally);
+    let baked = Baked {
+        raw: &raw,
+        floor_enc: &floor_enc,
+        paper: &paper,
+    };
+    measure_shadows(&case, &baked, &sample, a, suns, (u, v), smethods, tally);
     Ok(Some(BlockInfo {
         tile: id.to_string(),
         x0: bx,
@@ -1012,6 +996,16 @@ fn pixel_size_m(ctx: &HzContext, rect: Rect) -> f64 {
     dot.clamp(-1.0, 1.0).acos() * ctx.radius_m
 }
 
+/// A block's baked horizons for the lookup methods: the raw map, the encoder whose floor they
+/// are clamped to, and the paper's pyramid (the default options, which that encoder has).
+struct Baked<'a> {
+    raw: &'a [f32],
+    floor_enc: &'a Encoder,
+    paper: &'a Pyramid,
+}
+
+/// Measure every storage variant on a block; the floor encoder (the default options) and the
+/// paper's pyramid it made, for the shadow lookups.
 #[allow(clippy::too_many_arguments)]
 fn measure_fourier(
     case: &Case,
@@ -1023,7 +1017,7 @@ fn measure_fourier(
     (sun_el, _, _, sun_r): SunSet,
     variants: &[Variant],
     tally: &mut Tally,
-) {
+) -> (Encoder, Pyramid) {
     let n = case.rect.w;
     let plane = n * n;
     let tile = case.block_tile();
@@ -1080,6 +1074,7 @@ fn measure_fourier(
         })
         .collect();
     let threads = rayon::current_num_threads() as f64;
+    let mut paper = None;
     for (v_ix, &v) in variants.iter().enumerate() {
         let t0 = Instant::now();
         let (pyr, classic): (Option<Pyramid>, Option<(Vec<f32>, usize)>) = match v {
@@ -1158,18 +1153,25 @@ fn measure_fourier(
                 ft.lit_n += 1;
             }
         }
+        if v.is_paper() {
+            paper = pyr;
+        }
     }
+    (
+        floor_enc,
+        paper.expect("the paper's variant is among the variants"),
+    )
 }
 
 #[allow(clippy::too_many_arguments)]
 fn measure_shadows(
     case: &Case,
-    raw: &[f32],
+    baked: &Baked,
     sample: &[(usize, usize)],
     a: usize,
     (_, sun_el, sun_az, sun_r): SunSet,
     (u, v): (f64, f64),
-    smethods: &[Sm],
+    smethods: &[ShadowWay],
     tally: &mut Tally,
 ) {
     let n = case.rect.w;
@@ -1185,22 +1187,12 @@ fn measure_shadows(
             radius_deg: sun_r,
         })
         .collect();
-    let floor_enc = Encoder::for_tiles(
-        &FourierOptions::default(),
-        n,
-        0,
-        a,
-        case.ctx.radius_m,
-        case.terrain_min_m,
-    );
-    let tile = case.block_tile();
-    let (pyramid, _) = floor_enc.encode(raw, &tile);
     let threads = rayon::current_num_threads() as f64;
     let mut truth: Vec<f32> = Vec::new();
     for (m_ix, m) in smethods.iter().enumerate() {
         let t0 = Instant::now();
         let lit: Vec<f32> = match m {
-            Sm::SMap => suns
+            ShadowWay::SMap => suns
                 .iter()
                 .flat_map(|sun| {
                     let map = SMap::build(&case.ctx, sun.dir, rect, case.terrain_min_m);
@@ -1221,38 +1213,23 @@ fn measure_shadows(
                         .map(|&(i, j)| {
                             let (x, y) = (rect.x0 + i, rect.y0 + j);
                             match m {
-                                Sm::Trace(t) => tr.lit(x, y, sun, t, &mut work) as f32,
-                                Sm::Lookup(from_raw) => {
+                                ShadowWay::Trace(t) => tr.lit(x, y, sun, t, &mut work) as f32,
+                                ShadowWay::Lookup(from_raw) => {
                                     let h0 = case.ctx.at(x as i64, y as i64);
                                     if h0.is_nan() {
                                         return f32::NAN;
                                     }
                                     let at = tr.sun_at(x, y, sun);
-                                    let floor = floor_enc.floor_deg(h0 as f64);
-                                    if *from_raw {
-                                        let p = j * n + i;
-                                        lit_fraction(&at.frame, sun, Model::Constant, &|phi| {
-                                            let f = phi / TAU * a as f64;
-                                            let k0 = (f as usize) % a;
-                                            let w = f - f.floor();
-                                            let lo = (raw[k0 * plane + p] as f64).max(floor);
-                                            let hi =
-                                                (raw[((k0 + 1) % a) * plane + p] as f64).max(floor);
-                                            lo + (hi - lo) * w
-                                        }) as f32
+                                    let floor = baked.floor_enc.floor_deg(h0 as f64);
+                                    let from = if *from_raw {
+                                        measure::Baked::Raw(baked.raw, a)
                                     } else {
-                                        pyramid.coefficients_at(
-                                            i as f64 + 0.5,
-                                            j as f64 + 0.5,
-                                            &mut coef,
-                                        );
-                                        let c = &coef;
-                                        lit_fraction(&at.frame, sun, Model::Constant, &|phi| {
-                                            evaluate(c, phi).max(floor)
-                                        }) as f32
-                                    }
+                                        measure::Baked::Pyramid(baked.paper)
+                                    };
+                                    lookup_lit(&at.frame, sun, &from, i, j, n, floor, &mut coef)
+                                        as f32
                                 }
-                                Sm::SMap => unreachable!("answered above"),
+                                ShadowWay::SMap => unreachable!("answered above"),
                             }
                         })
                         .collect::<Vec<_>>()
@@ -1268,7 +1245,7 @@ fn measure_shadows(
             t.0.add(*l, *r);
         }
         // SMap's cost is per block (it answers every pixel of it); the others' per answer.
-        let answers = if matches!(m, Sm::SMap) {
+        let answers = if matches!(m, ShadowWay::SMap) {
             (plane * suns.len()) as f64
         } else {
             lit.len() as f64
@@ -1342,7 +1319,7 @@ fn fourier_rows(t: &Tally, variants: &[Variant], tile: usize) -> Vec<FourierRow>
     rows
 }
 
-fn shadow_rows(t: &Tally, smethods: &[Sm], a: usize) -> Vec<ShadowRow> {
+fn shadow_rows(t: &Tally, smethods: &[ShadowWay], a: usize) -> Vec<ShadowRow> {
     let mut rows: Vec<ShadowRow> = smethods
         .iter()
         .zip(&t.shadow)

@@ -375,6 +375,32 @@ fn summary_lines(r: &Report) -> Vec<String> {
     v
 }
 
+/// A table as HTML, its caption above.
+fn html_table(h: &mut String, (cap, head, rows): &Table) {
+    let _ = writeln!(h, "<table><caption>{}</caption><tr>", esc(cap));
+    for c in head {
+        let _ = write!(h, "<th>{}</th>", esc(c));
+    }
+    *h += "</tr>\n";
+    for row in rows {
+        *h += "<tr>";
+        for c in row {
+            let _ = write!(h, "<td>{}</td>", esc(c));
+        }
+        *h += "</tr>\n";
+    }
+    *h += "</table>\n";
+}
+
+/// A table as Markdown, its caption as the line before it.
+fn md_table(m: &mut String, (cap, head, rows): &Table) {
+    let _ = writeln!(m, "{cap}:\n\n| {} |", head.join(" | "));
+    let _ = writeln!(m, "|---|{}", "---:|".repeat(head.len() - 1));
+    for row in rows {
+        let _ = writeln!(m, "| {} |", row.join(" | "));
+    }
+}
+
 fn html(r: &Report, svgs: &[(Plot, String)]) -> String {
     let mut h = String::new();
     h += "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n";
@@ -403,42 +429,12 @@ fn html(r: &Report, svgs: &[(Plot, String)]) -> String {
         );
     }
     h += "</ul></div>\n";
-    for ((p, svg), (cap, head, rows)) in svgs.iter().zip(tables(r)) {
+    for ((p, svg), t) in svgs.iter().zip(tables(r)) {
         let _ = writeln!(h, "<h2>{}</h2>\n<figure>{}</figure>", esc(&p.title), svg);
-        let _ = writeln!(h, "<table><caption>{}</caption><tr>", esc(&cap));
-        for c in &head {
-            let _ = write!(h, "<th>{}</th>", esc(c));
-        }
-        h += "</tr>\n";
-        for row in rows {
-            h += "<tr>";
-            for c in row {
-                let _ = write!(h, "<td>{}</td>", esc(&c));
-            }
-            h += "</tr>\n";
-        }
-        h += "</table>\n";
+        html_table(&mut h, &t);
     }
-    {
-        let (cap, head, rows) = strata_table(r);
-        let _ = writeln!(
-            h,
-            "<h2>By stratum</h2>\n<table><caption>{}</caption><tr>",
-            esc(&cap)
-        );
-        for c in &head {
-            let _ = write!(h, "<th>{}</th>", esc(c));
-        }
-        h += "</tr>\n";
-        for row in rows {
-            h += "<tr>";
-            for c in row {
-                let _ = write!(h, "<td>{}</td>", esc(&c));
-            }
-            h += "</tr>\n";
-        }
-        h += "</table>\n";
-    }
+    h += "<h2>By stratum</h2>\n";
+    html_table(&mut h, &strata_table(r));
     // Checked by the headless-browser test: every plot laid out with a size.
     h += "<script>window.addEventListener('load',function(){var s=document.querySelectorAll(\
           'figure svg'),n=0;for(var i=0;i<s.length;i++){var b=s[i].getBBox();if(b.width>0&&\
@@ -467,31 +463,12 @@ fn markdown(r: &Report, svgs: &[(Plot, String)]) -> String {
                 .unwrap_or_default()
         );
     }
-    for ((p, _), (cap, head, rows)) in svgs.iter().zip(tables(r)) {
-        let _ = writeln!(
-            m,
-            "\n## {}\n\n![{}]({})\n\n{cap}:\n",
-            p.title, p.title, p.file
-        );
-        let _ = writeln!(m, "| {} |", head.join(" | "));
-        let _ = writeln!(
-            m,
-            "|{}",
-            head.iter()
-                .enumerate()
-                .map(|(i, _)| if i == 0 { "---|" } else { "---:|" })
-                .collect::<String>()
-        );
-        for row in rows {
-            let _ = writeln!(m, "| {} |", row.join(" | "));
-        }
+    for ((p, _), t) in svgs.iter().zip(tables(r)) {
+        let _ = writeln!(m, "\n## {}\n\n![{}]({})\n", p.title, p.title, p.file);
+        md_table(&mut m, &t);
     }
-    let (cap, head, rows) = strata_table(r);
-    let _ = writeln!(m, "\n## By stratum\n\n{cap}:\n\n| {} |", head.join(" | "));
-    let _ = writeln!(m, "|---|{}", "---:|".repeat(head.len() - 1));
-    for row in rows {
-        let _ = writeln!(m, "| {} |", row.join(" | "));
-    }
+    m += "\n## By stratum\n\n";
+    md_table(&mut m, &strata_table(r));
     m
 }
 
