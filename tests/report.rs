@@ -459,6 +459,15 @@ fn plan_takes_the_reports_storage_recommendation() {
     std::fs::write(&scene, scene_text("auto test")).unwrap();
     std::fs::write(rep.join("report.json"), &good[..good.len() / 2]).unwrap();
     refused("not a report.json");
+    // `report` names a file only `coefficients = "auto"` reads.
+    std::fs::write(
+        &scene,
+        scene_text("auto test").replace("coefficients = \"auto\"", "coefficients = 8"),
+    )
+    .unwrap();
+    let o = run(&["plan", sc]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("fourier.report"), "{}", stderr(&o));
 }
 
 /// A scene whose sun is a time span: the report's suns are the elevations the sun takes over
