@@ -846,3 +846,168 @@ fn fast_stays_below_exact_at_a_real_data_edge() {
         "RMS {rms}°, {low} of {n} > 0.25° below"
     );
 }
+
+/// Whether Mesa's software Vulkan driver (lavapipe) is installed: the GPU tests' adapter where
+/// there is no GPU. Under `CI=true` it must be (`.ci/run` installs it).
+fn lavapipe() -> bool {
+    let here = ["/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d"]
+        .iter()
+        .any(|d| {
+            std::fs::read_dir(d).is_ok_and(|r| {
+                r.flatten()
+                    .any(|e| e.file_name().to_string_lossy().starts_with("lvp_icd"))
+            })
+        });
+    if !here {
+        assert!(
+            std::env::var("CI").as_deref() != Ok("true"),
+            "CI=true and no lavapipe (mesa-vulkan-drivers)"
+        );
+        eprintln!("skipped: no lavapipe (apt-get install mesa-vulkan-drivers)");
+    }
+    here
+}
+
+/// `horizon --device gpu` (issue 39): the sweep on the GPU (lavapipe here) writes maps within
+/// the method's budget of the CPU sweep's (0.01° RMS), records the device in the run key (so the
+/// CPU's maps are redone, and a rerun on the same device is up to date), and refuses what it
+/// cannot do with exit 2: another method on the GPU, and no adapter at all (naming lavapipe and
+/// `--device cpu`), leaving the maps as they were.
+#[test]
+fn horizon_device_gpu() {
+    use crate::util::{global_dem, penumbra_bin};
+    use penumbra::body::Body;
+    use penumbra::progress::NoProgress;
+    use penumbra::tiling::{tile_dem, TileOptions};
+    if !lavapipe() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("t");
+    let opts = TileOptions {
+        tile_size: 32,
+        halo: 2,
+        levels: Some(2),
+        ..Default::default()
+    };
+    tile_dem(
+        &global_dem(360),
+        &Body::preset("moon").unwrap(),
+        &out,
+        &opts,
+        None,
+        &NoProgress,
+    )
+    .unwrap();
+    let o = out.to_str().unwrap();
+    let xdg = dir.path().join("xdg");
+    std::fs::create_dir_all(&xdg).unwrap();
+    let run = |args: &[&str], env: &[(&str, &str)]| {
+        let mut c = penumbra_bin();
+        c.args(args).env("XDG_RUNTIME_DIR", &xdg);
+        for (k, v) in env {
+            c.env(k, v);
+        }
+        c.output().unwrap()
+    };
+    let base = [
+        "horizon",
+        o,
+        "--levels",
+        "1",
+        "--azimuths",
+        "36",
+        "--method",
+        "sweep",
+        "--precision",
+        "f32",
+        "--json",
+    ];
+    let maps = || -> Vec<f32> {
+        let mut v = Vec::new();
+        let mut files: Vec<_> = walk(&out.join("horizon"));
+        files.sort();
+        for f in files {
+            let (a, data) = penumbra::horizon::read_horizon_exr(&f, 32).unwrap();
+            assert_eq!(a, 36);
+            v.extend(data);
+        }
+        v
+    };
+    let cpu = json(&run(&[&base[..], &["--device", "cpu"]].concat(), &[]));
+    assert_eq!(cpu["tiles_written"], 24);
+    let cpu_maps = maps();
+    let gpu = json(&run(&[&base[..], &["--device", "gpu"]].concat(), &[]));
+    assert_eq!(
+        gpu["tiles_written"], 24,
+        "another device: the maps are redone"
+    );
+    let gpu_maps = maps();
+    assert_eq!(cpu_maps.len(), gpu_maps.len());
+    let (rms, max, n) = diff_stats(&gpu_maps, &cpu_maps);
+    eprintln!("GPU − CPU sweep over {n} samples: rms {rms:.5}° max {max:.4}°");
+    assert!(n > 0 && rms <= 0.01, "rms {rms}° max {max}°");
+    let ts = penumbra::manifest::Tileset::load(&out).unwrap();
+    let hp = ts.products.horizon.as_ref().unwrap();
+    let basis = serde_json::to_string(&hp.run_key_basis).unwrap();
+    assert!(basis.contains("\\\"device\\\":\\\"gpu: "), "{basis}");
+    assert!(hp
+        .error
+        .as_ref()
+        .is_some_and(|e| e.samples > 0 && e.rms_deg < 0.3));
+    // The same device again: up to date, nothing rewritten.
+    let again = json(&run(&[&base[..], &["--device", "gpu"]].concat(), &[]));
+    assert_eq!(again["up_to_date"], true);
+    let before = crate::util::snapshot(&out.join("horizon"));
+    let manifest = std::fs::read(out.join("tileset.json")).unwrap();
+    for (args, env, says) in [
+        (
+            vec!["horizon", o, "--method", "fast", "--device", "gpu"],
+            vec![],
+            vec!["--device gpu runs the sweep method only", "--device cpu"],
+        ),
+        (
+            vec!["horizon", o, "--device", "tpu"],
+            vec![],
+            vec!["cpu, gpu, auto"],
+        ),
+        (
+            [&base[..], &["--device", "gpu"]].concat(),
+            vec![
+                ("WGPU_BACKEND", "vulkan"),
+                ("VK_ICD_FILENAMES", "/nonexistent.json"),
+                ("VK_DRIVER_FILES", "/nonexistent.json"),
+            ],
+            vec!["no GPU adapter", "lavapipe", "--device cpu"],
+        ),
+    ] {
+        let e = run(&args, &env);
+        assert_eq!(e.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&e.stderr);
+        for s in says {
+            assert!(err.contains(s), "{args:?}: {err}");
+        }
+    }
+    // `auto` on a machine whose only adapter is software: the CPU, whose maps these are not.
+    let auto = json(&run(&[&base[..], &["--device", "auto"]].concat(), &[]));
+    assert_eq!(
+        auto["tiles_written"], 24,
+        "auto ran on the CPU: another run key"
+    );
+    assert_eq!(maps(), cpu_maps, "auto on lavapipe is the CPU, to the bit");
+    assert!(before != crate::util::snapshot(&out.join("horizon")));
+    let _ = manifest;
+}
+
+fn walk(d: &std::path::Path) -> Vec<std::path::PathBuf> {
+    let mut v = Vec::new();
+    for e in std::fs::read_dir(d).unwrap().flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            v.extend(walk(&p));
+        } else if p.extension().is_some_and(|x| x == "exr") {
+            v.push(p);
+        }
+    }
+    v
+}

@@ -82,7 +82,7 @@ pub(super) const NEAR_COLS: i64 = 24;
 /// How near (columns) the raster's edge must be on a pixel's ray for the part of it that a
 /// line on the exit side never saw to be scanned on the ray itself (synthetic 1024² whole map,
 /// 360 azimuths: the worst sample 4.85° → 2.2°, all at the edges before).
-const EDGE_SCAN_COLS: f64 = 4.0 * NEAR_COLS as f64;
+pub(super) const EDGE_SCAN_COLS: f64 = 4.0 * NEAR_COLS as f64;
 
 /// Steps next to each pixel where its ray is also evaluated inside the cells, midway between
 /// crossings: the bilinear surface bulges between grid lines, which the crossings alone miss
@@ -170,7 +170,7 @@ impl Cols<'_> {
 
 /// One step along every ray of an azimuth: its distance in columns, its taps (column and row
 /// offsets from the observer, weight) and whether all four are used (inside a cell).
-type Step = (f64, [(i64, i64, f32); 4], bool);
+pub(super) type Step = (f64, [(i64, i64, f32); 4], bool);
 
 /// `a` + `w`·(`b` − `a`) on a grid line, a no-data tap left out (as the reference's bilinear
 /// does where a ray leaves a cell); NaN only where both are.
@@ -315,65 +315,7 @@ impl Pair<'_> {
             EXACT
         };
         let radius = self.radius as f32;
-        // The steps along every ray: (k, column offset, row offset, weights) of each tap set.
-        let mut steps: Vec<Step> = Vec::new();
-        let mut ks: Vec<f64> = (1..=k_max).map(|k| k as f64).collect();
-        if t != 0.0 {
-            for r in 1.. {
-                let kr = r as f64 / t.abs();
-                if kr > k_max as f64 {
-                    break;
-                }
-                if kr.fract() != 0.0 {
-                    ks.push(kr);
-                }
-            }
-        }
-        ks.sort_by(f64::total_cmp);
-        let mut prev = 0.0;
-        for &k in &ks {
-            if k <= MID_COLS {
-                // Inside the cell between the previous crossing and this one.
-                let km = 0.5 * (prev + k);
-                let (pp, qq) = ((s as f64) * km, grid(t * (s as f64) * km));
-                let (c0, r0) = (pp.floor(), qq.floor());
-                let (fp, fq) = ((pp - c0) as f32, (qq - r0) as f32);
-                let (c0, r0) = (c0 as i64, r0 as i64);
-                steps.push((
-                    km,
-                    [
-                        (c0, r0, (1.0 - fp) * (1.0 - fq)),
-                        (c0 + 1, r0, fp * (1.0 - fq)),
-                        (c0, r0 + 1, (1.0 - fp) * fq),
-                        (c0 + 1, r0 + 1, fp * fq),
-                    ],
-                    true,
-                ));
-            }
-            prev = k;
-            let (pp, qq) = ((s as f64) * k, grid(t * (s as f64) * k));
-            if k.fract() == 0.0 {
-                // A column: two taps along it.
-                let r0 = qq.floor();
-                let f = (qq - r0) as f32;
-                let (c, r0) = (pp as i64, r0 as i64);
-                steps.push((
-                    k,
-                    [(c, r0, 1.0 - f), (c, r0 + 1, f), (c, r0, 0.0), (c, r0, 0.0)],
-                    false,
-                ));
-            } else {
-                // A row: two taps along it.
-                let (c0, r) = (pp.floor(), qq.round());
-                let f = (pp - c0) as f32;
-                let (c0, r) = (c0 as i64, r as i64);
-                steps.push((
-                    k,
-                    [(c0, r, 1.0 - f), (c0 + 1, r, f), (c0, r, 0.0), (c0, r, 0.0)],
-                    false,
-                ));
-            }
-        }
+        let steps = near_steps(t, s);
         let (bu, bh) = (&mut b.near_u[dir], &mut b.near_h[dir]);
         bu.fill(-1.0);
         bh.fill(0.0);
@@ -696,19 +638,8 @@ impl Pair<'_> {
     #[inline(never)]
     fn combine(&self, dir: usize, phi: f64, b: &mut Buffers) {
         let (g, nr) = (&self.g, self.nr);
-        let mirror = if dir == 0 { 1.0 } else { -1.0 };
-        // The direction in raster (x right, y down), then in (p, q).
-        let (cx, cy) = (mirror * phi.cos(), -mirror * phi.sin());
-        let (cp, cq) = if self.lines.xmajor {
-            (cx, cy)
-        } else {
-            (cy, cx)
-        };
         let adp = self.lines.dp.abs();
-        let step = |c: f64| -> Option<(i64, f64)> {
-            (c.abs() > 1e-12).then(|| (c.signum() as i64, c.abs()))
-        };
-        let (sp, sq) = (step(cp), step(cq));
+        let [sp, sq] = zero_steps(self.lines.xmajor, phi, dir);
         let nan = vec![f32::NAN; nr];
         for p in self.rp0..self.rp1 {
             let col = g.col(p);
@@ -764,9 +695,88 @@ impl Pair<'_> {
     }
 }
 
+/// The steps along every ray of a plane azimuth whose rays go `s` (±1) columns along p per
+/// column and q moves `t` per column: (k, column and row offsets, weights, inside a cell) of
+/// each tap set, nearest first, out to [`NEAR_COLS`]. Every observer's ray meets the same ones.
+pub(super) fn near_steps(t: f64, s: i64) -> Vec<Step> {
+    let k_max = NEAR_COLS;
+    let mut steps: Vec<Step> = Vec::new();
+    let mut ks: Vec<f64> = (1..=k_max).map(|k| k as f64).collect();
+    if t != 0.0 {
+        for r in 1.. {
+            let kr = r as f64 / t.abs();
+            if kr > k_max as f64 {
+                break;
+            }
+            if kr.fract() != 0.0 {
+                ks.push(kr);
+            }
+        }
+    }
+    ks.sort_by(f64::total_cmp);
+    let mut prev = 0.0;
+    for &k in &ks {
+        if k <= MID_COLS {
+            // Inside the cell between the previous crossing and this one.
+            let km = 0.5 * (prev + k);
+            let (pp, qq) = ((s as f64) * km, grid(t * (s as f64) * km));
+            let (c0, r0) = (pp.floor(), qq.floor());
+            let (fp, fq) = ((pp - c0) as f32, (qq - r0) as f32);
+            let (c0, r0) = (c0 as i64, r0 as i64);
+            steps.push((
+                km,
+                [
+                    (c0, r0, (1.0 - fp) * (1.0 - fq)),
+                    (c0 + 1, r0, fp * (1.0 - fq)),
+                    (c0, r0 + 1, (1.0 - fp) * fq),
+                    (c0 + 1, r0 + 1, fp * fq),
+                ],
+                true,
+            ));
+        }
+        prev = k;
+        let (pp, qq) = ((s as f64) * k, grid(t * (s as f64) * k));
+        if k.fract() == 0.0 {
+            // A column: two taps along it.
+            let r0 = qq.floor();
+            let f = (qq - r0) as f32;
+            let (c, r0) = (pp as i64, r0 as i64);
+            steps.push((
+                k,
+                [(c, r0, 1.0 - f), (c, r0 + 1, f), (c, r0, 0.0), (c, r0, 0.0)],
+                false,
+            ));
+        } else {
+            // A row: two taps along it.
+            let (c0, r) = (pp.floor(), qq.round());
+            let f = (pp - c0) as f32;
+            let (c0, r) = (c0 as i64, r as i64);
+            steps.push((
+                k,
+                [(c0, r, 1.0 - f), (c0 + 1, r, f), (c0, r, 0.0), (c0, r, 0.0)],
+                false,
+            ));
+        }
+    }
+    steps
+}
+
+/// The zero-distance slope's neighbours for direction `dir` (0: `phi`, 1: `phi` + π) over a
+/// raster in (p, q) order (`xmajor`: p is x): the step (±1) and weight along p and along q,
+/// None where the direction has no component there.
+pub(super) fn zero_steps(xmajor: bool, phi: f64, dir: usize) -> [Option<(i64, f64)>; 2] {
+    let mirror = if dir == 0 { 1.0 } else { -1.0 };
+    // The direction in raster (x right, y down), then in (p, q).
+    let (cx, cy) = (mirror * phi.cos(), -mirror * phi.sin());
+    let (cp, cq) = if xmajor { (cx, cy) } else { (cy, cx) };
+    let step =
+        |c: f64| -> Option<(i64, f64)> { (c.abs() > 1e-12).then(|| (c.signum() as i64, c.abs())) };
+    [step(cp), step(cq)]
+}
+
 /// `v` moved onto the grid line it is within 1e-9 px of: a rounding error's weight on a tap
 /// beyond the raster's edge would otherwise leave an edge pixel's ray unevaluated there.
-fn grid(v: f64) -> f64 {
+pub(super) fn grid(v: f64) -> f64 {
     let r = v.round();
     if (v - r).abs() < 1e-9 {
         r
@@ -989,6 +999,14 @@ fn finish(
     } else {
         dst.copy_from_slice(deg);
     }
+    fill_gaps(ctx, rect, hmax, phi, dst);
+}
+
+/// One plane azimuth's horizons `dst` (row-major over `rect`) made whole: NaN where the pixel
+/// has no data, and the reference's search where a pixel found nothing at all (−90 exactly):
+/// every line's vertex fell outside its ray's raster or on cells it may not evaluate. −90
+/// after that means no terrain in that direction.
+pub(super) fn fill_gaps(ctx: &Context, rect: Rect, hmax: f32, phi: f64, dst: &mut [f32]) {
     for j in 0..rect.h {
         let row = &ctx.heights[(rect.y0 + j) * ctx.width + rect.x0..][..rect.w];
         for (i, h0) in row.iter().enumerate() {

@@ -215,6 +215,19 @@ impl<'a> FarHorizons<'a> {
         }
     }
 
+    /// As [`FarHorizons::new`] with the context's own horizons `own` (plane-major, as
+    /// [`horizons_with`] gives them) computed elsewhere: by a device ([`super::device`]).
+    pub fn from_own(ctx: &'a Context, rect: Rect, a: usize, own: Vec<f32>) -> FarHorizons<'a> {
+        assert_eq!(own.len(), rect.w * rect.h * a);
+        FarHorizons {
+            ctx,
+            rect,
+            a,
+            geo: pixel_geometry(ctx, rect),
+            out: own,
+        }
+    }
+
     /// The horizons so far (plane-major).
     pub fn current(&self) -> &[f32] {
         &self.out

@@ -10,6 +10,7 @@
 
 pub mod bound;
 mod budget;
+pub mod device;
 mod far;
 mod geometry;
 mod linesweep;

@@ -12,6 +12,7 @@ use std::sync::Arc;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::device::{horizons_sweep_on, SharedDevice, SweepDevice};
 use super::far::FarRing;
 use super::geometry::{Context, Rect};
 use super::method::{horizons_with, FarHorizons, Method};
@@ -96,6 +97,21 @@ pub struct HorizonOptions {
     /// change).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub terrain_range_m: Option<(f64, f64)>,
+    /// Where the sweep method runs (None: the CPU, as every other method): a device
+    /// ([`super::device`]) the front end made. Its key is part of the run key (a device's maps
+    /// are within the method's budget of the CPU's, not the same bytes).
+    #[serde(skip_serializing_if = "Option::is_none", serialize_with = "device_key")]
+    pub device: Option<SharedDevice>,
+}
+
+fn device_key<S: serde::Serializer>(
+    d: &Option<SharedDevice>,
+    s: S,
+) -> std::result::Result<S::Ok, S::Error> {
+    match d {
+        Some(d) => s.serialize_str(&d.key()),
+        None => s.serialize_none(),
+    }
 }
 
 impl Default for HorizonOptions {
@@ -112,6 +128,7 @@ impl Default for HorizonOptions {
             fine_margin_px: None,
             lit_above_deg: None,
             terrain_range_m: None,
+            device: None,
         }
     }
 }
@@ -690,16 +707,28 @@ pub(crate) fn horizons_seeing_rings(
     method: Method,
     near_px: f64,
     budget: Option<TileId>,
+    device: Option<&dyn SweepDevice>,
 ) -> Result<(Vec<f32>, Option<Tally>)> {
     // The sweep's error budget is its error on the full-resolution context, before the rings
     // (which add the same far terrain to any method) raise it.
     let tally = |elev: &[f32]| budget.map(|id| Tally::measure(ctx, rect, id, azimuths, elev));
+    // The sweep on a device: the context's own horizons there, the rings on the CPU.
+    let on_device = match device {
+        Some(d) if method == Method::Sweep => Some(horizons_sweep_on(d, ctx, rect, azimuths)?),
+        _ => None,
+    };
     if rings.is_empty() {
-        let elev = horizons_with(ctx, rect, azimuths, method, near_px);
+        let elev = match on_device {
+            Some(elev) => elev,
+            None => horizons_with(ctx, rect, azimuths, method, near_px),
+        };
         let t = tally(&elev);
         return Ok((elev, t));
     }
-    let mut far = FarHorizons::new(ctx, rect, azimuths, near_px, method);
+    let mut far = match on_device {
+        Some(own) => FarHorizons::from_own(ctx, rect, azimuths, own),
+        None => FarHorizons::new(ctx, rect, azimuths, near_px, method),
+    };
     let t = tally(far.current());
     for (k, spec) in rings.iter().enumerate() {
         let read = src.cache().now();
@@ -1270,6 +1299,7 @@ impl Stage for HorizonStage<'_> {
                 opts.method,
                 opts.near_px,
                 (opts.method == Method::Sweep).then_some(id),
+                opts.device.as_deref(),
             )?;
             budget = tally;
             elev

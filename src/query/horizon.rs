@@ -319,6 +319,7 @@ fn profile(
         method,
         opts.near_px,
         None,
+        None,
     )?;
     Ok((
         Profile::Samples(samples),

@@ -30,6 +30,9 @@ pub struct BakeOptions {
     /// (same sources and layout) added are removed. False: a bake adds what its plan lists
     /// and leaves what is there.
     pub prune: bool,
+    /// Where the horizon stage's sweep runs (None: the CPU): a device the front end made from
+    /// the scene's `[horizon] device` or `--device`.
+    pub device: Option<crate::horizon::device::SharedDevice>,
 }
 
 /// The stage options a plan's bake runs with: the tiling options of its layout and sources,
@@ -63,6 +66,7 @@ pub fn stage_plan(plan: &Plan, how: &BakeOptions) -> bake::Plan {
         stages.push(Stage::Horizon);
     }
     let mut horizon = plan.horizon_options();
+    horizon.device = how.device.clone();
     if plan.wanted().is_some() {
         // Some tiles of the sources only: the horizons assume the sources' whole range, so
         // that tiles another bake adds leave the horizons already made valid.
@@ -95,9 +99,14 @@ pub fn bake_stage(
     stage: &str,
     select: &crate::runner::Select,
     role: crate::runner::Role,
+    device: Option<crate::horizon::device::SharedDevice>,
     progress: &dyn Progress,
 ) -> Result<crate::graph::Ran> {
-    let stages = stage_plan(plan, &BakeOptions::default());
+    let how = BakeOptions {
+        device,
+        ..BakeOptions::default()
+    };
+    let stages = stage_plan(plan, &how);
     let Some(st) = Stage::named(stage).filter(|s| stages.stages.contains(s)) else {
         let names: Vec<&str> = stages.stages.iter().map(|s| s.name()).collect();
         return Err(Error::param(
@@ -198,6 +207,9 @@ impl Stamp {
         let mut h = blake3::Hasher::new();
         h.update(env!("CARGO_PKG_VERSION").as_bytes());
         h.update(&serde_json::to_vec(scene).expect("scenes serialise"));
+        // (Not the device: a folder baked on a GPU is up to date for the same scene on the CPU,
+        // its maps being within the sweep's budget of the CPU's; the horizon stage's run key
+        // has the device, so a bake that does run the stage redoes it on the device asked.)
         h.update(&[u8::from(how.prune)]);
         let manifest = crate::tileset::manifest_hash(out).ok_or_else(|| {
             Error::invalid(out.join(MANIFEST), "the bake left no readable manifest")

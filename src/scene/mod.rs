@@ -155,6 +155,7 @@ struct HorizonTable {
     azimuths: Option<Spanned<usize>>,
     method: Option<Spanned<String>>,
     prune: Option<Spanned<bool>>,
+    device: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize)]
@@ -371,6 +372,13 @@ pub struct HorizonSpec {
     pub method: HorizonMethod,
     /// Leave out the horizons of tiles that provably cannot shadow the scene's suns.
     pub prune: bool,
+    /// Where the sweep runs (`penumbra bake SCENE`; `--device` overrides it).
+    #[serde(skip_serializing_if = "is_auto")]
+    pub device: crate::horizon::device::DeviceChoice,
+}
+
+fn is_auto(d: &crate::horizon::device::DeviceChoice) -> bool {
+    *d == crate::horizon::device::DeviceChoice::Auto
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -887,6 +895,7 @@ fn check(raw: File, here: &Here) -> Result<Scene> {
             HorizonMethod::Fast
         },
         prune: true,
+        device: Default::default(),
     };
     if let Some(h) = &raw.horizon {
         let h = h.get_ref();
@@ -932,6 +941,31 @@ fn check(raw: File, here: &Here) -> Result<Scene> {
         }
         if let Some(p) = &h.prune {
             horizon.prune = *p.get_ref();
+        }
+        if let Some(d) = &h.device {
+            use crate::horizon::device::DeviceChoice;
+            horizon.device = DeviceChoice::parse(d.get_ref()).ok_or_else(|| {
+                here.err(
+                    d,
+                    "horizon.device",
+                    format!(
+                        "\"{}\" is not one of {}",
+                        d.get_ref(),
+                        DeviceChoice::NAMES.join(", ")
+                    ),
+                )
+            })?;
+            if horizon.device == DeviceChoice::Gpu && horizon.method != HorizonMethod::Sweep {
+                return Err(here.err(
+                    d,
+                    "horizon.device",
+                    format!(
+                        "\"gpu\" runs the sweep method only, and this scene's method is \"{}\": \
+                         set method = \"sweep\" or device = \"cpu\"",
+                        horizon.method.name()
+                    ),
+                ));
+            }
         }
     }
     // The default K, or all the azimuths give when they are fewer.

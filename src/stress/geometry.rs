@@ -134,7 +134,17 @@ pub(crate) fn pixel(x: usize, y: usize) -> Rect {
 
 /// The horizon kernel as the catalogue runs it: `horizon::horizons`, weakened on request.
 pub(crate) fn horizons(ctx: &Context, rect: Rect, a: usize, m: Method, weaken: Weaken) -> Vec<f32> {
-    let mut out = horizon::horizons(ctx, rect, a, m);
+    let device = SWEEP_DEVICE
+        .read()
+        .unwrap_or_else(|e| e.into_inner())
+        .clone();
+    let mut out = match device {
+        Some(d) if m == Method::Sweep => {
+            horizon::device::horizons_sweep_on(d.as_ref(), ctx, rect, a)
+                .unwrap_or_else(|e| panic!("the sweep device failed: {e}"))
+        }
+        _ => horizon::horizons(ctx, rect, a, m),
+    };
     if weaken == Weaken::HorizonFloorZero {
         out.iter_mut().for_each(|v| *v = v.max(0.0));
     }
@@ -222,4 +232,22 @@ pub(crate) fn value_noise(x: f64, y: f64, cell: f64, seed: u64) -> f64 {
         + g(i + 1.0, j) * tx * (1.0 - ty)
         + g(i, j + 1.0) * (1.0 - tx) * ty
         + g(i + 1.0, j + 1.0) * tx * ty
+}
+
+/// Where the catalogue's sweep rows run (`penumbra stress --device gpu`): None, the CPU.
+static SWEEP_DEVICE: std::sync::RwLock<Option<horizon::device::SharedDevice>> =
+    std::sync::RwLock::new(None);
+
+/// Runs the catalogue's sweep-method rows on `device` from now on (None: on the CPU), for
+/// the whole process: `penumbra stress --device` and the GPU crate's tests.
+pub fn set_sweep_device(device: Option<horizon::device::SharedDevice>) {
+    *SWEEP_DEVICE.write().unwrap_or_else(|e| e.into_inner()) = device;
+}
+
+/// Whether [`set_sweep_device`] set a device.
+pub(crate) fn sweep_device_set() -> bool {
+    SWEEP_DEVICE
+        .read()
+        .unwrap_or_else(|e| e.into_inner())
+        .is_some()
 }

@@ -16,6 +16,7 @@ use penumbra::format::TileCompression;
 use penumbra::fourier::sun::Model;
 use penumbra::fourier::{Encoding, FourierOptions, Layout, Reduce, Sigma};
 use penumbra::graph::{self, Node};
+use penumbra::horizon::device::DeviceChoice;
 use penumbra::horizon::{HorizonOptions, HorizonPrecision, Method};
 use penumbra::mip::{MipOptions, Precision};
 use penumbra::query::HorizonFrom;
@@ -90,6 +91,8 @@ enum Command {
         levels: Option<Vec<u8>>,
         #[command(flatten)]
         flags: HorizonFlags,
+        #[command(flatten)]
+        device: DeviceFlag,
         /// Sample type of the stored maps: f16 (default) or f32.
         #[arg(long, default_value = "f16")]
         precision: HorizonPrecision,
@@ -251,6 +254,10 @@ enum Command {
         /// fourier-drop-term) to see the bounds fail.
         #[arg(long, value_name = "NAME", hide = true)]
         weaken: Option<String>,
+        /// Where the sweep method's rows run (the other methods' run on the CPU): cpu (the
+        /// default here), gpu or auto, as `horizon --device`.
+        #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(DeviceChoice::NAMES))]
+        device: Option<String>,
         /// Print the rows as JSON.
         #[arg(long)]
         json: bool,
@@ -752,6 +759,75 @@ impl FourierFlags {
 }
 
 #[derive(Args, Clone)]
+struct DeviceFlag {
+    /// Where the sweep method runs: cpu, gpu (any adapter, Mesa's software lavapipe included;
+    /// an error where there is none) or auto (a hardware GPU where one is present, else the
+    /// CPU). The other methods run on the CPU. A GPU's maps are within the sweep's error budget
+    /// of the CPU's, not the same bytes (docs/horizons.md, "On the GPU").
+    /// [default: a scene's `[horizon] device`, else auto]
+    #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(DeviceChoice::NAMES))]
+    device: Option<String>,
+}
+
+impl DeviceFlag {
+    /// The device the sweep runs on for `method` (None: the CPU); `scene` is the scene's
+    /// choice, which `--device` overrides.
+    fn open(
+        &self,
+        method: Method,
+        scene: Option<DeviceChoice>,
+    ) -> anyhow::Result<Option<penumbra::horizon::device::SharedDevice>> {
+        let given = self.device.as_deref().and_then(DeviceChoice::parse);
+        let choice = given.or(scene).unwrap_or_default();
+        if choice == DeviceChoice::Cpu {
+            return Ok(None);
+        }
+        if method != Method::Sweep {
+            if choice == DeviceChoice::Gpu {
+                return Err(penumbra::Error::param(
+                    "device",
+                    format!(
+                        "gpu runs the sweep method only, and this run's method is {}: add \
+                         --method sweep, or use --device cpu",
+                        method.name()
+                    ),
+                )
+                .into());
+            }
+            return Ok(None);
+        }
+        open_gpu(choice)
+    }
+}
+
+#[cfg(feature = "gpu")]
+fn open_gpu(
+    choice: DeviceChoice,
+) -> anyhow::Result<Option<penumbra::horizon::device::SharedDevice>> {
+    match penumbra_gpu::GpuSweep::open(choice) {
+        Ok(Some(g)) => Ok(Some(std::sync::Arc::new(g))),
+        Ok(None) => Ok(None),
+        Err(e) => Err(penumbra::Error::usage(e.to_string()).into()),
+    }
+}
+
+#[cfg(not(feature = "gpu"))]
+fn open_gpu(
+    choice: DeviceChoice,
+) -> anyhow::Result<Option<penumbra::horizon::device::SharedDevice>> {
+    if choice == DeviceChoice::Gpu {
+        return Err(penumbra::Error::usage(
+            "--device gpu: this build has no GPU support (the `gpu` feature of penumbra-cli, \
+             on by default; built with --no-default-features); rebuild with `cargo build \
+             --release --features penumbra-cli/gpu`, or run the sweep on the CPU with \
+             --device cpu",
+        )
+        .into());
+    }
+    Ok(None)
+}
+
+#[derive(Args, Clone)]
 struct HorizonFlags {
     /// Azimuth samples per pixel (plane azimuths 360·k/A from the face's +U axis).
     #[arg(long, default_value_t = 360)]
@@ -1031,6 +1107,8 @@ struct BakeArgs {
     #[arg(long, requires = "stage", conflicts_with = "shard")]
     finish: bool,
     #[command(flatten)]
+    device: DeviceFlag,
+    #[command(flatten)]
     fourier: FourierFlags,
 }
 
@@ -1213,8 +1291,11 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
                 };
                 let select = a.shard.clone().unwrap_or_default();
                 let plan = penumbra::scene::plan::plan(&scene)?;
+                let device = a
+                    .device
+                    .open(plan.scene.horizon.method, Some(plan.scene.horizon.device))?;
                 let ran = penumbra::scene::bake::bake_stage(
-                    &plan, &a.out, stage, &select, role, &progress,
+                    &plan, &a.out, stage, &select, role, device, &progress,
                 )?;
                 output::print_ran(&ran, t0.elapsed().as_secs_f64(), a.flags.json)?;
                 return Ok(());
@@ -1222,6 +1303,9 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
             let how = penumbra::scene::bake::BakeOptions {
                 keep_partial: a.keep_partial,
                 prune: a.prune,
+                device: a
+                    .device
+                    .open(scene.horizon.method, Some(scene.horizon.device))?,
             };
             if let Some(r) = penumbra::scene::bake::unchanged(&scene, &a.out, &how)? {
                 output::print_bake(&r, t0.elapsed().as_secs_f64(), a.flags.json)?;
@@ -1318,6 +1402,7 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
                         plan.horizon.method = Method::Sweep;
                     }
                 }
+                plan.horizon.device = a.device.open(plan.horizon.method, None)?;
             }
             let input = match &a.dem {
                 Some(p) => dem_input(p.clone(), &a.body, a.dem_format)?,
@@ -1361,8 +1446,10 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
             fourier_flags,
             shard,
             json,
+            device,
         } => {
             let method = flags.method(fourier && !keep_raw);
+            let device = device.open(method, None)?;
             let opts = HorizonOptions {
                 levels,
                 azimuths: flags.azimuths,
@@ -1375,6 +1462,7 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
                 fine_margin_px: flags.fine_margin_px(method)?,
                 lit_above_deg: lit_above,
                 terrain_range_m: None,
+                device,
             };
             let fourier = fourier
                 .then(|| fourier_flags.options(None, penumbra::runner::DEFAULT_MAX_OUTPUT_GIB));
@@ -1524,8 +1612,14 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
             full,
             only,
             weaken,
+            device,
             json,
         } => {
+            let choice = device.as_deref().and_then(DeviceChoice::parse);
+            let flag = DeviceFlag { device };
+            penumbra::stress::set_sweep_device(
+                flag.open(Method::Sweep, Some(choice.unwrap_or(DeviceChoice::Cpu)))?,
+            );
             if !stress(full, only.as_deref(), weaken.as_deref(), json, cli.quiet)? {
                 std::process::exit(1);
             }
@@ -1641,6 +1735,7 @@ fn package(
                 let how = penumbra::scene::bake::BakeOptions {
                     keep_partial: false,
                     prune,
+                    device: None,
                 };
                 matches!(
                     penumbra::scene::bake::unchanged(&scene, &dir, &how),
