@@ -1,7 +1,7 @@
 //! The layering rules of docs/architecture.md, checked on the source itself:
 //!
 //! - **No import circle between files** of any crate in the workspace (the library, the CLI,
-//!   the benchmarks, the viewer, this test binary). An edge `a.rs → b.rs` is any path in `a.rs`
+//!   the benchmarks, the viewer, the GPU sweep, this test binary). An edge `a.rs → b.rs` is any path in `a.rs`
 //!   (a `use` or an inline `crate::…`/`super::…`/`self::…`/child-module path, test modules
 //!   included) that names an item defined in `b.rs`; a path through a re-export (`pub use`) is
 //!   followed to the file that defines the item, and the re-export itself is an edge of the
@@ -561,6 +561,8 @@ const ROOTS: &[&str] = &[
     "tools/bench/main.rs",
     "tools/viewer/src/lib.rs",
     "tools/viewer/src/main.rs",
+    "tools/gpu/src/lib.rs",
+    "tools/gpu/tests/gpu.rs",
     "tests/tests.rs",
 ];
 

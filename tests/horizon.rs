@@ -847,8 +847,35 @@ fn fast_stays_below_exact_at_a_real_data_edge() {
     );
 }
 
+/// A build without the GPU sweep (the README's first command's): `--device gpu` exits 2 saying
+/// how to build it, and `auto` is the CPU.
+#[cfg(not(feature = "gpu"))]
+#[test]
+fn horizon_device_gpu_needs_the_feature() {
+    use crate::util::penumbra_bin;
+    let dir = tempfile::tempdir().unwrap();
+    let e = penumbra_bin()
+        .args([
+            "horizon",
+            dir.path().to_str().unwrap(),
+            "--method",
+            "sweep",
+            "--device",
+            "gpu",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(e.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&e.stderr);
+    assert!(
+        err.contains("--features penumbra-cli/gpu") && err.contains("--device cpu"),
+        "{err}"
+    );
+}
+
 /// Whether Mesa's software Vulkan driver (lavapipe) is installed: the GPU tests' adapter where
 /// there is no GPU. Under `CI=true` it must be (`.ci/run` installs it).
+#[cfg(feature = "gpu")]
 fn lavapipe() -> bool {
     let here = ["/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d"]
         .iter()
@@ -873,6 +900,7 @@ fn lavapipe() -> bool {
 /// CPU's maps are redone, and a rerun on the same device is up to date), and refuses what it
 /// cannot do with exit 2: another method on the GPU, and no adapter at all (naming lavapipe and
 /// `--device cpu`), leaving the maps as they were.
+#[cfg(feature = "gpu")]
 #[test]
 fn horizon_device_gpu() {
     use crate::util::{global_dem, penumbra_bin};
@@ -999,6 +1027,7 @@ fn horizon_device_gpu() {
     let _ = manifest;
 }
 
+#[cfg(feature = "gpu")]
 fn walk(d: &std::path::Path) -> Vec<std::path::PathBuf> {
     let mut v = Vec::new();
     for e in std::fs::read_dir(d).unwrap().flatten() {

@@ -1358,6 +1358,25 @@ mod tests {
             e.contains("line 11") && e.contains("`region[0].level`"),
             "{e}"
         );
+        // A device that is none of the three, and the GPU for a method it does not run.
+        let e = err(&format!("{HEAD}{body}\n[horizon]\ndevice = \"tpu\"\n"));
+        assert!(
+            e.contains("line 16") && e.contains("`horizon.device`") && e.contains("cpu, gpu, auto"),
+            "{e}"
+        );
+        let e = err(&format!(
+            "{HEAD}{body}\n[horizon]\nmethod = \"fast\"\ndevice = \"gpu\"\n"
+        ));
+        assert!(
+            e.contains("`horizon.device`") && e.contains("sweep method only"),
+            "{e}"
+        );
+        let ok = parse(
+            &format!("{HEAD}{body}\n[horizon]\nmethod = \"sweep\"\ndevice = \"gpu\"\n"),
+            Path::new("s.toml"),
+        )
+        .expect("the GPU runs the sweep");
+        assert_eq!(ok.horizon.device, crate::horizon::device::DeviceChoice::Gpu);
         // Sun above 90°.
         let e = err(&format!(
             "{HEAD}{body}\n[sun]\nelevation_deg = [10.0, 95.0]\n"

@@ -262,6 +262,10 @@ pub enum BenchCommand {
         /// Lit-fraction pixels per block for `--product`.
         #[arg(long, default_value_t = 512)]
         lit_pixels: usize,
+        /// Also run the sweep on this device (`gpu`: any adapter, lavapipe included) and
+        /// compare it with the CPU sweep and the truth.
+        #[arg(long, value_parser = ["cpu", "gpu", "auto"])]
+        device: Option<String>,
         #[arg(long)]
         markdown: bool,
         #[arg(long)]
@@ -473,20 +477,35 @@ fn dispatch(cmd: BenchCommand, quiet: bool) -> Result<()> {
             whole_azimuths,
             markdown,
             json,
+            device,
             ..
-        } => crate::sweep::run(
-            &data,
-            &peers,
-            repeat,
-            skip_fast,
-            whole_azimuths,
-            block,
-            azimuths,
-            truth,
-            markdown,
-            json,
-            quiet,
-        ),
+        } => {
+            let choice = device
+                .as_deref()
+                .and_then(penumbra::horizon::device::DeviceChoice::parse)
+                .unwrap_or(penumbra::horizon::device::DeviceChoice::Cpu);
+            let gpu = penumbra_gpu::GpuSweep::open(choice).map_err(|e| anyhow::anyhow!("{e}"))?;
+            if let Some(g) = &gpu {
+                if !quiet {
+                    eprintln!("bench sweep: GPU {}", g.describe());
+                }
+            }
+            crate::sweep::run(
+                &data,
+                &peers,
+                repeat,
+                skip_fast,
+                whole_azimuths,
+                block,
+                azimuths,
+                truth,
+                gpu.as_ref()
+                    .map(|g| g as &dyn penumbra::horizon::device::SweepDevice),
+                markdown,
+                json,
+                quiet,
+            )
+        }
         BenchCommand::Shadows {
             data,
             block,

@@ -8,6 +8,7 @@ use std::time::Instant;
 use anyhow::Result;
 use serde::Serialize;
 
+use penumbra::horizon::device::{horizons_sweep_on, SweepDevice};
 use penumbra::horizon::{horizons, Method, Rect};
 
 use crate::cases::{peer_context, real_cases};
@@ -164,6 +165,7 @@ pub fn run(
     block: usize,
     a: usize,
     truth: Method,
+    device: Option<&dyn SweepDevice>,
     markdown: bool,
     json: bool,
     quiet: bool,
@@ -173,6 +175,14 @@ pub fn run(
             eprintln!("bench sweep: {m}");
         }
     };
+    // The sweep on `device` (`--device gpu`), timed wall-clock with its read-back.
+    let on_device =
+        |ctx: &penumbra::horizon::Context, rect: Rect, a: usize| -> Result<(Vec<f32>, f64)> {
+            let d = device.expect("asked only with a device");
+            let t0 = Instant::now();
+            let out = horizons_sweep_on(d, ctx, rect, a)?;
+            Ok((out, t0.elapsed().as_secs_f64()))
+        };
     let threads = rayon::current_num_threads();
     let (cases, notes) = if block == 0 {
         (Vec::new(), Vec::new())
@@ -223,6 +233,36 @@ pub fn run(
                 error: error(&got, &want),
             });
         }
+        if device.is_some() {
+            say("synthetic 1024²: sweep whole map on the GPU".into());
+            let full = Rect {
+                x0: 0,
+                y0: 0,
+                w: ctx.width,
+                h: ctx.height,
+            };
+            let mut best = f64::INFINITY;
+            let mut at = Vec::new();
+            for _ in 0..repeat.max(1) {
+                let (out, t) = on_device(&ctx, full, a)?;
+                best = best.min(t);
+                at = pix
+                    .iter()
+                    .flat_map(|&(x, y)| (0..a).map(move |k| (k, x, y)))
+                    .map(|(k, x, y)| out[k * plane + y * ctx.width + x])
+                    .collect();
+            }
+            rows.push(Row {
+                case: "synthetic 1024² (30 m), GPU".into(),
+                truth: "reference",
+                method: "sweep (gpu)",
+                pixels: plane,
+                azimuths: a,
+                wall_s: best,
+                core_ns_per_px_az: f64::NAN,
+                error: error(&at, &want),
+            });
+        }
     }
     for case in &cases {
         let plane = case.rect.w * case.rect.h;
@@ -255,6 +295,7 @@ pub fn run(
             core_ns_per_px_az: ns(t_truth),
             error: error(&want, &want),
         });
+        let cpu_sweep = methods[0].1.clone();
         for (m, out, t) in methods {
             rows.push(Row {
                 case: case.name.clone(),
@@ -267,21 +308,44 @@ pub fn run(
                 error: error(&out, &want),
             });
         }
+        if device.is_some() {
+            say(format!("{}: sweep on the GPU", case.name));
+            let (out, t) = on_device(&case.ctx, case.rect, a)?;
+            for (against, e) in [
+                (truth.name(), error(&out, &want)),
+                ("sweep (cpu)", error(&out, &cpu_sweep)),
+            ] {
+                rows.push(Row {
+                    case: case.name.clone(),
+                    truth: against,
+                    method: "sweep (gpu)",
+                    pixels: plane,
+                    azimuths: a,
+                    wall_s: t,
+                    core_ns_per_px_az: f64::NAN,
+                    error: e,
+                });
+            }
+        }
     }
     if json {
         println!("{}", serde_json::to_string_pretty(&rows)?);
         return Ok(());
     }
     let _ = markdown;
+    if let Some(d) = device {
+        println!("GPU: {}\n", d.key());
+    }
     println!(
-        "| case | method | wall s | core-ns/px·az | RMS ° | mean ° | p99 ° | max ° | > +0.1° |"
+        "| case | method | against | wall s | core-ns/px·az | RMS ° | mean ° | p99 ° | max ° | > +0.1° |"
     );
-    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---|---|---:|---:|---:|---:|---:|---:|---:|");
     for r in &rows {
         println!(
-            "| {} | {} | {:.2} | {:.1} | {:.4} | {:+.4} | {:.3} | {:.3} | {:.3} % |",
+            "| {} | {} | {} | {:.2} | {:.1} | {:.5} | {:+.5} | {:.4} | {:.3} | {:.3} % |",
             r.case,
             r.method,
+            r.truth,
             r.wall_s,
             r.core_ns_per_px_az,
             r.error.rms_deg,

@@ -763,7 +763,8 @@ struct DeviceFlag {
     /// Where the sweep method runs: cpu, gpu (any adapter, Mesa's software lavapipe included;
     /// an error where there is none) or auto (a hardware GPU where one is present, else the
     /// CPU). The other methods run on the CPU. A GPU's maps are within the sweep's error budget
-    /// of the CPU's, not the same bytes (docs/horizons.md, "On the GPU").
+    /// of the CPU's, not the same bytes (docs/horizons.md, "On the GPU"). Needs a build with
+    /// `--features penumbra-cli/gpu` (without it, auto is the CPU).
     /// [default: a scene's `[horizon] device`, else auto]
     #[arg(long, value_parser = clap::builder::PossibleValuesParser::new(DeviceChoice::NAMES))]
     device: Option<String>,
@@ -800,6 +801,12 @@ impl DeviceFlag {
     }
 }
 
+/// What `--device gpu` says in a build without the GPU sweep.
+#[cfg_attr(feature = "gpu", allow(dead_code))]
+const NO_GPU: &str = "--device gpu: this build of penumbra has no GPU sweep (the `gpu` feature \
+     of penumbra-cli); rebuild with `cargo build --release --features penumbra-cli/gpu` (wgpu, \
+     and a Vulkan driver at run time), or run the sweep on the CPU with --device cpu";
+
 #[cfg(feature = "gpu")]
 fn open_gpu(
     choice: DeviceChoice,
@@ -816,13 +823,7 @@ fn open_gpu(
     choice: DeviceChoice,
 ) -> anyhow::Result<Option<penumbra::horizon::device::SharedDevice>> {
     if choice == DeviceChoice::Gpu {
-        return Err(penumbra::Error::usage(
-            "--device gpu: this build has no GPU support (the `gpu` feature of penumbra-cli, \
-             on by default; built with --no-default-features); rebuild with `cargo build \
-             --release --features penumbra-cli/gpu`, or run the sweep on the CPU with \
-             --device cpu",
-        )
-        .into());
+        return Err(penumbra::Error::usage(NO_GPU).into());
     }
     Ok(None)
 }

@@ -312,29 +312,76 @@ impl GpuSweep {
         self.info.device_type == wgpu::DeviceType::Cpu
     }
 
-    /// The GPU memory a tile takes: its context's heights plus, per batch of `jobs` azimuth
-    /// jobs, the lines' scratch, the far-field slots, the results and their read-back copy.
-    /// Depends on the tile and its context only (bounded by the memory budget), never on how
-    /// many tiles a run has.
-    pub fn batch_bytes(ctx: &Context, rect: Rect, max_lines: u64, jobs: u64) -> u64 {
-        let np = ctx.width.max(ctx.height) as u64;
-        let plane = (rect.w * rect.h) as u64;
-        let heights = (ctx.width * ctx.height) as u64 * 4;
-        heights + jobs * per_job_bytes(np, plane, max_lines)
-    }
-
     /// The memory budget a tile's batches are cut to (bytes).
     pub fn memory_budget(&self) -> u64 {
         self.memory
     }
 }
 
-fn per_job_bytes(np: u64, plane: u64, max_lines: u64) -> u64 {
-    let scratch = max_lines * np * SAMPLE_BYTES;
-    let far = 2 * plane * 2 * 4;
-    let out = 2 * plane * 4 * 2;
-    let small = (2 * MAX_STEPS as u64) * 64 + np * 8 + 128;
-    scratch + far + out + small
+/// A tile as the GPU holds it: its context raster, its pixels and the most lines an azimuth
+/// job sweeps (≤ tile width + height + 3).
+#[derive(Clone, Copy, Debug)]
+pub struct TileShape {
+    pub width: u64,
+    pub height: u64,
+    pub plane: u64,
+    pub max_lines: u64,
+}
+
+impl TileShape {
+    /// The shape of a square `tile` with `margin` context pixels on each side.
+    pub fn square(tile: u64, margin: u64) -> TileShape {
+        let side = tile + 2 * margin;
+        TileShape {
+            width: side,
+            height: side,
+            plane: tile * tile,
+            max_lines: 2 * tile + 3,
+        }
+    }
+
+    fn heights_bytes(&self) -> u64 {
+        self.width * self.height * 4
+    }
+
+    /// One job's (two azimuths') buffers: the lines' scratch, the far-field slots (two a pixel
+    /// and direction), the results and their read-back copy, the job's small tables.
+    pub fn per_job_bytes(&self) -> u64 {
+        let np = self.width.max(self.height);
+        self.max_lines * np * SAMPLE_BYTES
+            + 2 * self.plane * 2 * 4
+            + 2 * 2 * self.plane * 4
+            + 2 * MAX_STEPS as u64 * 64
+            + np * 8
+            + 128
+    }
+
+    fn biggest_buffer(&self) -> u64 {
+        let np = self.width.max(self.height);
+        (self.max_lines * np * SAMPLE_BYTES)
+            .max(2 * self.plane * 8)
+            .max(self.heights_bytes())
+    }
+
+    /// Jobs per batch within `memory` bytes (at least one) and an adapter's largest binding
+    /// `cap`; None where one job's largest buffer exceeds `cap`.
+    pub fn batch(&self, memory: u64, cap: u64) -> Option<u64> {
+        if self.biggest_buffer() > cap {
+            return None;
+        }
+        let np = self.width.max(self.height);
+        let by_budget = memory.saturating_sub(self.heights_bytes()) / self.per_job_bytes();
+        let by_cap = (cap / (self.max_lines * np * SAMPLE_BYTES).max(1))
+            .min(cap / (2 * self.plane * 8).max(1));
+        Some(by_budget.min(by_cap).max(1))
+    }
+
+    /// The GPU memory the tile takes at the peak with `batch` jobs a batch: its heights and
+    /// the batch's buffers. Depends on the tile and its context only, never on how many tiles,
+    /// levels or azimuths a run has.
+    pub fn peak_bytes(&self, batch: u64) -> u64 {
+        self.heights_bytes() + batch * self.per_job_bytes()
+    }
 }
 
 impl SweepDevice for GpuSweep {
@@ -383,30 +430,29 @@ impl GpuSweep {
             .map(|j| (j.m_hi - j.m_lo + 1).max(0) as u64)
             .max()
             .unwrap_or(0);
-        let per_job = per_job_bytes(np_max as u64, plane as u64, max_lines);
         let cap = self
             .limits
             .max_storage_buffer_binding_size
             .min(self.limits.max_buffer_size);
-        let biggest = (max_lines * np_max as u64 * SAMPLE_BYTES).max(2 * plane as u64 * 8);
-        let heights_bytes = (ctx.width * ctx.height) as u64 * 4;
-        if biggest > cap || heights_bytes > cap {
-            return Err(format!(
+        let shape = TileShape {
+            width: ctx.width as u64,
+            height: ctx.height as u64,
+            plane: plane as u64,
+            max_lines,
+        };
+        let batch = shape.batch(self.memory, cap).ok_or_else(|| {
+            format!(
                 "a tile of {}×{} pixels with a {}×{} context needs {} MiB in one buffer, more \
                  than this adapter binds ({} MiB): use --device cpu or smaller tiles",
                 rect.w,
                 rect.h,
                 ctx.width,
                 ctx.height,
-                biggest.max(heights_bytes) >> 20,
+                shape.biggest_buffer() >> 20,
                 cap >> 20
-            ));
-        }
-        let by_budget = (self.memory.saturating_sub(heights_bytes) / per_job.max(1)).max(1);
-        let by_cap = (cap / (max_lines * np_max as u64 * SAMPLE_BYTES).max(1))
-            .min(cap / (2 * plane as u64 * 8).max(1))
-            .max(1);
-        let batch = by_budget.min(by_cap).min(jobs.len() as u64).max(1) as usize;
+            )
+        })?;
+        let batch = batch.min(jobs.len() as u64).max(1) as usize;
 
         // The heights, every NaN made the one no-data pattern the shader tests.
         let nodata = f32::from_bits(0x7fc0_0000);
