@@ -300,14 +300,13 @@ fn json(o: &std::process::Output) -> serde_json::Value {
     serde_json::from_slice(&o.stdout).unwrap()
 }
 
-#[test]
-fn cli_horizon_and_query_horizon() {
-    use crate::util::{global_dem, penumbra_bin};
+/// A global lunar tileset of 32² tiles, 2 levels, in `dir`/t.
+fn small_lunar_tileset(dir: &std::path::Path) -> std::path::PathBuf {
+    use crate::util::global_dem;
     use penumbra::body::Body;
     use penumbra::progress::NoProgress;
     use penumbra::tiling::{tile_dem, TileOptions};
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("t");
+    let out = dir.join("t");
     let opts = TileOptions {
         tile_size: 32,
         halo: 2,
@@ -323,6 +322,14 @@ fn cli_horizon_and_query_horizon() {
         &NoProgress,
     )
     .unwrap();
+    out
+}
+
+#[test]
+fn cli_horizon_and_query_horizon() {
+    use crate::util::penumbra_bin;
+    let dir = tempfile::tempdir().unwrap();
+    let out = small_lunar_tileset(dir.path());
     let o = out.to_str().unwrap();
     let run = |args: &[&str]| penumbra_bin().args(args).output().unwrap();
     // `penumbra [before] horizon o --levels 1 --azimuths 36 [after] --json`.
@@ -903,30 +910,12 @@ fn lavapipe() -> bool {
 #[cfg(feature = "gpu")]
 #[test]
 fn horizon_device_gpu() {
-    use crate::util::{global_dem, penumbra_bin};
-    use penumbra::body::Body;
-    use penumbra::progress::NoProgress;
-    use penumbra::tiling::{tile_dem, TileOptions};
+    use crate::util::penumbra_bin;
     if !lavapipe() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("t");
-    let opts = TileOptions {
-        tile_size: 32,
-        halo: 2,
-        levels: Some(2),
-        ..Default::default()
-    };
-    tile_dem(
-        &global_dem(360),
-        &Body::preset("moon").unwrap(),
-        &out,
-        &opts,
-        None,
-        &NoProgress,
-    )
-    .unwrap();
+    let out = small_lunar_tileset(dir.path());
     let o = out.to_str().unwrap();
     let xdg = dir.path().join("xdg");
     std::fs::create_dir_all(&xdg).unwrap();

@@ -8,7 +8,7 @@ use anyhow::Result;
 
 use penumbra::cube::Face;
 use penumbra::horizon::Context as HzContext;
-use penumbra_cli::measure::{dem_case, Case, EARTH_RADIUS_M};
+use penumbra_cli::measure::{dem_case, Case, EARTH_RADIUS_M, REAL_DEMS};
 
 /// Pixel spacing of the peers' synthetic UTM DEMs (m).
 pub(crate) const PEER_PIXEL_M: f64 = 30.0;
@@ -35,25 +35,9 @@ pub(crate) fn real_cases(
     block: usize,
     say: &dyn Fn(String),
 ) -> Result<(Vec<Case>, Vec<String>)> {
-    let dems: [(&str, &str, &'static str); 6] = [
-        ("LDEM_4 (Moon)", "lola_ldem4/LDEM_4.LBL", "moon"),
-        ("MEGDR (Mars)", "mola_megt90n000cb/megt90n000cb.lbl", "mars"),
-        (
-            "Gale (MOLA 463 m)",
-            "mola_gale_128ppd_crop/gale-mola.bin",
-            "mars",
-        ),
-        (
-            "Shoemaker (LOLA 5 m)",
-            "lola_shoemaker_1k/Shoemaker_final_adj_5mpp_surf_1k.tif",
-            "moon",
-        ),
-        ("Hawaiʻi (SRTM3)", "srtm3/N19W156.hgt", "earth"),
-        ("White Mts (SRTM3)", "srtm3/N44W072.hgt", "earth"),
-    ];
     let mut cases = Vec::new();
     let mut notes = Vec::new();
-    for (label, rel, body) in dems {
+    for (label, rel, body) in REAL_DEMS {
         let path = data.join(rel);
         if !path.exists() {
             notes.push(format!("{label}: {} not found, skipped.", path.display()));

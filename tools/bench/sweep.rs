@@ -130,13 +130,23 @@ fn whole_map(
             (t0.elapsed().as_secs_f64(), out)
         })?;
         best = best.min(t);
-        at = pix
-            .iter()
-            .flat_map(|&(x, y)| (0..a).map(move |k| (k, x, y)))
-            .map(|(k, x, y)| out[k * plane + y * ctx.width + x])
-            .collect();
+        at = at_pixels(&out, ctx.width, plane, a, pix);
     }
     Ok((best, at))
+}
+
+/// The values of `out` (plane-major maps `width` wide) at `pix`, pixel-major.
+fn at_pixels(
+    out: &[f32],
+    width: usize,
+    plane: usize,
+    a: usize,
+    pix: &[(usize, usize)],
+) -> Vec<f32> {
+    pix.iter()
+        .flat_map(|&(x, y)| (0..a).map(move |k| (k, x, y)))
+        .map(|(k, x, y)| out[k * plane + y * width + x])
+        .collect()
 }
 
 /// The reference at `pix` only, 360 azimuths, pixel-major as [`whole_map`] gathers.
@@ -246,11 +256,7 @@ pub fn run(
             for _ in 0..repeat.max(1) {
                 let (out, t) = on_device(&ctx, full, a)?;
                 best = best.min(t);
-                at = pix
-                    .iter()
-                    .flat_map(|&(x, y)| (0..a).map(move |k| (k, x, y)))
-                    .map(|(k, x, y)| out[k * plane + y * ctx.width + x])
-                    .collect();
+                at = at_pixels(&out, ctx.width, plane, a, &pix);
             }
             rows.push(Row {
                 case: "synthetic 1024² (30 m), GPU".into(),

@@ -1618,10 +1618,17 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
         } => {
             let choice = device.as_deref().and_then(DeviceChoice::parse);
             let flag = DeviceFlag { device };
-            penumbra::stress::set_sweep_device(
-                flag.open(Method::Sweep, Some(choice.unwrap_or(DeviceChoice::Cpu)))?,
-            );
-            if !stress(full, only.as_deref(), weaken.as_deref(), json, cli.quiet)? {
+            let dev = flag.open(Method::Sweep, Some(choice.unwrap_or(DeviceChoice::Cpu)))?;
+            let key = dev.as_ref().map(|d| d.key());
+            penumbra::stress::set_sweep_device(dev);
+            if !stress(
+                full,
+                only.as_deref(),
+                weaken.as_deref(),
+                key.as_deref(),
+                json,
+                cli.quiet,
+            )? {
                 std::process::exit(1);
             }
         }
@@ -1833,6 +1840,7 @@ fn stress(
     full: bool,
     only: Option<&str>,
     weaken: Option<&str>,
+    device: Option<&str>,
     json: bool,
     quiet: bool,
 ) -> Result<bool> {
@@ -1878,7 +1886,14 @@ fn stress(
             eprintln!("stress: {:<28} {:>7.2} s  {verdict}", c.name, secs);
         }
     });
-    output::print_stress(&rows, size, weaken, t0.elapsed().as_secs_f64(), json)?;
+    output::print_stress(
+        &rows,
+        size,
+        weaken,
+        device,
+        t0.elapsed().as_secs_f64(),
+        json,
+    )?;
     Ok(rows.iter().all(|r| r.pass))
 }
 

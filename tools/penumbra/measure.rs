@@ -120,6 +120,25 @@ impl Case {
     }
 }
 
+/// The shared real DEMs the benchmarks and the GPU sweep's tests take a block of: (label, path
+/// under the shared data folder, body).
+pub const REAL_DEMS: [(&str, &str, &str); 6] = [
+    ("LDEM_4 (Moon)", "lola_ldem4/LDEM_4.LBL", "moon"),
+    ("MEGDR (Mars)", "mola_megt90n000cb/megt90n000cb.lbl", "mars"),
+    (
+        "Gale (MOLA 463 m)",
+        "mola_gale_128ppd_crop/gale-mola.bin",
+        "mars",
+    ),
+    (
+        "Shoemaker (LOLA 5 m)",
+        "lola_shoemaker_1k/Shoemaker_final_adj_5mpp_surf_1k.tif",
+        "moon",
+    ),
+    ("Hawaiʻi (SRTM3)", "srtm3/N19W156.hgt", "earth"),
+    ("White Mts (SRTM3)", "srtm3/N44W072.hgt", "earth"),
+];
+
 /// A case from a DEM: a `block`² block of observers at the map's centre, in a context reaching
 /// as far as a horizon could see, on a face plane whose pixels are the map's.
 pub fn dem_case(label: &str, dem: &penumbra::dem::Dem, body: &'static str, block: usize) -> Case {

@@ -1125,6 +1125,7 @@ pub fn print_stress(
     rows: &[penumbra::stress::Row],
     size: penumbra::stress::Size,
     weaken: penumbra::stress::Weaken,
+    device: Option<&str>,
     wall_s: f64,
     json: bool,
 ) -> Result<()> {
@@ -1133,6 +1134,7 @@ pub fn print_stress(
         return print_json(&serde_json::json!({
             "size": size,
             "weaken": weaken,
+            "sweep_device": device.unwrap_or("cpu"),
             "wall_s": wall_s,
             "passed": failed.is_empty(),
             "rows": rows,
@@ -1163,13 +1165,16 @@ pub fn print_stress(
     }
     writeln!(
         o,
-        "{} rows, {} failed, {wall_s:.2} s ({})",
+        "{} rows, {} failed, {wall_s:.2} s ({}{})",
         rows.len(),
         failed.len(),
         match size {
             penumbra::stress::Size::Short => "short sizes",
             penumbra::stress::Size::Full => "full sizes",
-        }
+        },
+        device
+            .map(|d| format!("; sweep on {d}"))
+            .unwrap_or_default()
     )?;
     o.flush()?;
     for r in &failed {

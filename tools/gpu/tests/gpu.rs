@@ -146,25 +146,9 @@ fn rough_terrain_matches_the_cpu_sweep() {
 fn real_dem_blocks_within_the_sweep_budget() {
     let Some(gpu) = gpu() else { return };
     let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
-    let dems: [(&str, &str, &str); 6] = [
-        ("LDEM_4 (Moon)", "lola_ldem4/LDEM_4.LBL", "moon"),
-        ("MEGDR (Mars)", "mola_megt90n000cb/megt90n000cb.lbl", "mars"),
-        (
-            "Gale (MOLA 463 m)",
-            "mola_gale_128ppd_crop/gale-mola.bin",
-            "mars",
-        ),
-        (
-            "Shoemaker (LOLA 5 m)",
-            "lola_shoemaker_1k/Shoemaker_final_adj_5mpp_surf_1k.tif",
-            "moon",
-        ),
-        ("Hawaiʻi (SRTM3)", "srtm3/N19W156.hgt", "earth"),
-        ("White Mts (SRTM3)", "srtm3/N44W072.hgt", "earth"),
-    ];
     let a = 36;
     let mut seen = 0;
-    for (label, rel, body) in dems {
+    for (label, rel, body) in penumbra_cli::measure::REAL_DEMS {
         let path = data.join(rel);
         if !path.exists() {
             assert!(
