@@ -385,6 +385,15 @@ fn synth_context(
     }
 }
 
+/// A tile's time (scaled to 360 azimuths): CPU seconds on one thread, and with a device its
+/// wall seconds for the context's own horizons (the far rings are then the CPU seconds).
+struct TileTime {
+    core_s: f64,
+    device_s: Option<f64>,
+    reach_px: u64,
+    rings: usize,
+}
+
 /// Core seconds per 512² tile at 360 azimuths for `bake`, measured on one thread over
 /// synthetic terrain with the geometry of a tile at the face centre: the fine context and the
 /// far rings `penumbra horizon` would build for that reach (`azimuths` timed, scaled to 360).
@@ -392,7 +401,8 @@ fn per_tile_core_s(
     bake: &Bake,
     azimuths: usize,
     method: penumbra::horizon::Method,
-) -> Result<(f64, u64, usize)> {
+    device: Option<&dyn penumbra::horizon::device::SweepDevice>,
+) -> Result<TileTime> {
     use penumbra::horizon::{FarRing, Rect};
     let n = 512i64;
     let fine = penumbra::horizon::default_fine_margin_px(n as u32) as i64;
@@ -431,30 +441,57 @@ fn per_tile_core_s(
         prev = w;
     }
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    let scale = 360.0 / azimuths as f64;
+    let mut device_s = None;
+    let own = match device {
+        Some(d) => {
+            let t = std::time::Instant::now();
+            let own = penumbra::horizon::device::horizons_sweep_on(d, &ctx, rect, azimuths)?;
+            device_s = Some(t.elapsed().as_secs_f64() * scale);
+            Some(own)
+        }
+        None => None,
+    };
     let t = std::time::Instant::now();
     pool.install(|| {
-        let mut far = penumbra::horizon::FarHorizons::new(
-            &ctx,
-            rect,
-            azimuths,
-            penumbra::horizon::DEFAULT_NEAR_PX,
-            method,
-        );
+        let mut far = match own {
+            Some(own) => penumbra::horizon::FarHorizons::from_own(&ctx, rect, azimuths, own),
+            None => penumbra::horizon::FarHorizons::new(
+                &ctx,
+                rect,
+                azimuths,
+                penumbra::horizon::DEFAULT_NEAR_PX,
+                method,
+            ),
+        };
         for r in &rings {
             far.add_ring(r);
         }
         far.finish()
     });
-    let secs = t.elapsed().as_secs_f64() * 360.0 / azimuths as f64;
-    Ok((secs, needed as u64, rings.len()))
+    Ok(TileTime {
+        core_s: t.elapsed().as_secs_f64() * scale,
+        device_s,
+        reach_px: needed as u64,
+        rings: rings.len(),
+    })
 }
 
 /// The extrapolation table: per bake, the measured core seconds per tile and the CPU-hours.
-pub fn extrapolate(azimuths: usize, markdown: bool, json: bool) -> Result<()> {
+pub fn extrapolate(
+    azimuths: usize,
+    device: Option<&dyn penumbra::horizon::device::SweepDevice>,
+    markdown: bool,
+    json: bool,
+) -> Result<()> {
     #[derive(Serialize)]
     struct X {
         bake: &'static str,
         method: &'static str,
+        /// With a device: its wall seconds per tile for the context's own horizons, and its
+        /// minutes for the bake (the far rings stay in `core_s_per_tile`, on the CPU).
+        device_s_per_tile: Option<f64>,
+        device_minutes: Option<f64>,
         pixels: f64,
         tiles: f64,
         reach_px: u64,
@@ -466,24 +503,36 @@ pub fn extrapolate(azimuths: usize, markdown: bool, json: bool) -> Result<()> {
     }
     let mut rows = Vec::new();
     use penumbra::horizon::Method;
-    for (b, method) in BAKES
-        .iter()
-        .flat_map(|b| [(b, Method::Fast), (b, Method::Sweep)])
-    {
+    type Device<'a> = Option<&'a dyn penumbra::horizon::device::SweepDevice>;
+    let mut runs: Vec<(&Bake, Method, Device)> = Vec::new();
+    for b in BAKES.iter() {
+        runs.push((b, Method::Fast, None));
+        runs.push((b, Method::Sweep, None));
+        if device.is_some() {
+            runs.push((b, Method::Sweep, device));
+        }
+    }
+    for (b, method, on) in runs {
         let pixels = 4.0 * std::f64::consts::PI * b.radius_m * b.radius_m * b.area_fraction
             / (b.pixel_m * b.pixel_m);
         let tiles = pixels / (512.0 * 512.0);
-        let (secs, reach, rings) = per_tile_core_s(b, azimuths, method)?;
+        let t = per_tile_core_s(b, azimuths, method, on)?;
         rows.push(X {
             bake: b.name,
-            method: method.name(),
+            method: if on.is_some() {
+                "sweep (gpu)"
+            } else {
+                method.name()
+            },
+            device_s_per_tile: t.device_s,
+            device_minutes: t.device_s.map(|s| tiles * s / 60.0),
             pixels,
             tiles,
-            reach_px: reach,
+            reach_px: t.reach_px,
             fine_margin_px: penumbra::horizon::default_fine_margin_px(512),
-            rings,
-            core_s_per_tile: secs,
-            cpu_hours: tiles * secs / 3600.0,
+            rings: t.rings,
+            core_s_per_tile: t.core_s,
+            cpu_hours: tiles * t.core_s / 3600.0,
             published_cpu_hours: b.published_cpu_hours,
         });
     }
@@ -491,16 +540,17 @@ pub fn extrapolate(azimuths: usize, markdown: bool, json: bool) -> Result<()> {
         return penumbra_cli::output::print_json(&rows);
     }
     if markdown {
-        println!("| bake | method | pixels | 512² tiles | reach px | fine margin px | far rings | core s per tile (360 az) | CPU-hours | published |");
-        println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+        println!("| bake | method | pixels | 512² tiles | reach px | fine margin px | far rings | core s per tile (360 az) | CPU-hours | GPU s per tile | GPU-minutes | published |");
+        println!("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     }
     for r in &rows {
         let p = r
             .published_cpu_hours
             .map_or("–".into(), |h| format!("≈ {h:.0}"));
         if markdown {
+            let dev = |v: Option<f64>| v.map_or("–".into(), |v| format!("{v:.2}"));
             println!(
-                "| {} | {} | {:.3e} | {:.0} | {} | {} | {} | {:.1} | {:.1} | {} |",
+                "| {} | {} | {:.3e} | {:.0} | {} | {} | {} | {:.1} | {:.1} | {} | {} | {} |",
                 r.bake,
                 r.method,
                 r.pixels,
@@ -510,6 +560,8 @@ pub fn extrapolate(azimuths: usize, markdown: bool, json: bool) -> Result<()> {
                 r.rings,
                 r.core_s_per_tile,
                 r.cpu_hours,
+                dev(r.device_s_per_tile),
+                dev(r.device_minutes),
                 p
             );
         } else {

@@ -192,6 +192,10 @@ pub enum BenchCommand {
         /// lunar south-pole 5 m/px bake, and the CPU-hours they extrapolate to.
         #[arg(long)]
         extrapolate: bool,
+        /// With --extrapolate: also the sweep with its own horizons on this device (`gpu`),
+        /// the far rings on the CPU, and the GPU-minutes the bakes extrapolate to.
+        #[arg(long, value_parser = ["cpu", "gpu", "auto"], requires = "extrapolate")]
+        device: Option<String>,
         #[arg(long)]
         markdown: bool,
         #[arg(long)]
@@ -414,10 +418,20 @@ fn dispatch(cmd: BenchCommand, quiet: bool) -> Result<()> {
         BenchCommand::FarField {
             azimuths,
             extrapolate: true,
+            device,
             markdown,
             json,
             ..
-        } => crate::far::extrapolate(azimuths, markdown, json),
+        } => {
+            let gpu = open_device(device.as_deref(), quiet)?;
+            crate::far::extrapolate(
+                azimuths,
+                gpu.as_ref()
+                    .map(|g| g as &dyn penumbra::horizon::device::SweepDevice),
+                markdown,
+                json,
+            )
+        }
         BenchCommand::FarField {
             data,
             work,
@@ -427,6 +441,7 @@ fn dispatch(cmd: BenchCommand, quiet: bool) -> Result<()> {
             extrapolate: false,
             markdown,
             json,
+            ..
         } => crate::far::run(
             &data,
             work,
@@ -480,16 +495,7 @@ fn dispatch(cmd: BenchCommand, quiet: bool) -> Result<()> {
             device,
             ..
         } => {
-            let choice = device
-                .as_deref()
-                .and_then(penumbra::horizon::device::DeviceChoice::parse)
-                .unwrap_or(penumbra::horizon::device::DeviceChoice::Cpu);
-            let gpu = penumbra_gpu::GpuSweep::open(choice).map_err(|e| anyhow::anyhow!("{e}"))?;
-            if let Some(g) = &gpu {
-                if !quiet {
-                    eprintln!("bench sweep: GPU {}", g.describe());
-                }
-            }
+            let gpu = open_device(device.as_deref(), quiet)?;
             crate::sweep::run(
                 &data,
                 &peers,
@@ -559,6 +565,23 @@ fn dispatch(cmd: BenchCommand, quiet: bool) -> Result<()> {
 
 fn main() -> ExitCode {
     penumbra_cli::exit_code("penumbra-bench", run(Cli::parse()))
+}
+
+/// The GPU `--device` asks for (None: the CPU), named on stderr.
+fn open_device(
+    device: Option<&str>,
+    quiet: bool,
+) -> anyhow::Result<Option<penumbra_gpu::GpuSweep>> {
+    let choice = device
+        .and_then(penumbra::horizon::device::DeviceChoice::parse)
+        .unwrap_or(penumbra::horizon::device::DeviceChoice::Cpu);
+    let gpu = penumbra_gpu::GpuSweep::open(choice).map_err(|e| anyhow::anyhow!("{e}"))?;
+    if let Some(g) = &gpu {
+        if !quiet {
+            eprintln!("penumbra-bench: GPU {}", g.describe());
+        }
+    }
+    Ok(gpu)
 }
 
 #[cfg(test)]
