@@ -332,13 +332,22 @@ fn slope(l: Line, mi: f32, o: vec2<f32>, u: vec2<f32>, v: u32) -> f32 {
     return NEG;
 }
 
+// The slope of terrain hk, k columns out on a ray with geometry (alpha, beta), from an observer
+// h0 above the sphere: tan γ = kα/(1 + kβ), the curvature drop (R + h0)·(sec γ − 1).
+fn ray_slope(k: f32, alpha: f32, beta: f32, h0: f32, hk: f32) -> f32 {
+    let r = P.radius;
+    let tt = k * alpha / (1.0 + k * beta);
+    let q2 = tt * tt;
+    let drop = (r + h0) * q2 / (1.0 + sqrt(1.0 + q2));
+    return ((hk - h0) - drop) / ((r + hk) * tt);
+}
+
 // The best slope on pixel (p, q)'s own ray (direction s along p) where it crosses columns and
 // rows between kf and kt columns out: the rays near the raster's edge that the lines cannot
 // serve.
 fn scan(jn: u32, j: Job, xm: bool, np: i32, nq: i32, p: i32, q: i32, s: i32, kf: f32, kt: f32,
         alpha: f32, beta: f32) -> f32 {
     let h0 = g(xm, p, q);
-    let r = P.radius;
     var best = NEG;
     var k = max(ceil(kf), 1.0);
     let cp = col(jn, p);
@@ -363,10 +372,7 @@ fn scan(jn: u32, j: Job, xm: bool, np: i32, nq: i32, p: i32, q: i32, s: i32, kf:
             }
             let hk = on_col(xm, pc, qi, f, nq);
             if valid(hk) {
-                let tt = k * alpha / (1.0 + k * beta);
-                let q2 = tt * tt;
-                let drop = (r + h0) * q2 / (1.0 + sqrt(1.0 + q2));
-                best = max(best, ((hk - h0) - drop) / ((r + hk) * tt));
+                best = max(best, ray_slope(k, alpha, beta, h0, hk));
             }
         }
         k = k + 1.0;
@@ -397,10 +403,7 @@ fn scan(jn: u32, j: Job, xm: bool, np: i32, nq: i32, p: i32, q: i32, s: i32, kf:
             }
             let hk = on_grid_line(g(xm, ci, qr), g(xm, ci + 1, qr), fw);
             if valid(hk) {
-                let tt = kr * alpha / (1.0 + kr * beta);
-                let q2 = tt * tt;
-                let drop = (r + h0) * q2 / (1.0 + sqrt(1.0 + q2));
-                best = max(best, ((hk - h0) - drop) / ((r + hk) * tt));
+                best = max(best, ray_slope(kr, alpha, beta, h0, hk));
             }
             rr = rr + 1.0;
         }
