@@ -132,6 +132,18 @@ pub(crate) fn pixel(x: usize, y: usize) -> Rect {
     }
 }
 
+/// Unit steps along the 4 axes, then the 4 diagonals, of a raster.
+pub(crate) const AXES_AND_DIAGONALS: [(i64, i64); 8] = [
+    (1, 0),
+    (0, 1),
+    (-1, 0),
+    (0, -1),
+    (1, 1),
+    (-1, 1),
+    (-1, -1),
+    (1, -1),
+];
+
 /// The horizon kernel as the catalogue runs it: `horizon::horizons`, weakened on request.
 pub(crate) fn horizons(ctx: &Context, rect: Rect, a: usize, m: Method, weaken: Weaken) -> Vec<f32> {
     let device = SWEEP_DEVICE

@@ -247,16 +247,7 @@ fn axes_diagonals(_: Size, weaken: Weaken) -> Vec<Row> {
     // (fast), 2.5e-6 (sweep).
     for (m, diag_bound) in HORIZON_METHODS.into_iter().zip([4e-6, 4e-6, 1.3e-5, 5e-6]) {
         let (mut axes, mut diag) = (Vec::new(), Vec::new());
-        for (dx, dy) in [
-            (1i64, 0i64),
-            (0, 1),
-            (-1, 0),
-            (0, -1),
-            (1, 1),
-            (-1, 1),
-            (-1, -1),
-            (1, -1),
-        ] {
+        for (dx, dy) in AXES_AND_DIAGONALS {
             let (x0, y0) = (
                 (c as i64 - dx * d as i64 / 2) as usize,
                 (c as i64 - dy * d as i64 / 2) as usize,

@@ -281,16 +281,7 @@ fn shadow_axes_diagonals(_: Size, weaken: Weaken) -> Vec<Row> {
         .zip([1e-6, 1e-9, 1e-9, 1e-9])
         .map(|(m, bound)| {
             let mut e = Vec::new();
-            for (dx, dy) in [
-                (1i64, 0i64),
-                (0, 1),
-                (-1, 0),
-                (0, -1),
-                (1, 1),
-                (-1, 1),
-                (-1, -1),
-                (1, -1),
-            ] {
+            for (dx, dy) in AXES_AND_DIAGONALS {
                 let (x0, y0) = ((c as i64 - dx * d) as usize, (c as i64 - dy * d) as usize);
                 let want = elevation_to(&ctx, x0, y0, c as f64, c as f64, hs);
                 // The sun's centre on the tip, in its azimuth: the walks search the disc's
