@@ -942,10 +942,12 @@ fn horizon_device_gpu() {
     ];
     let maps = || -> Vec<f32> {
         let mut v = Vec::new();
-        let mut files: Vec<_> = walk(&out.join("horizon"));
-        files.sort();
-        for f in files {
-            let (a, data) = penumbra::horizon::read_horizon_exr(&f, 32).unwrap();
+        let dir = out.join("horizon");
+        for f in crate::util::snapshot(&dir)
+            .into_keys()
+            .filter(|f| f.ends_with(".exr"))
+        {
+            let (a, data) = penumbra::horizon::read_horizon_exr(&dir.join(f), 32).unwrap();
             assert_eq!(a, 36);
             v.extend(data);
         }
@@ -997,6 +999,16 @@ fn horizon_device_gpu() {
             ],
             vec!["no GPU adapter", "lavapipe", "--device cpu"],
         ),
+        (
+            [&base[..], &["--device", "gpu"]].concat(),
+            vec![("PENUMBRA_GPU_MEMORY_MIB", "lots")],
+            vec!["PENUMBRA_GPU_MEMORY_MIB=\"lots\"", "16..=1048576"],
+        ),
+        (
+            [&base[..], &["--device", "gpu"]].concat(),
+            vec![("PENUMBRA_GPU_MEMORY_MIB", "8")],
+            vec!["PENUMBRA_GPU_MEMORY_MIB=\"8\"", "16..=1048576"],
+        ),
     ] {
         let e = run(&args, &env);
         assert_eq!(e.status.code(), Some(2), "{args:?}");
@@ -1005,6 +1017,9 @@ fn horizon_device_gpu() {
             assert!(err.contains(s), "{args:?}: {err}");
         }
     }
+    // Refused runs leave the maps and the manifest as they were.
+    assert!(before == crate::util::snapshot(&out.join("horizon")));
+    assert_eq!(manifest, std::fs::read(out.join("tileset.json")).unwrap());
     // `auto` on a machine whose only adapter is software: the CPU, whose maps these are not.
     let auto = json(&run(&[&base[..], &["--device", "auto"]].concat(), &[]));
     assert_eq!(
@@ -1012,20 +1027,4 @@ fn horizon_device_gpu() {
         "auto ran on the CPU: another run key"
     );
     assert_eq!(maps(), cpu_maps, "auto on lavapipe is the CPU, to the bit");
-    assert!(before != crate::util::snapshot(&out.join("horizon")));
-    let _ = manifest;
-}
-
-#[cfg(feature = "gpu")]
-fn walk(d: &std::path::Path) -> Vec<std::path::PathBuf> {
-    let mut v = Vec::new();
-    for e in std::fs::read_dir(d).unwrap().flatten() {
-        let p = e.path();
-        if p.is_dir() {
-            v.extend(walk(&p));
-        } else if p.extension().is_some_and(|x| x == "exr") {
-            v.push(p);
-        }
-    }
-    v
 }

@@ -9,6 +9,7 @@
 use std::fmt;
 use std::sync::Arc;
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::geometry::{plane_azimuth, Context, Rect};
@@ -210,7 +211,6 @@ pub fn horizons_sweep_on(
         )));
     }
     let hmax = ctx.max_height();
-    use rayon::prelude::*;
     out.par_chunks_mut(plane)
         .enumerate()
         .for_each(|(k, dst)| linesweep::fill_gaps(ctx, rect, hmax, plane_azimuth(k, a), dst));

@@ -1616,9 +1616,8 @@ fn run(cli: Cli, legacy_bake: bool) -> Result<()> {
             device,
             json,
         } => {
-            let choice = device.as_deref().and_then(DeviceChoice::parse);
-            let flag = DeviceFlag { device };
-            let dev = flag.open(Method::Sweep, Some(choice.unwrap_or(DeviceChoice::Cpu)))?;
+            // The CPU unless --device says otherwise.
+            let dev = DeviceFlag { device }.open(Method::Sweep, Some(DeviceChoice::Cpu))?;
             let key = dev.as_ref().map(|d| d.key());
             penumbra::stress::set_sweep_device(dev);
             if !stress(

@@ -3,16 +3,16 @@
 //!
 //! The `penumbra` library prepares each tile's azimuth jobs ([`penumbra::horizon::device`]: the
 //! lines, near-field steps and column tables the CPU sweep uses) and finishes the result (the
-//! reference where a pixel found nothing); this crate runs the lines and pixels in two compute
+//! reference where a pixel found nothing); this crate runs the lines and pixels in three compute
 //! passes (`sweep.wgsl`) a batch of azimuth jobs at a time, so that GPU memory is bounded by
-//! the tile and its context, never by the number of tiles or azimuths ([`GpuSweep::batch_bytes`]).
+//! the tile and its context, never by the number of tiles or azimuths ([`TileShape`]).
 //! The Fourier DFT and the far rings stay on the CPU, after each tile's maps are read back.
 
 use std::sync::Mutex;
 use std::time::Duration;
 
 use bytemuck::{Pod, Zeroable};
-use penumbra::horizon::device::{DeviceChoice, SweepDevice, SweepJob, EDGE_SCAN_COLS};
+use penumbra::horizon::device::{DeviceChoice, SweepDevice, SweepJob, EDGE_SCAN_COLS, NEAR_COLS};
 use penumbra::horizon::{Context, Rect};
 
 /// Near-field steps per direction the shader has room for (the CPU makes ≤ 24 column, ≤ 24 row
@@ -31,6 +31,8 @@ pub enum OpenError {
     NoAdapter(String),
     /// The adapter refused a device or the shader.
     Device(String),
+    /// A setting of the environment is out of range.
+    Setting(String),
 }
 
 impl std::fmt::Display for OpenError {
@@ -42,6 +44,7 @@ impl std::fmt::Display for OpenError {
                  Mesa's software one, lavapipe (`apt-get install mesa-vulkan-drivers`), or run \
                  the sweep on the CPU with --device cpu"
             ),
+            OpenError::Setting(why) => write!(f, "--device: {why}"),
             OpenError::Device(why) => write!(
                 f,
                 "--device gpu: {why}; update the driver, try another backend with \
@@ -68,7 +71,6 @@ struct Params {
     oy: f32,
     face_px: f32,
     radius: f32,
-    edge_scan: f32,
     np_max: u32,
     row_threads: u32,
     seg: u32,
@@ -94,8 +96,6 @@ struct GpuJob {
     adp: f32,
     nsteps0: u32,
     nsteps1: u32,
-    out0: u32,
-    out1: u32,
     _pad0: u32,
     zero: [[ZeroTap; 2]; 2],
 }
@@ -130,7 +130,7 @@ const SAMPLE_BYTES: u64 = 24;
 /// Invocations per row of the pixel pass (workgroups of 256, at most 32768 per row).
 const ROW_THREADS: u32 = 32768 * 256;
 
-/// A GPU ready to run the sweep: its device, queue and the two pipelines.
+/// A GPU ready to run the sweep: its device, queue and the three pipelines.
 pub struct GpuSweep {
     device: wgpu::Device,
     queue: wgpu::Queue,
@@ -162,6 +162,7 @@ impl GpuSweep {
         if choice == DeviceChoice::Cpu {
             return Ok(None);
         }
+        let memory = memory_budget()? << 20;
         let instance =
             wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let options = wgpu::RequestAdapterOptions {
@@ -246,13 +247,21 @@ impl GpuSweep {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
+        let constants = [
+            ("NEAR_COLS", NEAR_COLS as f64),
+            ("EDGE_SCAN", EDGE_SCAN_COLS),
+            ("MAX_STEPS", MAX_STEPS as f64),
+        ];
         let pipeline = |entry: &str| {
             device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                 label: Some(entry),
                 layout: Some(&pl),
                 module: &module,
                 entry_point: Some(entry),
-                compilation_options: Default::default(),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants: &constants,
+                    ..Default::default()
+                },
                 cache: None,
             })
         };
@@ -264,12 +273,6 @@ impl GpuSweep {
                 info.name
             )));
         }
-        let memory = std::env::var("PENUMBRA_GPU_MEMORY_MIB")
-            .ok()
-            .and_then(|v| v.parse::<u64>().ok())
-            .filter(|v| (16..=1 << 20).contains(v))
-            .unwrap_or(DEFAULT_MEMORY_MIB)
-            << 20;
         let seg = if info.device_type == wgpu::DeviceType::Cpu {
             1
         } else {
@@ -316,6 +319,24 @@ impl GpuSweep {
     pub fn memory_budget(&self) -> u64 {
         self.memory
     }
+}
+
+/// `PENUMBRA_GPU_MEMORY_MIB` (16..=1048576), or [`DEFAULT_MEMORY_MIB`] where unset.
+fn memory_budget() -> Result<u64, OpenError> {
+    const VAR: &str = "PENUMBRA_GPU_MEMORY_MIB";
+    let Ok(v) = std::env::var(VAR) else {
+        return Ok(DEFAULT_MEMORY_MIB);
+    };
+    v.trim()
+        .parse::<u64>()
+        .ok()
+        .filter(|m| (16..=1 << 20).contains(m))
+        .ok_or_else(|| {
+            OpenError::Setting(format!(
+                "{VAR}={v:?} is not a GPU memory budget in MiB within 16..=1048576 (unset it for \
+                 the default {DEFAULT_MEMORY_MIB})"
+            ))
+        })
 }
 
 /// A tile as the GPU holds it: its context raster, its pixels and the most lines an azimuth
@@ -537,7 +558,7 @@ impl GpuSweep {
             let mut gs = vec![GpuStep::zeroed(); chunk.len() * 2 * MAX_STEPS];
             let mut gc = vec![[0.0f32; 2]; chunk.len() * np_max];
             for (n, j) in chunk.iter().enumerate() {
-                gj.push(gpu_job(j, n)?);
+                gj.push(gpu_job(j)?);
                 for dir in 0..2 {
                     for (i, s) in j.steps[dir].iter().enumerate() {
                         gs[(n * 2 + dir) * MAX_STEPS + i] = GpuStep {
@@ -568,7 +589,6 @@ impl GpuSweep {
                 oy: ctx.origin.1 as f32,
                 face_px: ctx.face_pixels as f32,
                 radius: ctx.radius_m as f32,
-                edge_scan: EDGE_SCAN_COLS as f32,
                 np_max: np_max as u32,
                 row_threads: ROW_THREADS,
                 seg: self.seg,
@@ -650,8 +670,8 @@ impl GpuSweep {
     }
 }
 
-/// A job as the shader reads it; its output planes in the batch are 2n and 2n + 1.
-fn gpu_job(j: &SweepJob, n: usize) -> Result<GpuJob, String> {
+/// A job as the shader reads it (its output planes in the batch are 2n and 2n + 1).
+fn gpu_job(j: &SweepJob) -> Result<GpuJob, String> {
     for s in &j.steps {
         if s.len() > MAX_STEPS {
             return Err(format!(
@@ -688,8 +708,6 @@ fn gpu_job(j: &SweepJob, n: usize) -> Result<GpuJob, String> {
         adp: j.adp as f32,
         nsteps0: j.steps[0].len() as u32,
         nsteps1: j.steps[1].len() as u32,
-        out0: 2 * n as u32,
-        out1: 2 * n as u32 + 1,
         _pad0: 0,
         zero: [
             [zt(j.zero[0][0]), zt(j.zero[0][1])],

@@ -17,8 +17,12 @@ const NONE: u32 = 0xffffffffu;
 const NODATA: u32 = 0x7fc00000u;
 const NEG: f32 = -3.0e38;
 const BIG: f32 = 3.0e38;
-const NEAR_COLS: i32 = 24;
-const MAX_STEPS: u32 = 64u;
+// Set by the host from the library's values (one source: `horizon::device`): the columns next
+// to each pixel searched on its own ray, how near the raster's edge must be for the edge scan,
+// and the near-field steps per direction the steps buffer has room for.
+override NEAR_COLS: i32;
+override EDGE_SCAN: f32;
+override MAX_STEPS: u32;
 const DEG: f32 = 57.29577951308232;
 
 struct Params {
@@ -35,7 +39,6 @@ struct Params {
     oy: f32,
     face_px: f32,
     radius: f32,
-    edge_scan: f32,
     np_max: u32,
     // Invocations per row of the pixel pass's dispatch.
     row_threads: u32,
@@ -61,8 +64,6 @@ struct Job {
     adp: f32,
     nsteps0: u32,
     nsteps1: u32,
-    out0: u32,
-    out1: u32,
     _pad0: u32,
     zp0: i32,
     zwp0: f32,
@@ -476,7 +477,7 @@ fn observe(l: Line, j: Job, dir: u32, mi: f32, st: i32, p: i32, from_v: u32) {
         } else if dq < -1e-12 {
             line_reach = (y + 1e-6) / -dq;
         }
-        if line_reach < reach && reach <= P.edge_scan {
+        if line_reach < reach && reach <= EDGE_SCAN {
             let kf = max(f32(NEAR_COLS), floor(line_reach));
             let ab = pixel_ab(j, l.xm, p, q);
             s = max(s, scan(l.jn, j, l.xm, l.np, l.nq, p, q, sd, kf, reach, ab.x, ab.y * bs));
@@ -650,7 +651,8 @@ fn pixels(@builtin(global_invocation_id) gid: vec3<u32>) {
         y = q;
     }
     let o = (u32(y) - P.ry0) * P.rw + (u32(x) - P.rx0);
-    let op = select(j.out1, j.out0, dir == 0u) * plane + o;
+    // Job n's directions are the batch's planes 2n and 2n + 1.
+    let op = (jn * 2u + dir) * plane + o;
     let h0 = g(xm, p, q);
     if !valid(h0) {
         outp[op] = nodata();

@@ -33,31 +33,24 @@ fn gpu() -> Option<Arc<GpuSweep>> {
     .clone()
 }
 
-/// Error statistics of `got` against `want` over samples finite in both: RMS, p99 of |Δ|,
-/// max |Δ|, count; and whether both agree on where the data is.
-fn stats(got: &[f32], want: &[f32]) -> (f64, f64, f64, usize) {
-    let mut d: Vec<f64> = Vec::new();
+/// Error statistics of `got` against `want` over samples finite in both, as the benchmarks
+/// tally them ([`penumbra_cli::measure::ErrStats`]): RMS, p99 of |Δ| (the upper edge of its
+/// 1e-4° bin), max |Δ|, count; both must agree on where the data is.
+fn stats(got: &[f32], want: &[f32]) -> (f64, f64, f64, u64) {
+    let mut e = penumbra_cli::measure::ErrStats::new(0);
     for (g, w) in got.iter().zip(want) {
         assert_eq!(g.is_nan(), w.is_nan(), "no data where the CPU has none");
         if g.is_finite() && w.is_finite() {
-            d.push((*g as f64 - *w as f64).abs());
+            e.add(*g as f64 - *w as f64);
         }
     }
-    let n = d.len().max(1);
-    let rms = (d.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
-    d.sort_unstable_by(f64::total_cmp);
-    let p99 = d
-        .get((d.len() as f64 * 0.99) as usize)
-        .copied()
-        .unwrap_or(0.0);
-    (rms, p99, d.last().copied().unwrap_or(0.0), d.len())
+    (e.rms(), e.p99(), e.max, e.n)
 }
-
-const MOON_R: f64 = 1_737_400.0;
 
 /// A raster of `w` × `h` heights at the centre of face +X on the Moon, `pixel_m` apart.
 fn moon(w: usize, h: usize, heights: Vec<f32>, pixel_m: f64) -> Context {
-    let s = (2.0 * MOON_R / pixel_m).round();
+    let radius_m = penumbra_cli::measure::body_radius("moon");
+    let s = (2.0 * radius_m / pixel_m).round();
     let si = s as i64;
     Context {
         face: Face::Px,
@@ -66,7 +59,7 @@ fn moon(w: usize, h: usize, heights: Vec<f32>, pixel_m: f64) -> Context {
         width: w,
         height: h,
         heights,
-        radius_m: MOON_R,
+        radius_m,
     }
 }
 
