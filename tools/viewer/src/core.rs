@@ -71,7 +71,7 @@ pub fn check_method(store: &Store, method: &GpuMethod) -> Result<()> {
             .into());
     }
     let (check, level) = match method {
-        GpuMethod::Fourier => (
+        GpuMethod::Fourier { .. } => (
             ShadowMethod::Horizon(HorizonSource::Fourier, Model::Constant),
             ts.products
                 .fourier
@@ -98,7 +98,7 @@ pub fn level_range(store: &Store, method: &GpuMethod, level: Option<u8>) -> Resu
                 levels - 1
             );
         }
-        if let (GpuMethod::Fourier, Some(f)) = (method, &ts.products.fourier) {
+        if let (GpuMethod::Fourier { .. }, Some(f)) = (method, &ts.products.fourier) {
             if !f.levels.contains(&l) {
                 bail!(
                     "--level {l} has no Fourier pyramids in {} (levels {:?}): pick one of \
@@ -110,7 +110,7 @@ pub fn level_range(store: &Store, method: &GpuMethod, level: Option<u8>) -> Resu
         }
         return Ok((l, l));
     }
-    if let (GpuMethod::Fourier, Some(f)) = (method, &ts.products.fourier) {
+    if let (GpuMethod::Fourier { .. }, Some(f)) = (method, &ts.products.fourier) {
         let l = f.levels.iter().max().copied().unwrap_or(levels - 1);
         return Ok((l, l));
     }

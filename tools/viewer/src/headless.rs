@@ -1,7 +1,7 @@
 /*!
 `--headless`: one frame rendered off-screen by the window's code path ([`Core::render`]),
 written as a PNG (`--out`), the per-pixel lit fraction as float EXR (`--lit`), the timings of
-`--frames` frames, and with `--validate` the GPU against the CPU at the frame's texels
+`--frames` frames (and of as many frames without shadows, for the cost of the shadows), and with `--validate` the GPU against the CPU at the frame's texels
 ([`crate::validate`]). `--json` prints the report on stdout.
 */
 
@@ -90,6 +90,45 @@ pub struct TimingReport {
     pub wall_ms_median: f64,
     /// Seconds spent preparing the tiles (read, mesh, shadow data) before the first frame.
     pub prepare_s: f64,
+    /// With shadows on: the same frame with shadows off (`--no-shadows`), timed the same
+    /// number of times just before (GPU ms per frame, null without timestamps; wall ms), their
+    /// medians, and the cost of the shadows as Jung et al. and Fritsch et al. report it: the
+    /// median frame time with shadows minus the median without (GPU time where timestamps
+    /// exist, else wall time).
+    pub no_shadows: Option<NoShadows>,
+    pub shadow_overhead_ms: Option<f64>,
+}
+
+/// The frame without shadows.
+#[derive(Clone, Debug, Serialize)]
+pub struct NoShadows {
+    pub gpu_ms: Vec<Option<f64>>,
+    pub wall_ms: Vec<f64>,
+    pub gpu_ms_median: Option<f64>,
+    pub wall_ms_median: f64,
+}
+
+/// Times `frames` renders: per frame GPU ms (None without timestamps) and wall ms, and the
+/// drawn tiles of the last.
+fn time_frames(
+    core: &mut Core,
+    targets: &Targets,
+    frames: u32,
+) -> Result<(Vec<Option<f64>>, Vec<f64>, Vec<penumbra::layout::TileId>)> {
+    let (mut gpu_ms, mut wall_ms, mut tiles) = (Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..frames {
+        let f = core.render(targets)?;
+        gpu_ms.push(f.time.gpu_ms);
+        wall_ms.push(f.time.wall_ms);
+        tiles = f.tiles;
+    }
+    Ok((gpu_ms, wall_ms, tiles))
+}
+
+/// The median of the GPU times when every frame has one.
+fn gpu_median(v: &[Option<f64>]) -> Option<f64> {
+    let t: Vec<f64> = v.iter().flatten().copied().collect();
+    (t.len() == v.len() && !t.is_empty()).then(|| median(&t))
 }
 
 /// What `--headless --json` prints.
@@ -165,15 +204,29 @@ pub fn run(opts: &Options) -> Result<Report> {
     }
     core.prepare(&ids)?;
     let prepare_s = core.scene.prepare_s;
-    let mut gpu_ms = Vec::new();
-    let mut wall_ms = Vec::new();
-    let mut tiles = Vec::new();
-    for _ in 0..opts.frames {
-        let f = core.render(&targets)?;
-        gpu_ms.push(f.time.gpu_ms);
-        wall_ms.push(f.time.wall_ms);
-        tiles = f.tiles;
-    }
+    // The frame without shadows first, so that the targets hold the frame with them after.
+    let no_shadows = if core.shadows_on {
+        core.shadows_on = false;
+        let (g, w, _) = time_frames(&mut core, &targets, opts.frames)?;
+        core.shadows_on = true;
+        Some(NoShadows {
+            gpu_ms_median: gpu_median(&g),
+            wall_ms_median: median(&w),
+            gpu_ms: g,
+            wall_ms: w,
+        })
+    } else {
+        None
+    };
+    let (gpu_ms, wall_ms, tiles) = time_frames(&mut core, &targets, opts.frames)?;
+    let gpu_ms_median = gpu_median(&gpu_ms);
+    let wall_ms_median = median(&wall_ms);
+    let shadow_overhead_ms = no_shadows
+        .as_ref()
+        .map(|n| match (gpu_ms_median, n.gpu_ms_median) {
+            (Some(a), Some(b)) => a - b,
+            _ => wall_ms_median - n.wall_ms_median,
+        });
     let rb = Readback::read(&core.gpu, &targets)?;
     output::write_rgba_as_png(&out, rb.width, rb.height, &rb.colour)?;
     if let Some(l) = &lit {
@@ -220,7 +273,6 @@ pub fn run(opts: &Options) -> Result<Report> {
             _ => px.partial += 1,
         }
     }
-    let gpu_valid: Vec<f64> = gpu_ms.iter().flatten().copied().collect();
     Ok(Report {
         tileset: a.dir.clone(),
         out,
@@ -250,12 +302,13 @@ pub fn run(opts: &Options) -> Result<Report> {
         tiles: tiles.iter().map(|t| t.to_string()).collect(),
         pixels: px,
         timings: TimingReport {
-            gpu_ms_median: (gpu_valid.len() == gpu_ms.len() && !gpu_valid.is_empty())
-                .then(|| median(&gpu_valid)),
+            gpu_ms_median,
             gpu_ms,
-            wall_ms_median: median(&wall_ms),
+            wall_ms_median,
             wall_ms,
             prepare_s,
+            no_shadows,
+            shadow_overhead_ms,
         },
         validation,
     })
@@ -300,6 +353,13 @@ pub fn print_text(r: &Report) {
             r.timings.wall_ms.len(),
             r.timings.prepare_s
         ),
+    }
+    if let (Some(o), Some(n)) = (r.timings.shadow_overhead_ms, &r.timings.no_shadows) {
+        let (base, clock) = match n.gpu_ms_median {
+            Some(g) => (g, "gpu"),
+            None => (n.wall_ms_median, "wall"),
+        };
+        println!("shadows    cost {o:.3} ms per frame ({clock}; {base:.3} ms without shadows)");
     }
     if let Some(v) = &r.validation {
         println!(

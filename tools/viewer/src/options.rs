@@ -8,6 +8,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 use clap::Parser;
+use penumbra::fourier::sun::Model;
 use penumbra::shadow::Runs;
 
 use crate::shadow::GpuMethod;
@@ -21,7 +22,8 @@ use crate::shadow::GpuMethod;
     about = "Render a Penumbra tileset with GPU soft shadows (window or headless) and validate \
              them against the CPU methods",
     after_help = "Keys (window): arrows = sun azimuth/elevation at the view's target, M = next \
-                  method, 1-4 = dp/uniform/extrema/fourier, H = shadows on/off, F = orbit/fly, \
+                  method, 1-5 = dp/uniform/extrema/fourier/extrema-soft, H = shadows on/off, \
+                  F = orbit/fly, \
                   WASD/QE = fly, drag = orbit or look, wheel = zoom, +/- = sun faster/slower, \
                   Esc = quit."
 )]
@@ -29,9 +31,15 @@ pub struct Args {
     /// Tileset folder (made by `penumbra tile` or `penumbra bake`), or a package folder (made
     /// by `penumbra package`: its cube-face tileset is drawn).
     pub dir: PathBuf,
-    /// Shadow method: dp, uniform, extrema or fourier (needs the Fourier pyramids).
+    /// Shadow method: dp, uniform, extrema, extrema-soft or fourier (needs the Fourier
+    /// pyramids).
     #[arg(long, default_value = "dp")]
     pub method: String,
+    /// The disc model of `fourier`: constant (the series once per pixel, at the sun's azimuth),
+    /// segment (at the disc's two rims), slices (8 strips) or exact (256 strips with
+    /// bisection: the validation model).
+    #[arg(long, default_value = "constant")]
+    pub fourier_model: String,
     /// Steps of the uniform method.
     #[arg(long, default_value_t = 100)]
     pub steps: u32,
@@ -131,11 +139,18 @@ pub struct Options {
 /// Largest frame side (pixels).
 pub const MAX_SIDE: u32 = 8192;
 
-/// The GPU method `name` with the uniform steps and DP runs given.
-pub fn method(name: &str, steps: u32, dp_levels: &str) -> Result<GpuMethod> {
+/// The GPU method `name` with the uniform steps, DP runs and Fourier disc model of `args`.
+pub fn method(name: &str, args: &Args) -> Result<GpuMethod> {
+    let steps = args.steps;
+    // Checked whatever the method: the window may switch to `fourier` later.
+    let model = args
+        .fourier_model
+        .parse::<Model>()
+        .map_err(|e| anyhow::anyhow!("--fourier-model {e}"))?;
     Ok(match name {
         "dp" => GpuMethod::Dp {
-            runs: dp_levels
+            runs: args
+                .dp_levels
                 .parse::<Runs>()
                 .map_err(|e| anyhow::anyhow!("--dp-levels {e}"))?,
         },
@@ -146,10 +161,11 @@ pub fn method(name: &str, steps: u32, dp_levels: &str) -> Result<GpuMethod> {
             GpuMethod::Uniform { steps }
         }
         "extrema" => GpuMethod::Extrema,
-        "fourier" => GpuMethod::Fourier,
+        "extrema-soft" => GpuMethod::ExtremaSoft,
+        "fourier" => GpuMethod::Fourier { model },
         _ => bail!(
-            "--method {name}: unknown shadow method; the viewer has dp, uniform, extrema and \
-             fourier"
+            "--method {name}: unknown shadow method; the viewer has dp, uniform, extrema, \
+             extrema-soft and fourier"
         ),
     })
 }
@@ -216,7 +232,7 @@ pub fn parse_size(s: &str) -> Result<(u32, u32)> {
 impl Options {
     /// Check `args`.
     pub fn resolve(args: Args) -> Result<Options> {
-        let method = method(&args.method, args.steps, &args.dp_levels)?;
+        let method = method(&args.method, &args)?;
         let camera = args.camera.as_deref().map(parse_camera).transpose()?;
         let sun = match (args.sun_lat, args.sun_lon) {
             (Some(lat), Some(lon)) => {
@@ -315,12 +331,34 @@ mod tests {
         for bad in ["256", "0x10", "10x99999", "axb"] {
             assert!(parse_size(bad).is_err(), "{bad}");
         }
+        let args = |extra: &[&str]| {
+            let mut v = vec!["penumbra-view", "tiles"];
+            v.extend_from_slice(extra);
+            Args::try_parse_from(v).unwrap()
+        };
         assert!(matches!(
-            method("uniform", 7, "auto").unwrap(),
+            method("uniform", &args(&["--steps", "7"])).unwrap(),
             GpuMethod::Uniform { steps: 7 }
         ));
-        assert!(method("smoke", 1, "auto").is_err());
-        assert!(method("dp", 1, "0,5").is_err());
-        assert!(method("uniform", 0, "auto").is_err());
+        assert_eq!(
+            method("fourier", &args(&[])).unwrap(),
+            GpuMethod::Fourier {
+                model: Model::Constant
+            }
+        );
+        assert_eq!(
+            method("fourier", &args(&["--fourier-model", "exact"])).unwrap(),
+            GpuMethod::Fourier {
+                model: Model::Exact
+            }
+        );
+        assert_eq!(
+            method("extrema-soft", &args(&[])).unwrap(),
+            GpuMethod::ExtremaSoft
+        );
+        assert!(method("smoke", &args(&[])).is_err());
+        assert!(method("dp", &args(&["--dp-levels", "0,5"])).is_err());
+        assert!(method("uniform", &args(&["--steps", "0"])).is_err());
+        assert!(method("fourier", &args(&["--fourier-model", "disc"])).is_err());
     }
 }

@@ -4,7 +4,7 @@ onto the window's surface with the status line, and the keys and mouse that move
 the sun and the method.
 
 Keys: arrows turn the sun in azimuth (←/→) and elevation (↑/↓) *at the view's target*;
-`M` cycles the method, `1`–`4` pick dp, uniform, extrema, fourier; `H` toggles shadows; `F`
+`M` cycles the method, `1`–`5` pick dp, uniform, extrema, fourier, extrema-soft; `H` toggles shadows; `F`
 toggles orbit and fly; `W A S D` and `Q E` fly; `+`/`-` make the keys' steps larger or
 smaller; `Esc` quits. Mouse: drag to orbit the target (or to look around when flying), wheel to
 zoom. `--screenshot PNG --frames N` saves the N-th frame as the window shows it and exits.
@@ -310,13 +310,15 @@ impl App {
                     let next = match core.scene.method() {
                         GpuMethod::Dp { .. } => "uniform",
                         GpuMethod::Uniform { .. } => "extrema",
-                        GpuMethod::Extrema => "fourier",
-                        GpuMethod::Fourier => "dp",
+                        GpuMethod::Extrema => "extrema-soft",
+                        GpuMethod::ExtremaSoft => "fourier",
+                        GpuMethod::Fourier { .. } => "dp",
                     };
                     self.note = self.switch(next).err().map(|e| format!("{e:#}"));
                 }
-                "1" | "2" | "3" | "4" => {
-                    let name = ["dp", "uniform", "extrema", "fourier"][c.parse::<usize>()? - 1];
+                "1" | "2" | "3" | "4" | "5" => {
+                    let name = ["dp", "uniform", "extrema", "fourier", "extrema-soft"]
+                        [c.parse::<usize>()? - 1];
                     self.note = self.switch(name).err().map(|e| format!("{e:#}"));
                 }
                 "h" | "H" => core.shadows_on = !core.shadows_on,
@@ -342,7 +344,7 @@ impl App {
     /// Use the method `name` with the command line's steps and DP levels, when the tileset
     /// holds what it reads.
     fn switch(&mut self, name: &str) -> Result<()> {
-        let m = options::method(name, self.opts.args.steps, &self.opts.args.dp_levels)?;
+        let m = options::method(name, &self.opts.args)?;
         let st = self.state.as_mut().expect("running");
         let core = &mut st.core;
         crate::core::check_method(&core.scene.store, &m)?;

@@ -47,6 +47,11 @@ fn bad_input_exits_2_and_writes_nothing() {
         (h(&["--size", "0x10"], full), "--size"),
         (h(&["--steps", "0", "--method", "uniform"], full), "--steps"),
         (h(&["--dp-levels", "0,5"], full), "--dp-levels"),
+        (
+            h(&["--method", "fourier", "--fourier-model", "disc"], full),
+            "--fourier-model",
+        ),
+        (h(&["--fourier-model", "Exact"], full), "--fourier-model"),
         (h(&["--level", "40"], full), "--level"),
         (
             h(

@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use penumbra::bake::{bake, Input, Plan};
-use penumbra::fourier::sun::{sun_radius_deg, Frame, Sun};
+use penumbra::fourier::sun::{sun_radius_deg, Frame, Model, Sun};
 use penumbra::fourier::FourierOptions;
 use penumbra::horizon::HorizonOptions;
 use penumbra::layout::TileId;
@@ -237,10 +237,27 @@ fn compare_scene(gpu: &Gpu, dir: &Path, tile: TileId, scene: &str) {
         },
         GpuMethod::Uniform { steps: 64 },
         GpuMethod::Extrema,
-        GpuMethod::Fourier,
+        GpuMethod::ExtremaSoft,
+        GpuMethod::Fourier {
+            model: Model::Constant,
+        },
+        GpuMethod::Fourier {
+            model: Model::Segment,
+        },
+        GpuMethod::Fourier {
+            model: Model::Slices,
+        },
+        GpuMethod::Fourier {
+            model: Model::Exact,
+        },
     ];
+    let is_fourier = |m: &GpuMethod| matches!(m, GpuMethod::Fourier { .. });
     let mut totals: Vec<Cmp> = methods.iter().map(|_| Cmp::default()).collect();
     let mut vs_reference = Cmp::default();
+    // GPU extrema-soft against the CPU reference, and each GPU O(K) Fourier model against the
+    // CPU's exact disc model over the same coefficients.
+    let mut soft_vs_reference = Cmp::default();
+    let mut vs_exact: Vec<Cmp> = methods.iter().map(|_| Cmp::default()).collect();
     for &(el, az) in &SUNS {
         let sun = sun_over(&store, tile, az, el);
         // One preparation for the ray-marching methods (they share the data), one for Fourier.
@@ -248,18 +265,15 @@ fn compare_scene(gpu: &Gpu, dir: &Path, tile: TileId, scene: &str) {
             .prepare_tile(gpu, &store, tile, &sun, &methods[0], 512)
             .unwrap();
         let fourier = shadows
-            .prepare_tile(gpu, &store, tile, &sun, &GpuMethod::Fourier, 512)
+            .prepare_tile(gpu, &store, tile, &sun, &methods[5], 512)
             .unwrap();
         let texels = interior(&trace);
+        let mut exact_cpu = None;
         for (k, m) in methods.iter().enumerate() {
-            let t = if matches!(m, GpuMethod::Fourier) {
-                &fourier
-            } else {
-                &trace
-            };
+            let t = if is_fourier(m) { &fourier } else { &trace };
             assert!(t.margin_ok(&store, &sun));
             t.set_sun(gpu, &sun, m);
-            let texels = if matches!(m, GpuMethod::Fourier) {
+            let texels = if is_fourier(m) {
                 interior(t)
             } else {
                 texels.clone()
@@ -284,6 +298,17 @@ fn compare_scene(gpu: &Gpu, dir: &Path, tile: TileId, scene: &str) {
             assert_eq!(one.data_mismatch, 0, "{}: no-data texels differ", m.label());
             assert!(one.n > 0);
             totals[k].add(&g, &c);
+            if is_fourier(m) {
+                let exact = exact_cpu.get_or_insert_with(|| {
+                    let model = Model::Exact;
+                    t.cpu_lit_many(&texels, &sun, &CpuTwin::Same(GpuMethod::Fourier { model }))
+                });
+                vs_exact[k].add(&g, exact);
+            }
+            if *m == GpuMethod::ExtremaSoft {
+                let r = t.cpu_lit_many(&texels, &sun, &CpuTwin::Reference);
+                soft_vs_reference.add(&g, &r);
+            }
             if k == 0 {
                 let r = t.cpu_lit_many(&texels, &sun, &CpuTwin::Reference);
                 let mut one = Cmp::default();
@@ -320,6 +345,30 @@ fn compare_scene(gpu: &Gpu, dir: &Path, tile: TileId, scene: &str) {
             c.per()
         );
     }
+    for (m, c) in methods.iter().zip(&vs_exact).filter(|(m, _)| is_fourier(m)) {
+        eprintln!(
+            "{scene}: GPU {:<16} vs CPU fourier exact over all suns: mean {:.5} PER {:.3}%",
+            m.label(),
+            c.mean(),
+            100.0 * c.per()
+        );
+        assert!(
+            c.mean() <= 0.005,
+            "{scene} GPU {} vs the exact disc model: mean {} > 0.005",
+            m.label(),
+            c.mean()
+        );
+    }
+    eprintln!(
+        "{scene}: GPU extrema-soft vs CPU reference over all suns: mean {:.5} PER {:.3}%",
+        soft_vs_reference.mean(),
+        100.0 * soft_vs_reference.per()
+    );
+    assert!(
+        soft_vs_reference.mean() <= 0.01,
+        "{scene}: GPU extrema-soft vs the reference: mean {} > 0.01",
+        soft_vs_reference.mean()
+    );
     eprintln!(
         "{scene}: GPU dp auto vs CPU reference over all suns: mean {:.5} PER {:.3}%",
         vs_reference.mean(),
@@ -374,7 +423,10 @@ fn fourier_without_pyramids_says_what_to_run() {
     let tile = middle_tile(&store, level);
     let sun = sun_over(&store, tile, 90.0, 10.0);
     let shadows = Shadows::new(&gpu);
-    let err = match shadows.prepare_tile(&gpu, &store, tile, &sun, &GpuMethod::Fourier, 256) {
+    let fourier = GpuMethod::Fourier {
+        model: Model::Constant,
+    };
+    let err = match shadows.prepare_tile(&gpu, &store, tile, &sun, &fourier, 256) {
         Ok(_) => panic!("a tileset without Fourier pyramids was accepted"),
         Err(e) => format!("{e:#}"),
     };
@@ -589,7 +641,21 @@ fn method_names_parse() {
         GpuMethod::Uniform { steps: 100 }
     );
     assert_eq!("extrema".parse::<GpuMethod>().unwrap(), GpuMethod::Extrema);
-    assert_eq!("fourier".parse::<GpuMethod>().unwrap(), GpuMethod::Fourier);
+    assert_eq!(
+        "fourier".parse::<GpuMethod>().unwrap(),
+        GpuMethod::Fourier {
+            model: Model::Constant
+        }
+    );
+    assert_eq!(
+        "fourier:exact".parse::<GpuMethod>().unwrap().label(),
+        "fourier exact"
+    );
+    assert_eq!(
+        "extrema-soft".parse::<GpuMethod>().unwrap(),
+        GpuMethod::ExtremaSoft
+    );
+    assert!("fourier:disc".parse::<GpuMethod>().is_err());
     assert!("smap".parse::<GpuMethod>().is_err());
     assert!("uniform:0".parse::<GpuMethod>().is_err());
 }

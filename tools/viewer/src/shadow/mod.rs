@@ -14,8 +14,12 @@
 //!   runs fixed or `auto`), the exact near field and the exact search of the chosen cell;
 //! - `uniform`: equal steps out to where the ray leaves the terrain volume;
 //! - `extrema`: Timokhin & Mikhaylyuk's min/max traversal (an explicit stack of level walks);
-//! - `fourier`: the pyramid's coefficients at the pixel centre (bilinear, clamp-to-edge) and
-//!   the exact disc model (256 strips), as `penumbra shadow --method horizon` does.
+//! - `extrema-soft`: the same traversal finding the exact horizon slope within the disc's band,
+//!   with DP's disc occlusion (the CPU's most accurate soft method);
+//! - `fourier`: the pyramid's coefficients at the pixel centre (bilinear, clamp-to-edge) and a
+//!   disc model of `penumbra::fourier::sun`: `constant` (the default; the series once, at the
+//!   sun's azimuth), `segment` (twice, at the disc's rims), `slices` (8 times) or `exact` (256
+//!   strips with bisection, for validation), as `penumbra shadow --method horizon` does.
 //!
 //! [`TileShadow::cpu_lit`] gives the CPU's answer at the same texel, and [`evaluate`] runs
 //! `shadow_lit` in a compute shader at chosen texels, for validation.
@@ -62,8 +66,13 @@ pub enum GpuMethod {
     },
     /// Timokhin & Mikhaylyuk's min/max traversal (hard).
     Extrema,
-    /// The tile's Fourier horizon pyramid with the exact disc model (soft).
-    Fourier,
+    /// The min/max traversal finding the exact horizon within the disc's band (soft).
+    ExtremaSoft,
+    /// The tile's Fourier horizon pyramid with a disc model (soft).
+    Fourier {
+        /// How the disc meets the horizon (`constant` by default: O(K) per pixel).
+        model: Model,
+    },
 }
 
 impl GpuMethod {
@@ -73,7 +82,8 @@ impl GpuMethod {
             GpuMethod::Dp { runs } => format!("dp {runs}"),
             GpuMethod::Uniform { steps } => format!("uniform {steps}"),
             GpuMethod::Extrema => "extrema".into(),
-            GpuMethod::Fourier => "fourier".into(),
+            GpuMethod::ExtremaSoft => "extrema-soft".into(),
+            GpuMethod::Fourier { model } => format!("fourier {model}"),
         }
     }
 
@@ -93,17 +103,21 @@ impl GpuMethod {
                 steps: *steps as usize,
             }),
             GpuMethod::Extrema => ShadowMethod::Trace(Method::Extrema),
-            GpuMethod::Fourier => ShadowMethod::Horizon(HorizonSource::Fourier, Model::Exact),
+            GpuMethod::ExtremaSoft => ShadowMethod::Trace(Method::ExtremaSoft),
+            GpuMethod::Fourier { model } => ShadowMethod::Horizon(HorizonSource::Fourier, *model),
         }
     }
 
-    fn is_trace(&self) -> bool {
-        !matches!(self, GpuMethod::Fourier)
+    /// Whether the method searches the terrain (the context raster and its pyramid), rather
+    /// than reading the Fourier pyramid.
+    pub fn is_trace(&self) -> bool {
+        !matches!(self, GpuMethod::Fourier { .. })
     }
 }
 
 /// `dp` (runs `auto`), `dp:5,5,5` (fixed runs), `uniform` (100 steps), `uniform:N`, `extrema`,
-/// `fourier`.
+/// `extrema-soft`, `fourier` (the `constant` model), `fourier:MODEL` (`constant`, `segment`,
+/// `slices`, `exact`).
 impl std::str::FromStr for GpuMethod {
     type Err = String;
     fn from_str(s: &str) -> Result<GpuMethod, String> {
@@ -120,10 +134,14 @@ impl std::str::FromStr for GpuMethod {
                 _ => Err(format!("'{a}': uniform steps must be 1..={MAX_STEPS}")),
             },
             ("extrema", None) => Ok(GpuMethod::Extrema),
-            ("fourier", None) => Ok(GpuMethod::Fourier),
+            ("extrema-soft", None) => Ok(GpuMethod::ExtremaSoft),
+            ("fourier", None) => Ok(GpuMethod::Fourier {
+                model: Model::Constant,
+            }),
+            ("fourier", Some(a)) => Ok(GpuMethod::Fourier { model: a.parse()? }),
             _ => Err(format!(
                 "unknown GPU shadow method '{s}' (dp, dp:5,5,5, uniform, uniform:N, extrema, \
-                 fourier)"
+                 extrema-soft, fourier, fourier:constant|segment|slices|exact)"
             )),
         }
     }
@@ -537,15 +555,24 @@ fn fill_sun(p: &mut Params, sun: &Sun, method: &GpuMethod, tmin_trace: f64, tmin
         },
         GpuMethod::Uniform { steps } => (1, (*steps as usize).min(MAX_STEPS) as i32),
         GpuMethod::Extrema => (2, 0),
-        GpuMethod::Fourier => (3, 0),
+        GpuMethod::Fourier { model } => (
+            3,
+            match model {
+                Model::Constant => 0,
+                Model::Segment => 1,
+                Model::Slices => 2,
+                Model::Exact => 3,
+            },
+        ),
+        GpuMethod::ExtremaSoft => (4, 0),
     };
     p.method[0] = id;
     p.method[1] = arg;
 }
 
 impl TileShadow {
-    /// Whether this tile's data serves `method` (`dp`, `uniform` and `extrema` read the same
-    /// data; `fourier` reads the Fourier pyramid).
+    /// Whether this tile's data serves `method` (`dp`, `uniform`, `extrema` and `extrema-soft`
+    /// read the same data; `fourier`, whatever its model, reads the Fourier pyramid).
     pub fn supports(&self, method: &GpuMethod) -> bool {
         method.is_trace() == self.method.is_trace()
     }
@@ -615,15 +642,22 @@ impl TileShadow {
                 *slot = Some(tracer.pyramid);
                 out
             }
-            None => texels
-                .par_iter()
-                .map(|p| self.cpu_fourier(p[0] as i64, p[1] as i64, sun))
-                .collect(),
+            None => {
+                let model = match method {
+                    CpuTwin::Same(GpuMethod::Fourier { model }) => *model,
+                    _ => Model::Exact,
+                };
+                texels
+                    .par_iter()
+                    .map(|p| self.cpu_fourier(p[0] as i64, p[1] as i64, sun, model))
+                    .collect()
+            }
         }
     }
 
-    /// The Fourier lookup of `penumbra::shadow::tile_shadows` at raster texel (x, y).
-    fn cpu_fourier(&self, x: i64, y: i64, sun: &Sun) -> f64 {
+    /// The Fourier lookup of `penumbra::shadow::tile_shadows` at raster texel (x, y), with the
+    /// disc model `model`.
+    fn cpu_fourier(&self, x: i64, y: i64, sun: &Sun, model: Model) -> f64 {
         let Some(pyr) = &self.fourier else {
             return f64::NAN;
         };
@@ -642,7 +676,7 @@ impl TileShadow {
         let floor = penumbra::fourier::stage::floor_deg(self.ctx.radius_m, self.tmin_tileset, h0);
         let mut coef = Vec::new();
         pyr.coefficients_at(i as f64 + 0.5, j as f64 + 0.5, &mut coef);
-        sun::lit_fraction(&frame, sun, Model::Exact, &|phi| {
+        sun::lit_fraction(&frame, sun, model, &|phi| {
             penumbra::fourier::evaluate(&coef, phi).max(floor)
         })
     }

@@ -17,7 +17,8 @@ struct ShadowParams {
     // Face pixels S, body radius (m), lowest terrain (m) for the floor, highest terrain of the
     // raster (m).
     geo: vec4<f32>,
-    // Method (0 dp, 1 uniform, 2 extrema, 3 fourier), uniform steps or fixed DP runs (0: auto),
+    // Method (0 dp, 1 uniform, 2 extrema, 3 fourier, 4 extrema-soft), uniform steps, fixed DP
+    // runs (0: auto) or the Fourier disc model (0 constant, 1 segment, 2 slices, 3 exact),
     // pyramid levels, Fourier coefficients.
     method: vec4<i32>,
     // The tile's interior in the raster: x0, y0, w, h.
@@ -647,6 +648,56 @@ fn sh_extrema_dark(ray: ShRay, x: i32, y: i32, phi: f32, t: f32) -> bool {
     return dark;
 }
 
+// The min/max traversal as a soft method (the CPU's extrema_soft): the exact horizon slope in
+// the ray's azimuth, clamped below at lo (anything lower leaves the disc whole) and found only
+// up to hi (anything higher hides it). Texels that cannot rise above the best slope found or
+// lo are skipped; the walk stops once a texel hides the disc's top.
+fn sh_extrema_soft(ray: ShRay, x: i32, y: i32, phi: f32, lo: f32, hi: f32) -> f32 {
+    var best = sh_near(ray, x, y, phi);
+    if best >= hi {
+        return best;
+    }
+    let end = sh_exit(ray, lo);
+    if end <= SH_NEAR_PX {
+        return best;
+    }
+    let top = min(shadow_params.method.z - 1, 7);
+    var stack: array<ShWalker, 8>;
+    stack[top] = sh_walker(ray, top, SH_NEAR_PX, end);
+    var cur = top;
+    for (var guard = 0; guard < 10000000; guard++) {
+        let m = cur;
+        var w = stack[m];
+        let tex = sh_walk_next(&w);
+        stack[m] = w;
+        if !tex.ok {
+            if m == top {
+                break;
+            }
+            cur = m + 1;
+            continue;
+        }
+        let e = sh_extrema(m, tex.tx, tex.ty);
+        if sh_max_slope(ray, tex.s_in, tex.s_out, e.x) <= max(best, lo) {
+            continue;
+        }
+        if e.y > SH_NODATA && sh_max_slope(ray, tex.s_in, tex.s_out, e.y) >= hi {
+            best = max(best, hi);
+            break;
+        }
+        if m == 0 {
+            best = sh_max_over(ray, tex.s_in, tex.s_out, best);
+            if best >= hi {
+                break;
+            }
+            continue;
+        }
+        stack[m - 1] = sh_walker(ray, m - 1, tex.s_in, tex.s_out);
+        cur = m - 1;
+    }
+    return best;
+}
+
 // Jung et al.'s disc occlusion: a horizon of slope a (floored) hides the segment below it.
 fn sh_occlusion(a: f32, floor_deg: f32, el: f32, r: f32) -> f32 {
     var alpha = floor_deg;
@@ -666,7 +717,8 @@ fn sh_occlusion(a: f32, floor_deg: f32, el: f32, r: f32) -> f32 {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Fourier: the tile's horizon pyramid and the exact disc model (256 strips).
+// Fourier: the tile's horizon pyramid and the disc models of penumbra::fourier::sun: constant
+// (method.y 0), segment (1), slices (2), exact (3; 256 strips).
 
 alias ShCoef = array<vec2<f32>, 32>;
 
@@ -708,7 +760,9 @@ fn sh_fourier_coefficients(coef: ptr<function, ShCoef>, i: i32, j: i32) {
     }
 }
 
-// α(θ) = Σ Re c_k cos kθ − Im c_k sin kθ (degrees).
+// α(θ) = Σ Re c_k cos kθ − Im c_k sin kθ (degrees): one sin/cos, then rotations. A constant
+// trip count over all 32 slots (zero past the tile's k): with the loop bounded by k, lavapipe
+// miscompiled the exact model's strips (mean 0.005 off the CPU's, constant model unaffected).
 fn sh_series(coef: ptr<function, ShCoef>, theta: f32) -> f32 {
     let c1 = cos(theta);
     let s1 = sin(theta);
@@ -806,6 +860,38 @@ fn sh_fourier(p: vec2<i32>, h0: f32, up: vec3<f32>) -> f32 {
             return 0.0;
         }
         return 0.5;
+    }
+    let model = prm.method.y;
+    if model == 0 {
+        // constant (Max 1988): the horizon at the sun centre's azimuth across the disc.
+        return sh_segment_fraction((a0 - el) / r_deg);
+    }
+    if model == 1 {
+        // segment: the horizon linear between the disc's left and right rims; the lit part is
+        // the disc above the chord through the two crossings.
+        let yl = -sh_disc_g(&coef, d, -1.0, 0.0);
+        let yr = -sh_disc_g(&coef, d, 1.0, 0.0);
+        let m = 0.5 * (yl + yr);
+        let kk = 0.5 * (yr - yl);
+        return clamp(sh_segment_fraction(m / sqrt(r_deg * r_deg + kk * kk)), 0.0, 1.0);
+    }
+    if model == 2 {
+        // slices: 8 strips, the horizon at each strip's middle, each strip's exact area.
+        var lit_s = 0.0;
+        var whole = 0;
+        for (var i = 0; i < 8; i++) {
+            let a = -1.0 + 0.25 * f32(i);
+            let b = a + 0.25;
+            let c = -sh_disc_g(&coef, d, 0.5 * (a + b), 0.0) / r_deg;
+            if c <= -1.0 {
+                whole += 1;
+            }
+            lit_s += sh_strip_area_above(a, b, c);
+        }
+        if whole == 8 {
+            return 1.0;
+        }
+        return clamp(lit_s / SH_PI, 0.0, 1.0);
     }
     // A cheap answer where the horizon cannot cross the disc: |α'| ≤ Σ k|c_k| bounds its
     // change over the disc's azimuths (from 8 rim points, with 50 % to spare).
@@ -913,6 +999,8 @@ fn shadow_lit(p: vec2<i32>) -> f32 {
     var a = SH_NEG;
     if method == 1 {
         a = sh_uniform(ray, prm.method.y, lo);
+    } else if method == 4 {
+        a = sh_extrema_soft(ray, p.x, p.y, phi, lo, hi);
     } else {
         a = sh_dp(ray, p.x, p.y, phi, lo, hi);
     }
