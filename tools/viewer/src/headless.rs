@@ -108,14 +108,16 @@ pub struct NoShadows {
     pub wall_ms_median: f64,
 }
 
-/// Times `frames` renders: per frame GPU ms (None without timestamps) and wall ms, and the
-/// drawn tiles of the last.
+/// Times `frames` renders after one untimed warm-up render (drivers such as lavapipe compile
+/// a pipeline's shaders at its first draw): per frame GPU ms (None without timestamps) and
+/// wall ms, and the drawn tiles of the last.
 fn time_frames(
     core: &mut Core,
     targets: &Targets,
     frames: u32,
 ) -> Result<(Vec<Option<f64>>, Vec<f64>, Vec<penumbra::layout::TileId>)> {
     let (mut gpu_ms, mut wall_ms, mut tiles) = (Vec::new(), Vec::new(), Vec::new());
+    core.render(targets)?;
     for _ in 0..frames {
         let f = core.render(targets)?;
         gpu_ms.push(f.time.gpu_ms);

@@ -5,7 +5,8 @@
 //! method in a uniform, its context raster (the heights a ray-marching method searches, on the
 //! face's extended gnomonic plane, as `penumbra::shadow::shadow_context` makes it), the raster's
 //! cell min/max pyramid (`penumbra::shadow::trace::Extrema`, its levels side by side in one
-//! texture) and, for `fourier`, the tile's Fourier horizon pyramid. The WGSL
+//! texture) and, for `fourier`, the tile's Fourier horizon pyramid expanded into each texel's
+//! coefficients. The WGSL
 //! ([`Shadows::wgsl`]) declares these bindings and `fn shadow_lit(p: vec2<i32>) -> f32`: the
 //! lit fraction of the sun's disc at raster texel `p` (0 or 1 for the hard `extrema`), negative
 //! over no data. The shader follows the CPU methods step by step (docs/shadow-methods.md):
@@ -16,8 +17,8 @@
 //! - `extrema`: Timokhin & Mikhaylyuk's min/max traversal (an explicit stack of level walks);
 //! - `extrema-soft`: the same traversal finding the exact horizon slope within the disc's band,
 //!   with DP's disc occlusion (the CPU's most accurate soft method);
-//! - `fourier`: the pyramid's coefficients at the pixel centre (bilinear, clamp-to-edge) and a
-//!   disc model of `penumbra::fourier::sun`: `constant` (the default; the series once, at the
+//! - `fourier`: the pyramid's coefficients at the texel centre (bilinear, clamp-to-edge, as
+//!   `Pyramid::coefficients_at`, expanded when the tile is loaded) and a disc model of `penumbra::fourier::sun`: `constant` (the default; the series once, at the
 //!   sun's azimuth), `segment` (twice, at the disc's rims), `slices` (8 times) or `exact` (256
 //!   strips with bisection, for validation), as `penumbra shadow --method horizon` does.
 //!
@@ -45,9 +46,8 @@ const WGSL: &str = include_str!("shadow.wgsl");
 
 /// Most pyramid levels the uniform describes (a raster up to 32768 texels a side).
 const MAX_LEVELS: usize = 16;
-/// Most Fourier coefficients the shader reads (and groups of four).
+/// Most Fourier coefficients the shader reads.
 const MAX_COEFFICIENTS: usize = 32;
-const MAX_GROUPS: usize = 16;
 /// What stands for −∞ and for no data in the textures (WGSL need not support infinities).
 const NEG: f32 = -1.0e30;
 
@@ -171,7 +171,6 @@ struct Params {
     rect: [i32; 4],
     runs: [[i32; 4]; 4],
     levels: [[i32; 4]; MAX_LEVELS],
-    groups: [[i32; 4]; MAX_GROUPS],
 }
 
 /// Per device: the layout of the shadow bind group (`@group(1)`) and what tiles share.
@@ -332,7 +331,7 @@ impl Shadows {
                      without --min-sun-el to render it, or use a ray-marching method"
                 );
             }
-            if p.k > MAX_COEFFICIENTS || p.groups.len() > MAX_GROUPS {
+            if p.k > MAX_COEFFICIENTS {
                 bail!(
                     "tile {tile}'s Fourier pyramid keeps {} coefficients; the GPU reads at most \
                      {MAX_COEFFICIENTS}: rebuild it with `penumbra fourier --coefficients 16`",
@@ -437,35 +436,39 @@ impl Shadows {
         };
         let fourier_view = match &fourier {
             Some(p) => {
-                let aw = 2 * p.groups.iter().map(|g| g.res).max().unwrap_or(1);
-                let ah: usize = p.groups.iter().map(|g| g.res).sum();
-                if aw > max_tex || ah > max_tex {
-                    bail!("tile {tile}'s Fourier pyramid does not fit a texture of this GPU");
+                // The pyramid expanded at load time into each texel's own coefficients (the
+                // bilinear interpolation of every group at the texel centre, in f64 as the CPU
+                // does, then f32): a fragment reads ⌈K/2⌉ texels instead of interpolating
+                // 4 × ⌈K/2⌉, at K × 8 bytes per texel of GPU memory.
+                let pairs = p.k.div_ceil(2);
+                let (n, m) = (rect.w, rect.h);
+                let aw = n * pairs;
+                if aw > max_tex || m > max_tex {
+                    bail!(
+                        "tile {tile}'s Fourier coefficients ({aw}×{m} texels) do not fit a \
+                         texture of this GPU (at most {max_tex}): use fewer coefficients"
+                    );
                 }
-                let mut data = vec![0.0f32; aw * ah * 4];
-                let mut row = 0;
-                for (g, gr) in p.groups.iter().enumerate() {
-                    for ty in 0..gr.res {
-                        for tx in 0..gr.res {
-                            for c in 0..4 {
-                                let v = gr.coef[(ty * gr.res + tx) * 4 + c];
-                                let o = ((row + ty) * aw + 2 * tx + c / 2) * 4 + (c % 2) * 2;
-                                data[o] = v[0];
-                                data[o + 1] = v[1];
+                let mut data = vec![0.0f32; aw * m * 4];
+                data.par_chunks_mut(aw * 4)
+                    .enumerate()
+                    .for_each(|(j, row)| {
+                        let mut coef = Vec::with_capacity(p.k);
+                        for i in 0..n {
+                            p.coefficients_at(i as f64 + 0.5, j as f64 + 0.5, &mut coef);
+                            for (c, v) in coef.iter().enumerate() {
+                                row[(i * pairs) * 4 + 2 * c] = v[0] as f32;
+                                row[(i * pairs) * 4 + 2 * c + 1] = v[1] as f32;
                             }
                         }
-                    }
-                    let count = p.k.saturating_sub(4 * g).min(4);
-                    base.groups[g] = [row as i32, gr.res as i32, count as i32, 0];
-                    row += gr.res;
-                }
+                    });
                 base.method[3] = p.k as i32;
                 float_texture(
                     gpu,
                     "shadow fourier",
                     wgpu::TextureFormat::Rgba32Float,
                     aw,
-                    ah,
+                    m,
                     &data,
                 )
             }

@@ -27,8 +27,6 @@ struct ShadowParams {
     runs: array<vec4<i32>, 4>,
     // Level m of the min/max pyramid in the atlas: x, y offset, width, height.
     levels: array<vec4<i32>, 16>,
-    // Fourier group g in its atlas: row offset, resolution, coefficients in it, unused.
-    groups: array<vec4<i32>, 16>,
 }
 
 @group(1) @binding(0) var<uniform> shadow_params: ShadowParams;
@@ -36,7 +34,8 @@ struct ShadowParams {
 @group(1) @binding(1) var shadow_heights: texture_2d<f32>;
 // Min/max pyramid levels side by side: (max, min), -1e30 standing for −∞.
 @group(1) @binding(2) var shadow_extrema: texture_2d<f32>;
-// Fourier coefficients: texel (2x, row) holds slots 0, 1 (re, im, re, im), (2x + 1, row) 2, 3.
+// Fourier coefficients of tile texel (i, j), expanded from the pyramid when the tile is loaded:
+// texel (i·P + q, j) holds slots 2q and 2q + 1 (re, im, re, im), P = ⌈K/2⌉.
 @group(1) @binding(3) var shadow_fourier: texture_2d<f32>;
 
 const SH_NEG: f32 = -1.0e30;
@@ -722,42 +721,50 @@ fn sh_occlusion(a: f32, floor_deg: f32, el: f32, r: f32) -> f32 {
 
 alias ShCoef = array<vec2<f32>, 32>;
 
+// Coefficient slots 2q, 2q + 1 of tile texel (i, j).
+fn sh_fourier_pair(i: i32, j: i32, q: i32) -> vec4<f32> {
+    let pairs = (shadow_params.method.w + 1) / 2;
+    return textureLoad(shadow_fourier, vec2<i32>(i * pairs + q, j), 0);
+}
+
+// All 32 slots of tile texel (i, j), zero past K, for the models that evaluate the series at
+// many azimuths.
 fn sh_fourier_coefficients(coef: ptr<function, ShCoef>, i: i32, j: i32) {
-    let p = shadow_params;
-    let n = f32(p.rect.z);
-    let k = p.method.w;
+    let k = shadow_params.method.w;
     // Constant trip counts (all 32 slots, zero past k): lavapipe corrupted the array when
     // the loops ran k times.
-    for (var g = 0; g < 8; g++) {
-        let gr = p.groups[g];
-        let res = max(gr.y, 1);
-        let r = f32(res);
-        let fx = (f32(i) + 0.5) / n * r - 0.5;
-        let fy = (f32(j) + 0.5) / n * r - 0.5;
-        let x0 = floor(fx);
-        let y0 = floor(fy);
-        let ax = fx - x0;
-        let ay = fy - y0;
-        let xa = clamp(i32(x0), 0, res - 1);
-        let xb = clamp(i32(x0) + 1, 0, res - 1);
-        let ya = clamp(i32(y0), 0, res - 1) + gr.x;
-        let yb = clamp(i32(y0) + 1, 0, res - 1) + gr.x;
-        for (var half = 0; half < 2; half++) {
-            let slot = 4 * g + 2 * half;
-            var v = vec4<f32>(0.0);
-            if slot < k {
-                let t00 = textureLoad(shadow_fourier, vec2<i32>(2 * xa + half, ya), 0);
-                let t10 = textureLoad(shadow_fourier, vec2<i32>(2 * xb + half, ya), 0);
-                let t01 = textureLoad(shadow_fourier, vec2<i32>(2 * xa + half, yb), 0);
-                let t11 = textureLoad(shadow_fourier, vec2<i32>(2 * xb + half, yb), 0);
-                let top = t00 * (1.0 - ax) + t10 * ax;
-                let bot = t01 * (1.0 - ax) + t11 * ax;
-                v = top * (1.0 - ay) + bot * ay;
-            }
-            (*coef)[slot] = select(vec2<f32>(0.0), v.xy, slot < k);
-            (*coef)[slot + 1] = select(vec2<f32>(0.0), v.zw, slot + 1 < k);
+    for (var q = 0; q < 16; q++) {
+        var v = vec4<f32>(0.0);
+        if 2 * q < k {
+            v = sh_fourier_pair(i, j, q);
         }
+        (*coef)[2 * q] = select(vec2<f32>(0.0), v.xy, 2 * q < k);
+        (*coef)[2 * q + 1] = select(vec2<f32>(0.0), v.zw, 2 * q + 1 < k);
     }
+}
+
+// The series of tile texel (i, j) at two azimuths at once, straight from the texture (no
+// array): ⌈K/2⌉ fetches, one sin/cos per azimuth, then rotations (the constant model uses x).
+fn sh_series_at(i: i32, j: i32, ta: f32, tb: f32) -> vec2<f32> {
+    let k = shadow_params.method.w;
+    let ra = vec2<f32>(cos(ta), sin(ta));
+    let rb = vec2<f32>(cos(tb), sin(tb));
+    // e^{i·kθ} for the pair's first slot, per azimuth.
+    var ea = vec2<f32>(1.0, 0.0);
+    var eb = vec2<f32>(1.0, 0.0);
+    var sum = vec2<f32>(0.0);
+    let pairs = (k + 1) / 2;
+    for (var q = 0; q < pairs; q++) {
+        let v = sh_fourier_pair(i, j, q);
+        // Slot 2q (slot 0's imaginary part is zero), then slot 2q + 1 (zero past K).
+        sum += vec2<f32>(v.x * ea.x - v.y * ea.y, v.x * eb.x - v.y * eb.y);
+        ea = vec2<f32>(ea.x * ra.x - ea.y * ra.y, ea.y * ra.x + ea.x * ra.y);
+        eb = vec2<f32>(eb.x * rb.x - eb.y * rb.y, eb.y * rb.x + eb.x * rb.y);
+        sum += vec2<f32>(v.z * ea.x - v.w * ea.y, v.z * eb.x - v.w * eb.y);
+        ea = vec2<f32>(ea.x * ra.x - ea.y * ra.y, ea.y * ra.x + ea.x * ra.y);
+        eb = vec2<f32>(eb.x * rb.x - eb.y * rb.y, eb.y * rb.x + eb.x * rb.y);
+    }
+    return sum;
 }
 
 // α(θ) = Σ Re c_k cos kθ − Im c_k sin kθ (degrees): one sin/cos, then rotations. A constant
@@ -829,10 +836,15 @@ fn sh_disc_g(coef: ptr<function, ShCoef>, d: ShDisc, x: f32, y: f32) -> f32 {
     return sh_elevation_deg(d.up, dir) - hor;
 }
 
+// The horizon (degrees) from a series value: floored, clamped as the CPU's lookup.
+fn sh_horizon(series: f32, floor_deg: f32) -> f32 {
+    return clamp(max(series, floor_deg), -90.0, 90.0);
+}
+
 fn sh_fourier(p: vec2<i32>, h0: f32, up: vec3<f32>) -> f32 {
     let prm = shadow_params;
-    var coef: ShCoef;
-    sh_fourier_coefficients(&coef, p.x - prm.rect.x, p.y - prm.rect.y);
+    let ti = p.x - prm.rect.x;
+    let tj = p.y - prm.rect.y;
     let s = normalize(prm.sun.xyz);
     let r_deg = prm.sun.w;
     let floor_deg = sh_floor_deg(h0);
@@ -851,30 +863,37 @@ fn sh_fourier(p: vec2<i32>, h0: f32, up: vec3<f32>) -> f32 {
     d.ev = normalize(cross(d.eh, s));
     d.tan_r = tan(r_deg / SH_DEG);
     let phi0 = sh_plane_azimuth(up, cross(up, d.eh));
-    let a0 = clamp(max(sh_series(&coef, phi0), floor_deg), -90.0, 90.0);
-    if r_deg <= 0.0 {
-        if el > a0 {
-            return 1.0;
-        }
-        if el < a0 {
-            return 0.0;
-        }
-        return 0.5;
-    }
     let model = prm.method.y;
-    if model == 0 {
-        // constant (Max 1988): the horizon at the sun centre's azimuth across the disc.
+    if r_deg <= 0.0 || model == 0 {
+        // A point sun, or the constant model (Max 1988): the horizon at the sun centre's
+        // azimuth held across the disc. The series once: O(K).
+        let a0 = sh_horizon(sh_series_at(ti, tj, phi0, phi0).x, floor_deg);
+        if r_deg <= 0.0 {
+            if el > a0 {
+                return 1.0;
+            }
+            if el < a0 {
+                return 0.0;
+            }
+            return 0.5;
+        }
         return sh_segment_fraction((a0 - el) / r_deg);
     }
     if model == 1 {
         // segment: the horizon linear between the disc's left and right rims; the lit part is
-        // the disc above the chord through the two crossings.
-        let yl = -sh_disc_g(&coef, d, -1.0, 0.0);
-        let yr = -sh_disc_g(&coef, d, 1.0, 0.0);
+        // the disc above the chord through the two crossings. The series twice: O(K).
+        let dl = normalize(s - d.tan_r * d.eh);
+        let dr = normalize(s + d.tan_r * d.eh);
+        let a = sh_series_at(ti, tj, sh_plane_azimuth(up, dl), sh_plane_azimuth(up, dr));
+        let yl = sh_horizon(a.x, floor_deg) - sh_elevation_deg(up, dl);
+        let yr = sh_horizon(a.y, floor_deg) - sh_elevation_deg(up, dr);
         let m = 0.5 * (yl + yr);
         let kk = 0.5 * (yr - yl);
         return clamp(sh_segment_fraction(m / sqrt(r_deg * r_deg + kk * kk)), 0.0, 1.0);
     }
+    var coef: ShCoef;
+    sh_fourier_coefficients(&coef, ti, tj);
+    let a0 = sh_horizon(sh_series(&coef, phi0), floor_deg);
     if model == 2 {
         // slices: 8 strips, the horizon at each strip's middle, each strip's exact area.
         var lit_s = 0.0;
