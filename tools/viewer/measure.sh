@@ -42,8 +42,8 @@ import json, sys, os
 out, sizes = sys.argv[1], sys.argv[2:]
 methods = ["dp", "uniform", "extrema", "extrema-soft", "fourier-constant", "fourier-segment", "fourier-exact"]
 adapter = None
-print("| size | method | frame ms | without shadows ms | shadow cost ms | ÷ dp's cost | ÷ uniform's cost | vs CPU twin: mean abs, PER | vs reference: mean abs |")
-print("|---|---|---:|---:|---:|---:|---:|---|---:|")
+print("| size | method | frame ms | without shadows ms | shadow cost ms | ÷ dp's cost | ÷ uniform's cost | vs CPU twin: mean abs, PER | vs reference: mean abs | vs exact disc model: mean abs |")
+print("|---|---|---:|---:|---:|---:|---:|---|---:|---:|")
 for size in sizes:
     rep = {m: json.load(open(os.path.join(out, f"{m}-{size}.json"))) for m in methods}
     cost = {m: r["timings"]["shadow_overhead_ms"] for m, r in rep.items()}
@@ -53,7 +53,8 @@ for size in sizes:
         frame = t["gpu_ms_median"] if t["gpu_ms_median"] is not None else t["wall_ms_median"]
         base = t["no_shadows"]["gpu_ms_median"] if t["no_shadows"]["gpu_ms_median"] is not None else t["no_shadows"]["wall_ms_median"]
         print(f"| {size} | {r['method']} | {frame:.2f} | {base:.2f} | {cost[m]:.2f} | {cost[m]/cost['dp']:.2f} | {cost[m]/cost['uniform']:.2f} | "
-              f"{v['same']['mean_abs']:.5f}, {v['same']['per_percent']:.3f} % | {v['reference']['mean_abs']:.4f} |")
+              f"{v['same']['mean_abs']:.5f}, {v['same']['per_percent']:.3f} % | {v['reference']['mean_abs']:.4f} | "
+              f"{'%.5f' % v['exact_model']['mean_abs'] if v.get('exact_model') else '–'} |")
 print()
 print(f"Adapter: {adapter['name']} ({adapter['backend']}, {adapter['device_type']}, driver {adapter['driver']}); "
       f"times from {'GPU timestamp queries' if adapter['timestamps'] else 'the wall clock'}.")

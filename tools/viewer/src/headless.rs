@@ -368,7 +368,10 @@ pub fn print_text(r: &Report) {
             "validation {} texels on the CPU in {:.2} s",
             v.texels, v.cpu_s
         );
-        for e in [&v.same, &v.reference, &v.cpu_same_vs_reference] {
+        for e in [&v.same, &v.reference, &v.cpu_same_vs_reference]
+            .into_iter()
+            .chain(&v.exact_model)
+        {
             println!(
                 "  vs {:<22} mean abs {:.5}  max {:.4}  PER {:.3} %  ({} px, {} data mismatches)",
                 e.against, e.mean_abs, e.max_abs, e.per_percent, e.pixels, e.data_mismatch

@@ -15,7 +15,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::Result;
-use penumbra::fourier::sun::Sun;
+use penumbra::fourier::sun::{Model, Sun};
 use serde::Serialize;
 
 use crate::render::{GpuTile, Readback};
@@ -50,14 +50,19 @@ pub struct Validation {
     /// The CPU twin against the CPU reference at the same texels (what the method itself
     /// costs in accuracy, GPU aside).
     pub cpu_same_vs_reference: Errors,
+    /// For `fourier` with an O(K) disc model: the GPU against the CPU's exact disc model over
+    /// the same coefficients (what the cheap model costs); null otherwise.
+    pub exact_model: Option<Errors>,
     /// CPU seconds (both evaluations, all threads).
     pub cpu_s: f64,
 }
 
-/// Per pixel, the CPU values of the texel it shows: (same method, reference).
+/// Per pixel, the CPU values of the texel it shows: same method, reference, and for an O(K)
+/// Fourier model the exact disc model.
 pub struct CpuValues {
     pub same: Vec<f32>,
     pub reference: Vec<f32>,
+    pub exact_model: Option<Vec<f32>>,
 }
 
 /// Evaluate the CPU twins at the texels of `rb` and compare.
@@ -83,8 +88,15 @@ pub fn validate(
             })
         })
         .collect();
-    // Per tile, both CPU twins over that tile's texels (each call runs in parallel).
-    let mut values = vec![(f32::NAN, f32::NAN); texels.len()];
+    // The exact disc model beside an O(K) Fourier model.
+    let exact = match method {
+        GpuMethod::Fourier { model } if *model != Model::Exact => Some(GpuMethod::Fourier {
+            model: Model::Exact,
+        }),
+        _ => None,
+    };
+    // Per tile, the CPU twins over that tile's texels (each call runs in parallel).
+    let mut values = vec![(f32::NAN, f32::NAN, f32::NAN); texels.len()];
     let mut by_tile: HashMap<u32, Vec<usize>> = HashMap::new();
     for (k, t) in texels.iter().enumerate() {
         by_tile.entry(t.0).or_default().push(k);
@@ -105,11 +117,15 @@ pub fn validate(
             .collect();
         let same = sh.cpu_lit_many(&at, sun, &CpuTwin::Same(method.clone()));
         let reference = sh.cpu_lit_many(&at, sun, &CpuTwin::Reference);
+        let model = exact
+            .as_ref()
+            .map(|m| sh.cpu_lit_many(&at, sun, &CpuTwin::Same(m.clone())));
         for (n, &k) in ks.iter().enumerate() {
-            values[k] = (same[n] as f32, reference[n] as f32);
+            let e = model.as_ref().map_or(f32::NAN, |v| v[n] as f32);
+            values[k] = (same[n] as f32, reference[n] as f32, e);
         }
     }
-    let px = |pick: fn(&(f32, f32)) -> f32| -> Vec<f32> {
+    let px = |pick: fn(&(f32, f32, f32)) -> f32| -> Vec<f32> {
         slot.iter()
             .map(|s| s.map_or(f32::NAN, |k| pick(&values[k])))
             .collect()
@@ -117,6 +133,7 @@ pub fn validate(
     let cpu = CpuValues {
         same: px(|v| v.0),
         reference: px(|v| v.1),
+        exact_model: exact.is_some().then(|| px(|v| v.2)),
     };
     let label = method.label();
     let on_surface: Vec<bool> = rb.texel.iter().map(|t| t.is_some()).collect();
@@ -135,6 +152,11 @@ pub fn validate(
             &on_surface,
             format!("reference (cpu, for cpu {label})"),
         ),
+        exact_model: cpu
+            .exact_model
+            .as_ref()
+            .zip(exact.as_ref())
+            .map(|(e, m)| compare(&rb.lit, e, &on_surface, format!("{} (cpu)", m.label()))),
         cpu_s: t0.elapsed().as_secs_f64(),
     };
     (v, cpu)

@@ -159,6 +159,11 @@ fn every_method_matches_its_cpu_twin_on_the_scene() {
             _ => None,
         };
         check_validation(&v, m, vs_ref);
+        if m == "fourier" && extra.is_empty() {
+            // The O(K) constant model against the exact disc model over the same coefficients.
+            let e = f(&v, &["validation", "exact_model", "mean_abs"]);
+            assert!(e <= 0.005, "fourier constant vs exact: mean {e}");
+        }
         if m == "fourier" {
             // Drawn at the level that has pyramids.
             assert!(v["tiles"]
