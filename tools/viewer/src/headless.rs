@@ -377,6 +377,17 @@ pub fn print_text(r: &Report) {
                 e.against, e.mean_abs, e.max_abs, e.per_percent, e.pixels, e.data_mismatch
             );
         }
+        let p = &v.penumbra;
+        println!(
+            "  penumbra ({} px on {} texels with the sun within ±3° of their horizon):",
+            p.pixels, p.texels
+        );
+        for e in [&p.same, &p.reference] {
+            println!(
+                "    vs {:<20} mean abs {:.5}  max {:.4}  PER {:.3} %",
+                e.against, e.mean_abs, e.max_abs, e.per_percent
+            );
+        }
         if let Some(d) = &r.diff {
             println!("  difference image {}", d.display());
         }

@@ -53,8 +53,23 @@ pub struct Validation {
     /// For `fourier` with an O(K) disc model: the GPU against the CPU's exact disc model over
     /// the same coefficients (what the cheap model costs); null otherwise.
     pub exact_model: Option<Errors>,
+    /// The same comparisons over the penumbral pixels only: those whose texel has the sun
+    /// within ±3° of its own horizon in the sun's azimuth, where shadows are decided and the
+    /// all-pixel means hide a method's errors.
+    pub penumbra: Penumbra,
     /// CPU seconds (both evaluations, all threads).
     pub cpu_s: f64,
+}
+
+/// [`Validation::penumbra`].
+#[derive(Clone, Debug, Serialize)]
+pub struct Penumbra {
+    /// Penumbral pixels (showing terrain) and distinct texels.
+    pub pixels: u64,
+    pub texels: usize,
+    /// GPU against the CPU twin, and against the reference.
+    pub same: Errors,
+    pub reference: Errors,
 }
 
 /// Per pixel, the CPU values of the texel it shows: same method, reference, and for an O(K)
@@ -97,6 +112,7 @@ pub fn validate(
     };
     // Per tile, the CPU twins over that tile's texels (each call runs in parallel).
     let mut values = vec![(f32::NAN, f32::NAN, f32::NAN); texels.len()];
+    let mut penumbral = vec![false; texels.len()];
     let mut by_tile: HashMap<u32, Vec<usize>> = HashMap::new();
     for (k, t) in texels.iter().enumerate() {
         by_tile.entry(t.0).or_default().push(k);
@@ -120,9 +136,11 @@ pub fn validate(
         let model = exact
             .as_ref()
             .map(|m| sh.cpu_lit_many(&at, sun, &CpuTwin::Same(m.clone())));
+        let band = sh.cpu_penumbral_many(&at, sun);
         for (n, &k) in ks.iter().enumerate() {
             let e = model.as_ref().map_or(f32::NAN, |v| v[n] as f32);
             values[k] = (same[n] as f32, reference[n] as f32, e);
+            penumbral[k] = band[n];
         }
     }
     let px = |pick: fn(&(f32, f32, f32)) -> f32| -> Vec<f32> {
@@ -137,6 +155,10 @@ pub fn validate(
     };
     let label = method.label();
     let on_surface: Vec<bool> = rb.texel.iter().map(|t| t.is_some()).collect();
+    let in_band: Vec<bool> = slot
+        .iter()
+        .map(|s| s.is_some_and(|k| penumbral[k]))
+        .collect();
     let v = Validation {
         texels: texels.len(),
         same: compare(&rb.lit, &cpu.same, &on_surface, format!("{label} (cpu)")),
@@ -157,6 +179,12 @@ pub fn validate(
             .as_ref()
             .zip(exact.as_ref())
             .map(|(e, m)| compare(&rb.lit, e, &on_surface, format!("{} (cpu)", m.label()))),
+        penumbra: Penumbra {
+            pixels: in_band.iter().filter(|&&b| b).count() as u64,
+            texels: penumbral.iter().filter(|&&b| b).count(),
+            same: compare(&rb.lit, &cpu.same, &in_band, format!("{label} (cpu)")),
+            reference: compare(&rb.lit, &cpu.reference, &in_band, "reference (cpu)".into()),
+        },
         cpu_s: t0.elapsed().as_secs_f64(),
     };
     (v, cpu)

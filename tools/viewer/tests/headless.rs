@@ -69,6 +69,19 @@ fn check_validation(v: &Value, what: &str, vs_ref: Option<(f64, f64)>) {
     }
 }
 
+/// Where shadows are decided (the sun within ±3° of a texel's horizon), GPU `extrema-soft` is
+/// within mean 0.01 of the CPU reference, over at least 200 such pixels.
+fn check_penumbra(v: &Value, what: &str) {
+    let n = f(v, &["validation", "penumbra", "pixels"]);
+    let m = f(v, &["validation", "penumbra", "reference", "mean_abs"]);
+    eprintln!("{what}: {n} penumbral pixels, GPU vs reference mean {m}");
+    assert!(n >= 200.0, "{what}: only {n} penumbral pixels");
+    assert!(
+        m <= 0.01,
+        "{what}: penumbral GPU vs reference mean {m} > 0.01"
+    );
+}
+
 #[test]
 fn a_low_sun_lights_and_shadows_the_scene_and_dp_matches_the_cpu() {
     if !gpu() {
@@ -159,6 +172,9 @@ fn every_method_matches_its_cpu_twin_on_the_scene() {
             _ => None,
         };
         check_validation(&v, m, vs_ref);
+        if m == "extrema-soft" {
+            check_penumbra(&v, "embedded scene, extrema-soft");
+        }
         if m == "fourier" && extra.is_empty() {
             // The O(K) constant model against the exact disc model over the same coefficients.
             let e = f(&v, &["validation", "exact_model", "mean_abs"]);
@@ -335,6 +351,9 @@ fn a_real_dem_validates_every_method_at_a_low_sun() {
             _ => None,
         };
         check_validation(&v, &format!("Shoemaker, {m}"), vs_ref);
+        if m == "extrema-soft" {
+            check_penumbra(&v, "Shoemaker, extrema-soft");
+        }
     }
 }
 

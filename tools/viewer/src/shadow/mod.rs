@@ -48,6 +48,9 @@ const WGSL: &str = include_str!("shadow.wgsl");
 const MAX_LEVELS: usize = 16;
 /// Most Fourier coefficients the shader reads.
 const MAX_COEFFICIENTS: usize = 32;
+/// Half-width (degrees) of the band around a point's horizon where shadows are decided: the
+/// penumbra metric's suns are within it ([`TileShadow::cpu_penumbral_many`]).
+pub const PENUMBRA_BAND_DEG: f64 = 3.0;
 /// What stands for −∞ and for no data in the textures (WGSL need not support infinities).
 const NEG: f32 = -1.0e30;
 
@@ -656,6 +659,47 @@ impl TileShadow {
                     .collect()
             }
         }
+    }
+
+    /// Whether the sun is within ±[`PENUMBRA_BAND_DEG`] of the terrain's own horizon in its
+    /// azimuth at each texel (where shadows are decided: issue 40's penumbra metric). The
+    /// exact reference search with a disc of that radius around the sun's centre finds the
+    /// horizon clamped to the band; strictly inside it, the texel is penumbral. False over no
+    /// data and outside the raster.
+    pub fn cpu_penumbral_many(&self, texels: &[[i32; 2]], sun: &Sun) -> Vec<bool> {
+        let band = Sun {
+            dir: sun.dir,
+            radius_deg: PENUMBRA_BAND_DEG,
+        };
+        let mut slot = self.extrema.lock().unwrap_or_else(|e| e.into_inner());
+        let pyramid = slot.take().unwrap_or_else(|| Extrema::new(&self.ctx));
+        let tracer = Tracer {
+            ctx: &self.ctx,
+            pyramid,
+            hmax: self.hmax,
+            terrain_min_m: self.tmin_trace,
+        };
+        let out = texels
+            .par_iter()
+            .map(|p| {
+                let inside = p[0] >= 0
+                    && p[1] >= 0
+                    && (p[0] as usize) < self.ctx.width
+                    && (p[1] as usize) < self.ctx.height;
+                if !inside {
+                    return false;
+                }
+                let (x, y) = (p[0] as usize, p[1] as usize);
+                let el = tracer.sun_at(x, y, &band).elevation_deg;
+                let mut work = Work::default();
+                let h = tracer
+                    .trace(x, y, &band, &Method::Reference, &mut work)
+                    .horizon_deg;
+                h > el - PENUMBRA_BAND_DEG && h < el + PENUMBRA_BAND_DEG
+            })
+            .collect();
+        *slot = Some(tracer.pyramid);
+        out
     }
 
     /// The Fourier lookup of `penumbra::shadow::tile_shadows` at raster texel (x, y), with the
