@@ -9,7 +9,8 @@
 //!   and the sun by its sub-solar point, moved in azimuth/elevation at the view's target.
 //! - [`lod`]: which tiles to draw (screen-space error, frustum and horizon culling).
 //! - [`mesh`]: a tile's displaced grid relative to its centre, skirts, per-texel normals.
-//! - [`scene`]: the tiles on the GPU (mesh, normals, albedo, shadow data), made on first use.
+//! - [`scene`]: the tiles on the GPU (mesh, normals, albedo, shadow data), made on first use
+//!   or, when they stream, by background loaders ([`stream`]).
 //! - [`render`]: the terrain pass, drawing [`render::GpuTile`]s (what the scene makes) into
 //!   colour, lit-fraction and texel-id targets, GPU timestamps, readback.
 //! - [`core`]: what the window and the headless mode share: one frame.
@@ -33,5 +34,6 @@ pub mod overlay;
 pub mod render;
 pub mod scene;
 pub mod shadow;
+pub mod stream;
 pub mod validate;
 pub mod window;
