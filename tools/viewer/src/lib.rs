@@ -16,6 +16,8 @@
 //! - [`core`]: what the window and the headless mode share: one frame.
 //! - [`headless`], [`validate`], [`output`]: off-screen frames, the GPU against the CPU,
 //!   files.
+//! - [`flight`]: `--path`, a camera path flown headless or in the window with streamed
+//!   tiles, and its frame-time report.
 //! - [`window`], [`overlay`], [`font`]: the winit window, its composite pass and status line.
 //! - [`gpu`]: the device (headless or for a window's surface).
 //! - [`shadow`]: the GPU twins of the CPU shadow methods (WGSL beside the code) and the
@@ -23,6 +25,7 @@
 
 pub mod camera;
 pub mod core;
+pub mod flight;
 pub mod font;
 pub mod gpu;
 pub mod headless;
