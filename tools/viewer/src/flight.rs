@@ -590,7 +590,11 @@ mod tests {
         // north.
         assert!(c[0].heading_deg.abs() < 1e-6 || (c[0].heading_deg - 360.0).abs() < 1e-6);
         let want = (1000.0f64 / (r * 0.01f64.to_radians())).atan().to_degrees();
-        assert!((c[0].pitch_deg + want).abs() < 0.1, "{} {want}", c[0].pitch_deg);
+        assert!(
+            (c[0].pitch_deg + want).abs() < 0.1,
+            "{} {want}",
+            c[0].pitch_deg
+        );
         // The repeated row looks towards the next distinct position.
         assert!((c[2].pitch_deg - c[1].pitch_deg).abs() < 1e-9);
         assert_eq!((c[3].heading_deg, c[3].pitch_deg), (90.0, -10.0));
