@@ -267,6 +267,9 @@ pub struct FlightReport {
     /// Wall time per frame (ms), and the terrain pass's GPU time where timestamps exist.
     pub frame_ms: Option<Percentiles>,
     pub gpu_ms: Option<Percentiles>,
+    /// Frame time outside the terrain pass (frame − GPU, ms; where timestamps exist): what
+    /// the frame loop spent on anything but drawing, a tile's load when a frame waits for it.
+    pub outside_gpu_ms: Option<Percentiles>,
     /// Frames drawn with a chosen tile not ready (a coarser stand-in or a gap in its place).
     pub frames_waiting: usize,
     /// Chosen tiles missing, summed over the frames; stand-ins drawn, likewise.
@@ -375,6 +378,10 @@ impl Flight {
         let fr = &self.frames;
         let frame_ms: Vec<f64> = fr.iter().map(|f| f.frame_ms).collect();
         let gpu: Vec<f64> = fr.iter().filter_map(|f| f.gpu_ms).collect();
+        let outside: Vec<f64> = fr
+            .iter()
+            .filter_map(|f| f.gpu_ms.map(|g| (f.frame_ms - g).max(0.0)))
+            .collect();
         FlightReport {
             mode: mode.into(),
             tileset: opts.args.dir.clone(),
@@ -391,6 +398,9 @@ impl Flight {
             frame_ms: Percentiles::of(&frame_ms),
             gpu_ms: (gpu.len() == fr.len())
                 .then(|| Percentiles::of(&gpu))
+                .flatten(),
+            outside_gpu_ms: (outside.len() == fr.len())
+                .then(|| Percentiles::of(&outside))
                 .flatten(),
             frames_waiting: fr.iter().filter(|f| f.missing > 0).count(),
             tiles_missing: fr.iter().map(|f| f.missing).sum(),
@@ -517,6 +527,11 @@ pub fn table(r: &FlightReport) -> String {
     ));
     line(format!("{:<22} {}", "frame (wall)", fmt_p(&r.frame_ms)));
     line(format!("{:<22} {}", "terrain pass (GPU)", fmt_p(&r.gpu_ms)));
+    line(format!(
+        "{:<22} {}",
+        "frame outside the GPU",
+        fmt_p(&r.outside_gpu_ms)
+    ));
     line(format!(
         "{:<22} {}",
         "tile load (loader)",
