@@ -260,3 +260,120 @@ fn the_window_flies_the_path_and_reports() {
     check_report(&r, 6, false);
     assert!(shot.is_file(), "no screenshot at the path's end");
 }
+
+/// Press and release the key of `keysym` in the X server `display` (XTEST), with the
+/// keyboard focus on the top-most window (no window manager gives it one: winit takes keys
+/// only after a focus-in).
+fn press(display: &str, keysym: u32) {
+    use x11rb::connection::Connection as _;
+    use x11rb::protocol::xproto::{self, ConnectionExt as _};
+    use x11rb::protocol::xtest::ConnectionExt as _;
+    let (conn, screen) = x11rb::connect(Some(display)).expect("the X server answers");
+    let root = conn.setup().roots[screen].root;
+    let (lo, hi) = (conn.setup().min_keycode, conn.setup().max_keycode);
+    let map = conn
+        .get_keyboard_mapping(lo, hi - lo + 1)
+        .unwrap()
+        .reply()
+        .unwrap();
+    let per = map.keysyms_per_keycode as usize;
+    let code = map
+        .keysyms
+        .chunks(per)
+        .position(|syms| syms.contains(&keysym))
+        .map(|k| lo + k as u8)
+        .expect("the key is on the keyboard map");
+    let tree = conn.query_tree(root).unwrap().reply().unwrap();
+    let window = *tree.children.last().expect("a window is open");
+    conn.set_input_focus(xproto::InputFocus::PARENT, window, x11rb::CURRENT_TIME)
+        .unwrap();
+    // A round trip: the server has handled the requests before this returns.
+    let sync = || {
+        conn.flush().unwrap();
+        conn.get_input_focus().unwrap().reply().unwrap();
+    };
+    sync();
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    for kind in [xproto::KEY_PRESS_EVENT, xproto::KEY_RELEASE_EVENT] {
+        conn.xtest_fake_input(kind, code, x11rb::CURRENT_TIME, root, 0, 0, 0)
+            .unwrap();
+        sync();
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+}
+
+#[test]
+fn the_window_takes_keys_while_it_flies_and_esc_ends_the_flight_with_a_report() {
+    use std::io::{BufRead as _, BufReader};
+    use std::process::Stdio;
+    use std::time::{Duration, Instant};
+    if !gpu() {
+        return;
+    }
+    let Some(x) = crate::window::xvfb() else {
+        return;
+    };
+    let d = tmp();
+    // 3000 rows: far more than the second the test lets it fly.
+    let mut text = String::from("lat_deg,lon_deg,height_m\n");
+    let rows = 3000;
+    for k in 0..rows {
+        let f = k as f64 / rows as f64;
+        text.push_str(&format!(
+            "{},30,{}\n",
+            -89.80 - 0.15 * f,
+            9000.0 - 6000.0 * f
+        ));
+    }
+    let path = write_path(d.path(), &text);
+    let mut child = view()
+        .args([
+            scene().to_str().unwrap(),
+            "--path",
+            &path,
+            "--size",
+            "128x96",
+            "--json",
+        ])
+        .env("DISPLAY", &x.display)
+        .env_remove("WAYLAND_DISPLAY")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait for the window to be up (its first line on stderr), let it fly, press Esc.
+    let stderr = child.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for l in BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = tx.send(l);
+        }
+    });
+    let t0 = Instant::now();
+    let mut log = Vec::new();
+    while !log.iter().any(|l: &String| l.contains("window")) {
+        match rx.recv_timeout(Duration::from_secs(1)) {
+            Ok(l) => log.push(l),
+            Err(_) if t0.elapsed() > Duration::from_secs(60) => panic!("no window: {log:?}"),
+            Err(_) => {}
+        }
+    }
+    std::thread::sleep(Duration::from_secs(1));
+    press(&x.display, 0xff1b); // XK_Escape
+    let t1 = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if t1.elapsed() > Duration::from_secs(30) {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("the window did not close on Esc");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let o = child.wait_with_output().unwrap();
+    assert!(o.status.success(), "{:?}: {log:?}", o.status);
+    let r: Value = serde_json::from_slice(&o.stdout).expect("the report");
+    assert_eq!(n(&r, "rows"), rows);
+    let frames = n(&r, "frames");
+    assert!(frames >= 1 && frames < rows, "{frames} frames flown");
+    assert_eq!(r["per_frame"].as_array().unwrap().len() as u64, frames);
+}
