@@ -339,6 +339,19 @@ impl Flight {
         true
     }
 
+    /// For the window's status line: the row being drawn (or the last drawn) and the tiles
+    /// it lacks.
+    pub fn status(&self, core: &Core) -> String {
+        let l = core.scene.last_load;
+        // Rows drawn, and the one being drawn.
+        let row = self.frames.len() + self.frame_t0.is_some() as usize;
+        let mut s = format!(" | row {row}/{}", self.cameras.len());
+        if l.missing > 0 {
+            s.push_str(&format!(", {} tiles loading", l.missing));
+        }
+        s
+    }
+
     /// The frame begun last is drawn (`time` from the renderer); `file` where it was written.
     pub fn end(&mut self, core: &Core, time: &FrameTime) -> &mut FrameRecord {
         let t0 = self.frame_t0.take().expect("a frame was begun");

@@ -252,6 +252,9 @@ impl App {
         if self.fly {
             line.push_str(" | fly");
         }
+        if let Some(fl) = &self.flight {
+            line.push_str(&fl.status(&st.core));
+        }
         if let Some(n) = &self.note {
             line = format!("{line} | {n}");
         }
@@ -305,6 +308,9 @@ impl App {
         let st = self.state.as_mut().expect("running");
         let mut shot = Composite::new(&st.core.gpu, COLOUR_FORMAT, st.composite.scale)?;
         let mut line = st.core.status_line(st.last.as_ref());
+        if let Some(fl) = &self.flight {
+            line.push_str(&fl.status(&st.core));
+        }
         if let Some(n) = &self.note {
             line = format!("{line} | {n}");
         }
