@@ -38,9 +38,9 @@ use crate::stream::Loader;
 /// The flight's flags (flattened into [`Args`]).
 #[derive(Clone, Debug, Default, clap::Args)]
 pub struct FlightArgs {
-    /// Fly a camera path: a CSV with the header lat_deg,lon_deg,height_m[,heading_deg,
-    /// pitch_deg] (degrees, metres above the reference sphere), one frame per row; tiles are
-    /// loaded in the background. Headless with --record DIR (frames and report), or in the
+    /// Fly a camera path, one frame per row, tiles loaded in the background: a CSV whose
+    /// header is lat_deg,lon_deg,height_m[,heading_deg,pitch_deg] (degrees, metres above
+    /// the reference sphere). Headless with --record DIR (frames and report), or in the
     /// window.
     #[arg(long)]
     pub path: Option<PathBuf>,

@@ -259,12 +259,13 @@ impl Scene {
         self.loader = Some(loader);
         r?;
         let draw = self.draw_list(ids);
-        for id in &draw {
+        // Chosen tiles covered by a stand-in count as used too: kept for the next frames.
+        for id in ids.iter().chain(&draw) {
             if let Some(t) = self.tiles.get_mut(id) {
                 t.last_used = self.frame;
             }
         }
-        self.let_go(draw.len());
+        self.let_go(ids.len() + self.last_load.stand_ins);
         Ok(draw.iter().map(|id| &self.tiles[id]).collect())
     }
 
