@@ -304,43 +304,11 @@ impl Scene {
         Ok(())
     }
 
-    /// The tiles to draw for the chosen `ids` (see [`Scene::streamed`]), and the frame's
-    /// counts of drawn tiles and stand-ins.
+    /// The tiles to draw for the chosen `ids` ([`draw_list`] over the kept tiles), and the
+    /// frame's counts of drawn tiles and stand-ins.
     fn draw_list(&mut self, ids: &[TileId]) -> Vec<TileId> {
-        let mut stand: BTreeSet<TileId> = BTreeSet::new();
-        for id in ids.iter().filter(|id| !self.tiles.contains_key(id)) {
-            let mut a = id.parent();
-            while let Some(p) = a {
-                if self.tiles.contains_key(&p) {
-                    stand.insert(p);
-                    break;
-                }
-                a = p.parent();
-            }
-        }
-        let under_stand_in = |id: &TileId, stand: &BTreeSet<TileId>| {
-            let mut a = id.parent();
-            while let Some(p) = a {
-                if stand.contains(&p) {
-                    return true;
-                }
-                a = p.parent();
-            }
-            false
-        };
-        let outer: Vec<TileId> = stand
-            .iter()
-            .copied()
-            .filter(|s| !under_stand_in(s, &stand))
-            .collect();
-        let stand: BTreeSet<TileId> = outer.into_iter().collect();
-        let mut draw: Vec<TileId> = ids
-            .iter()
-            .copied()
-            .filter(|id| self.tiles.contains_key(id) && !under_stand_in(id, &stand))
-            .collect();
-        draw.extend(stand.iter().copied());
-        self.last_load.stand_ins = stand.len();
+        let (draw, stand_ins) = draw_list(ids, |id| self.tiles.contains_key(&id));
+        self.last_load.stand_ins = stand_ins;
         self.last_load.drawn = draw.len();
         draw
     }
@@ -370,6 +338,29 @@ impl Scene {
         t.last_used = self.frame;
         Ok(t)
     }
+}
+
+/// What a streamed frame draws for its chosen tiles `ids` when only those `ready` are on the
+/// GPU: each missing tile's nearest ready ancestor stands in for it; a stand-in under another
+/// stand-in is left out (the outer one covers it), and so are the ready chosen tiles under a
+/// stand-in (drawing both would put two surfaces in one place). The ready chosen tiles, then
+/// the stand-ins (sorted), and how many stand-ins.
+pub fn draw_list(ids: &[TileId], ready: impl Fn(TileId) -> bool) -> (Vec<TileId>, usize) {
+    let ancestors = |id: TileId| std::iter::successors(id.parent(), |p| p.parent());
+    let stand: BTreeSet<TileId> = ids
+        .iter()
+        .filter(|id| !ready(**id))
+        .filter_map(|id| ancestors(*id).find(|p| ready(*p)))
+        .collect();
+    let under = |id: TileId| ancestors(id).any(|p| stand.contains(&p));
+    let outer: Vec<TileId> = stand.iter().copied().filter(|s| !under(*s)).collect();
+    let mut draw: Vec<TileId> = ids
+        .iter()
+        .copied()
+        .filter(|id| ready(*id) && !under(*id))
+        .collect();
+    draw.extend(outer.iter().copied());
+    (draw, outer.len())
 }
 
 impl TileMaker {
@@ -496,4 +487,40 @@ fn albedo(store: &Store, id: TileId) -> Result<Option<Vec<u8>>> {
         .to_image()
         .context("the store returned an albedo tile of the wrong length")?;
     Ok(Some(img.to_rgba8().into_raw()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use penumbra::cube::Face;
+
+    fn t(level: u8, x: u32, y: u32) -> TileId {
+        TileId {
+            level,
+            face: Face::Nz,
+            x,
+            y,
+        }
+    }
+
+    #[test]
+    fn missing_tiles_are_drawn_by_their_nearest_ready_ancestor() {
+        // Chosen: the four children of L2 (0,0) and one grandchild of L2 (1,0).
+        let ids = [t(3, 0, 0), t(3, 1, 0), t(3, 0, 1), t(3, 1, 1), t(4, 4, 0)];
+        // Everything ready: drawn as chosen, no stand-in.
+        assert_eq!(draw_list(&ids, |_| true), (ids.to_vec(), 0));
+        // Two children missing, their parent ready: the parent alone covers all four.
+        let ready = [t(3, 0, 0), t(3, 1, 1), t(2, 0, 0), t(4, 4, 0), t(1, 0, 0)];
+        let (draw, n) = draw_list(&ids, |id| ready.contains(&id));
+        assert_eq!((draw, n), (vec![t(4, 4, 0), t(2, 0, 0)], 1));
+        // The grandchild missing too: its nearest ready ancestor is L1 (0,0), which covers
+        // L2 (0,0) as well, so L1 alone is drawn.
+        let ready = [t(3, 0, 0), t(2, 0, 0), t(1, 0, 0)];
+        let (draw, n) = draw_list(&ids, |id| ready.contains(&id));
+        assert_eq!((draw, n), (vec![t(1, 0, 0)], 1));
+        // Nothing ready above a missing tile: a gap there, the rest drawn.
+        let ready = [t(3, 0, 0)];
+        let (draw, n) = draw_list(&ids, |id| ready.contains(&id));
+        assert_eq!((draw, n), (vec![t(3, 0, 0)], 0));
+    }
 }
