@@ -22,7 +22,7 @@ its heading and pitch.
 use std::collections::{BTreeSet, BinaryHeap, HashSet};
 
 use crate::camera::Camera;
-use crate::cube::{add, dot, norm, scale, sub, Face, Vec3};
+use crate::cube::{self, add, dot, norm, scale, sub, Face, Vec3};
 use crate::layout::{Layout, TileId};
 
 /// How the walk chooses.
@@ -263,13 +263,28 @@ impl Quadtree {
         }
         let n = self.layout.tile_size as f64;
         let top = self.radius_m + self.terrain_m.1;
+        let visible = |d: Vec3| {
+            let vt = sub(scale(d, top), eye);
+            let vt_dot_vc = -dot(vt, eye);
+            !(vt_dot_vc > vh2 && vt_dot_vc * vt_dot_vc / dot(vt, vt) > vh2)
+        };
+        // The tile's point nearest the eye's nadir first: a tile much larger than the eye's
+        // horizon (a low eye over a coarse tile) can have all nine samples below it while
+        // the ground under the eye is in view.
+        if let Some((u, v)) = cube::dir_to_uv_on(id.face, eye) {
+            let proj = self.layout.projection;
+            let (s, t) = (proj.u_to_s(u), proj.u_to_s(v));
+            let side = self.layout.face_pixels(id.level) as f64;
+            let i = (s + 1.0) / 2.0 * side - 0.5 - id.x as f64 * n;
+            let j = (1.0 - t) / 2.0 * side - 0.5 - id.y as f64 * n;
+            let (i, j) = (i.clamp(-0.5, n - 0.5), j.clamp(-0.5, n - 0.5));
+            if visible(self.dir_at(id, i, j)) {
+                return false;
+            }
+        }
         for a in [0.0, 0.5, 1.0] {
             for c in [0.0, 0.5, 1.0] {
-                let p = scale(self.dir_at(id, a * n - 0.5, c * n - 0.5), top);
-                let vt = sub(p, eye);
-                let vt_dot_vc = -dot(vt, eye);
-                let hidden = vt_dot_vc > vh2 && vt_dot_vc * vt_dot_vc / dot(vt, vt) > vh2;
-                if !hidden {
+                if visible(self.dir_at(id, a * n - 0.5, c * n - 0.5)) {
                     return false;
                 }
             }
@@ -421,6 +436,31 @@ mod tests {
         // No face the eye cannot see (the north face is behind the body).
         assert!(far.iter().all(|c| c.tile.face != Face::Pz));
         assert!(near.len() <= 200 && far.len() <= 200);
+    }
+
+    #[test]
+    fn a_low_eye_far_from_every_sample_of_a_coarse_tile_still_sees_the_ground_under_it() {
+        // 20° from the south face's centre, 1 km above the lowest terrain: the horizon is
+        // ~150 km away, every corner, edge middle and centre of the level-0 face farther.
+        let q = tree(8);
+        let p = LodParams {
+            max_texel_px: 1.0,
+            max_tiles: 200,
+            min_level: 0,
+            max_level: 7,
+        };
+        for (pitch, heading) in [(-90.0, 0.0), (-20.0, 137.0)] {
+            let v = View {
+                camera: Camera::at(1_737_400.0, -70.0, 20.0, 0.0, heading, pitch, 45.0),
+                width: 256,
+                height: 256,
+                near: 1.0,
+                all_directions: false,
+            };
+            let s = q.select(&v, &p);
+            assert!(!s.is_empty(), "pitch {pitch}: nothing chosen");
+            assert_eq!(s.iter().map(|c| c.tile.level).max(), Some(7));
+        }
     }
 
     #[test]

@@ -612,8 +612,11 @@ impl PathPoint {
 /// name the line (from 1) and the column: a missing or wrong header, a wrong field count, a
 /// value that is not a finite number or out of range (latitude [−90, 90], longitude
 /// [−360, 360], height [−20 km, 1e9 m]), no rows, more than 1,000,000 rows.
+/// [`parse_path_poses`] reads the optional view columns as well.
 pub fn parse_path_csv(text: &str) -> Result<Vec<PathPoint>> {
-    parse_path(text).map_err(|m| Error::usage(format!("camera path: {m}")))
+    parse_path(text)
+        .map(points_of)
+        .map_err(|m| Error::usage(format!("camera path: {m}")))
 }
 
 /// [`parse_path_csv`] of the file at `path` (a regular file of at most 256 MiB, UTF-8).
@@ -625,10 +628,57 @@ pub fn read_path_csv(path: &Path) -> Result<Vec<PathPoint>> {
             format!("not UTF-8 text ({e}): a camera path is a CSV text file"),
         )
     })?;
+    parse_path(text)
+        .map(points_of)
+        .map_err(|m| Error::invalid(path, m))
+}
+
+/// One row of a camera path with its optional view columns, for a viewer that flies it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PathPose {
+    pub point: PathPoint,
+    /// The `heading_deg` column (compass degrees, [−360, 360]), where the header has it and
+    /// the row's field is not empty.
+    pub heading_deg: Option<f64>,
+    /// The `pitch_deg` column (degrees above the horizontal, [−90, 90]; −90 looks straight
+    /// down), likewise.
+    pub pitch_deg: Option<f64>,
+    /// The row's line in the text (from 1), for errors found later (a point inside the body).
+    pub line: usize,
+}
+
+/// The optional view columns of a camera path that [`parse_path_poses`] reads, and their
+/// ranges.
+pub const PATH_VIEW_COLUMNS: [(&str, (f64, f64)); 2] = [
+    ("heading_deg", (-360.0, 360.0)),
+    ("pitch_deg", (-90.0, 90.0)),
+];
+
+/// [`parse_path_csv`] with the view columns: where the header has `heading_deg` and/or
+/// `pitch_deg` (anywhere after the first three columns), each row's value is read (an empty
+/// field means "not given"; anything else must be a finite number in range, or the error
+/// names the line and the column), and every row keeps its line number.
+pub fn parse_path_poses(text: &str) -> Result<Vec<PathPose>> {
+    parse_path(text).map_err(|m| Error::usage(format!("camera path: {m}")))
+}
+
+/// [`parse_path_poses`] of the file at `path` (as [`read_path_csv`] reads it).
+pub fn read_path_poses(path: &Path) -> Result<Vec<PathPose>> {
+    let bytes = crate::fsio::read_capped(path, MAX_PATH_FILE_BYTES, "a camera path CSV")?;
+    let text = std::str::from_utf8(&bytes).map_err(|e| {
+        Error::invalid(
+            path,
+            format!("not UTF-8 text ({e}): a camera path is a CSV text file"),
+        )
+    })?;
     parse_path(text).map_err(|m| Error::invalid(path, m))
 }
 
-fn parse_path(text: &str) -> std::result::Result<Vec<PathPoint>, String> {
+fn points_of(rows: Vec<PathPose>) -> Vec<PathPoint> {
+    rows.into_iter().map(|r| r.point).collect()
+}
+
+fn parse_path(text: &str) -> std::result::Result<Vec<PathPose>, String> {
     let mut header: Option<Vec<&str>> = None;
     let mut out = Vec::new();
     for (k, line) in text.split('\n').enumerate() {
@@ -687,7 +737,35 @@ fn parse_path(text: &str) -> std::result::Result<Vec<PathPoint>, String> {
         if let Some((col, msg)) = p.problem() {
             return Err(format!("line {ln}, column {col}: {msg}"));
         }
-        out.push(p);
+        let mut view = [None; 2];
+        for (slot, (name, (lo, hi))) in view.iter_mut().zip(PATH_VIEW_COLUMNS) {
+            let Some(i) = cols.iter().position(|c| *c == name) else {
+                continue;
+            };
+            if fields[i].is_empty() {
+                continue;
+            }
+            let x = fields[i].parse::<f64>().map_err(|_| {
+                format!("line {ln}, column {name}: '{}' is not a number", fields[i])
+            })?;
+            if !x.is_finite() {
+                return Err(format!(
+                    "line {ln}, column {name}: {x} is not a finite number"
+                ));
+            }
+            if !(lo..=hi).contains(&x) {
+                return Err(format!(
+                    "line {ln}, column {name}: {x} is outside [{lo}, {hi}]"
+                ));
+            }
+            *slot = Some(x);
+        }
+        out.push(PathPose {
+            point: p,
+            heading_deg: view[0],
+            pitch_deg: view[1],
+            line: ln,
+        });
     }
     if header.is_none() {
         return Err(format!(
@@ -1370,6 +1448,43 @@ mod tests {
         assert!(e.contains("path.csv") && e.contains("line 2"), "{e}");
         std::fs::write(&f, "lat_deg,lon_deg,height_m\n-89,0,100\n").unwrap();
         assert_eq!(read_path_csv(&f).unwrap().len(), 1);
+    }
+
+    #[test]
+    fn path_poses_read_the_view_columns_and_keep_line_numbers() {
+        let text = "lat_deg,lon_deg,height_m,time_s,pitch_deg,heading_deg\n\
+                    # first\n-89,0,100,0,-30,45\n\n-89.1,0,90,1,,\n";
+        let p = parse_path_poses(text).unwrap();
+        assert_eq!(p.len(), 2);
+        assert_eq!(
+            (p[0].line, p[0].heading_deg, p[0].pitch_deg),
+            (3, Some(45.0), Some(-30.0))
+        );
+        assert_eq!(
+            (p[1].line, p[1].heading_deg, p[1].pitch_deg),
+            (5, None, None)
+        );
+        assert_eq!(p[1].point.height_m, 90.0);
+        // The same rows as parse_path_csv reads.
+        let points: Vec<PathPoint> = p.iter().map(|r| r.point).collect();
+        assert_eq!(points, parse_path_csv(text).unwrap());
+        for (text, want) in [
+            (
+                "lat_deg,lon_deg,height_m,pitch_deg\n1,2,3,-91\n",
+                "line 2, column pitch_deg",
+            ),
+            (
+                "lat_deg,lon_deg,height_m,heading_deg\n1,2,3,inf\n",
+                "column heading_deg",
+            ),
+            (
+                "lat_deg,lon_deg,height_m,heading_deg\n1,2,3,x\n",
+                "'x' is not a number",
+            ),
+        ] {
+            let e = parse_path_poses(text).unwrap_err().to_string();
+            assert!(e.contains(want), "{text:?}: {e}");
+        }
     }
 
     fn view_of(max_level: u8) -> PathView {

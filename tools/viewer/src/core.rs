@@ -5,6 +5,7 @@ input and presentation; the headless mode adds the files and the validation.
 */
 
 use std::path::Path;
+use std::sync::Arc;
 
 use anyhow::{bail, Result};
 use penumbra::cube::{self, Vec3};
@@ -34,7 +35,8 @@ pub struct FrameInfo {
 /// The viewer's state.
 pub struct Core {
     pub gpu: Gpu,
-    pub shadows: Shadows,
+    /// Shared with the tile loaders when tiles stream ([`crate::stream`]).
+    pub shadows: Arc<Shadows>,
     pub renderer: Renderer,
     pub scene: Scene,
     pub camera: Camera,
@@ -214,7 +216,7 @@ impl Core {
                 sun.set_local(camera.target(mid), az, el);
             }
         }
-        let shadows = Shadows::new(&gpu);
+        let shadows = Arc::new(Shadows::new(&gpu));
         let renderer = Renderer::new(&gpu, &shadows, ts.layout.tile_size as usize)?;
         let scene = Scene::new(store, opts.method.clone(), sun, opts.args.max_margin_px);
         Ok(Core {

@@ -5,6 +5,9 @@
 use std::fmt;
 
 /// An adapter with its device and queue, ready for the renderer and the shadow shaders.
+/// Cloning shares them (wgpu's handles are reference-counted and usable from any thread: the
+/// tile loaders of [`crate::stream`] make textures on their own threads).
+#[derive(Clone)]
 pub struct Gpu {
     /// The instance the adapter came from (the window's surface is made from it).
     pub instance: wgpu::Instance,

@@ -9,12 +9,15 @@
 //!   and the sun by its sub-solar point, moved in azimuth/elevation at the view's target.
 //! - [`lod`]: which tiles to draw (screen-space error, frustum and horizon culling).
 //! - [`mesh`]: a tile's displaced grid relative to its centre, skirts, per-texel normals.
-//! - [`scene`]: the tiles on the GPU (mesh, normals, albedo, shadow data), made on first use.
+//! - [`scene`]: the tiles on the GPU (mesh, normals, albedo, shadow data), made on first use
+//!   or, when they stream, by background loaders ([`stream`]).
 //! - [`render`]: the terrain pass, drawing [`render::GpuTile`]s (what the scene makes) into
 //!   colour, lit-fraction and texel-id targets, GPU timestamps, readback.
 //! - [`core`]: what the window and the headless mode share: one frame.
 //! - [`headless`], [`validate`], [`output`]: off-screen frames, the GPU against the CPU,
 //!   files.
+//! - [`flight`]: `--path`, a camera path flown headless or in the window with streamed
+//!   tiles, and its frame-time report.
 //! - [`window`], [`overlay`], [`font`]: the winit window, its composite pass and status line.
 //! - [`gpu`]: the device (headless or for a window's surface).
 //! - [`shadow`]: the GPU twins of the CPU shadow methods (WGSL beside the code) and the
@@ -22,6 +25,7 @@
 
 pub mod camera;
 pub mod core;
+pub mod flight;
 pub mod font;
 pub mod gpu;
 pub mod headless;
@@ -33,5 +37,6 @@ pub mod overlay;
 pub mod render;
 pub mod scene;
 pub mod shadow;
+pub mod stream;
 pub mod validate;
 pub mod window;

@@ -111,6 +111,9 @@ pub struct Args {
     /// CPU threads for tile preparation and validation (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Flying a camera path (crate::flight).
+    #[command(flatten)]
+    pub flight: crate::flight::FlightArgs,
 }
 
 /// The camera as given.
@@ -260,8 +263,8 @@ impl Options {
             );
         }
         if args.headless {
-            if args.out.is_none() {
-                bail!("--headless needs --out FRAME.png");
+            if args.out.is_none() && args.flight.path.is_none() {
+                bail!("--headless needs --out FRAME.png (or --path PATH.csv to fly a path)");
             }
             if args.screenshot.is_some() {
                 bail!("--screenshot is for the window; headless frames go to --out");
@@ -272,7 +275,7 @@ impl Options {
                 (args.lit.is_some(), "--lit"),
                 (args.validate, "--validate"),
                 (args.diff.is_some(), "--diff"),
-                (args.json, "--json"),
+                (args.json && args.flight.path.is_none(), "--json"),
             ] {
                 if set {
                     bail!("{flag} is for --headless renders");
@@ -282,6 +285,7 @@ impl Options {
         if args.diff.is_some() && !args.validate {
             bail!("--diff needs --validate");
         }
+        crate::flight::check(&args)?;
         let frames = args.frames.unwrap_or(3);
         if !(1..=10_000).contains(&frames) {
             bail!("--frames {frames} is outside 1..=10000");

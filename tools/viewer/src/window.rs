@@ -8,6 +8,9 @@ Keys: arrows turn the sun in azimuth (←/→) and elevation (↑/↓) *at the v
 toggles orbit and fly; `W A S D` and `Q E` fly; `+`/`-` make the keys' steps larger or
 smaller; `Esc` quits. Mouse: drag to orbit the target (or to look around when flying), wheel to
 zoom. `--screenshot PNG --frames N` saves the N-th frame as the window shows it and exits.
+With `--path` the window flies a camera path ([`crate::flight`]), one row per frame with the
+tiles streamed, the keys live (the camera keys are overridden by the path), and closes at the
+path's end (saving `--screenshot` then), printing the flight's report.
 
 Vulkan first; where a surface cannot be made or no Vulkan adapter presents to it (a software
 X server without DRI3), the instance is made again for OpenGL with the window system's
@@ -28,6 +31,7 @@ use winit::window::{Window, WindowId};
 
 use crate::camera::norm;
 use crate::core::{level_range, Core};
+use crate::flight::Flight;
 use crate::gpu::Gpu;
 use crate::options::{self, Options};
 use crate::output;
@@ -48,6 +52,10 @@ pub fn run(opts: Options) -> Result<()> {
         output::check_parent(s, "--screenshot")?;
     }
     let store = crate::core::open_checked(&opts.args.dir, &opts.method)?;
+    let flight = match opts.args.flight.path {
+        Some(_) => Some(Flight::new(&opts, &store)?),
+        None => None,
+    };
     if !window_system_present() {
         bail!(
             "no window system: neither DISPLAY nor WAYLAND_DISPLAY is set. Run it in a desktop \
@@ -74,14 +82,20 @@ pub fn run(opts: Options) -> Result<()> {
         step: 1.0,
         fly: false,
         note: None,
+        flight,
     };
     event_loop
         .run_app(&mut app)
         .map_err(|e| anyhow!("the window's event loop failed: {e}"))?;
-    match app.error {
-        Some(e) => Err(e),
-        None => Ok(()),
+    if let Some(e) = app.error {
+        return Err(e);
     }
+    if let (Some(f), Some(st)) = (&app.flight, &app.state) {
+        let size = (st.targets.width, st.targets.height);
+        let report = f.report("window", &st.core, &app.opts, size);
+        crate::flight::emit(&report, app.opts.args.json, true)?;
+    }
+    Ok(())
 }
 
 /// The window and what draws into it.
@@ -110,6 +124,8 @@ struct App {
     fly: bool,
     /// A message shown in the status line until the next key.
     note: Option<String>,
+    /// The camera path being flown (`--path`).
+    flight: Option<Flight>,
 }
 
 /// Make the instance, the surface and the device, Vulkan first, then OpenGL.
@@ -191,7 +207,10 @@ impl App {
         let store = self.store.take().expect("started once");
         // Glyph pixels: 1:1 in a small window, doubled from 800 px across.
         let composite = Composite::new(&gpu, format, if config.width >= 800 { 2 } else { 1 })?;
-        let core = Core::new(gpu, store, &self.opts)?;
+        let mut core = Core::new(gpu, store, &self.opts)?;
+        if let Some(f) = &mut self.flight {
+            f.attach(&mut core, &self.opts);
+        }
         let targets = Targets::new(&core.gpu, config.width, config.height);
         eprintln!(
             "penumbra-view: {} ({:?}) into a {}×{} window",
@@ -221,11 +240,20 @@ impl App {
         let Some(st) = self.state.as_mut() else {
             return Ok(());
         };
+        if let Some(fl) = &mut self.flight {
+            if !fl.begin(&mut st.core) {
+                el.exit();
+                return Ok(());
+            }
+        }
         let f = st.core.render(&st.targets)?;
         st.last = Some(f.time);
         let mut line = st.core.status_line(st.last.as_ref());
         if self.fly {
             line.push_str(" | fly");
+        }
+        if let Some(fl) = &self.flight {
+            line.push_str(&fl.status(&st.core));
         }
         if let Some(n) = &self.note {
             line = format!("{line} | {n}");
@@ -250,6 +278,18 @@ impl App {
         st.window.pre_present_notify();
         st.core.gpu.queue.present(frame);
         self.frames += 1;
+        if let Some(fl) = &mut self.flight {
+            fl.end(&st.core, &f.time);
+            if fl.finished() {
+                if let Some(path) = self.opts.args.screenshot.as_deref().map(output::in_folder) {
+                    self.screenshot(&path)?;
+                }
+                el.exit();
+            } else {
+                st.window.request_redraw();
+            }
+            return Ok(());
+        }
         if let Some(path) = self.opts.args.screenshot.as_deref().map(output::in_folder) {
             if self.frames >= self.opts.frames {
                 self.screenshot(&path)?;
@@ -268,6 +308,9 @@ impl App {
         let st = self.state.as_mut().expect("running");
         let mut shot = Composite::new(&st.core.gpu, COLOUR_FORMAT, st.composite.scale)?;
         let mut line = st.core.status_line(st.last.as_ref());
+        if let Some(fl) = &self.flight {
+            line.push_str(&fl.status(&st.core));
+        }
         if let Some(n) = &self.note {
             line = format!("{line} | {n}");
         }

@@ -15,3 +15,5 @@ mod window;
 mod shadow_gpu;
 // A package made by `penumbra package` draws as the tileset it was made from.
 mod package;
+// A camera path flown headless and in the window: frames, report, bad paths.
+mod flight;

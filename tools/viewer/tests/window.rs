@@ -11,9 +11,9 @@ use std::time::{Duration, Instant};
 use crate::util::{gpu, read_png, scene, skip, stderr, tmp, view};
 
 /// An Xvfb server, killed when dropped.
-struct Xvfb {
+pub struct Xvfb {
     child: Child,
-    display: String,
+    pub display: String,
 }
 
 impl Drop for Xvfb {
@@ -24,7 +24,7 @@ impl Drop for Xvfb {
 }
 
 /// Start Xvfb on a free display number, or None (after a skip message) when it is missing.
-fn xvfb() -> Option<Xvfb> {
+pub fn xvfb() -> Option<Xvfb> {
     if Command::new("Xvfb")
         .arg("-help")
         .stderr(Stdio::null())
