@@ -750,7 +750,7 @@ impl<'a> Tracer<'a> {
                 // The candidates of this level, the one with the largest bound first.
                 let mut cands = [(f64::NEG_INFINITY, 0.0f64, 0.0f64); 4];
                 let mut nc = 0;
-                let mut hidden = false;
+                let mut hidden = f64::NEG_INFINITY;
                 let thr = best.max(floor);
                 let mut keep = |c: (f64, f64, f64)| {
                     if c.0 <= thr {
@@ -792,21 +792,21 @@ impl<'a> Tracer<'a> {
                         work.visits += 1;
                         let bound = self.max_slope(ray, s_in, s_out, hmax as f64);
                         // Refined: a texel whose lowest terrain already hides the disc's top
-                        // ends the search (the sun is hidden, as extrema-soft stops).
-                        if refine
-                            && bound >= hi
-                            && hmin > f32::NEG_INFINITY
-                            && self.max_slope(ray, s_in, s_out, hmin as f64) >= hi
-                        {
-                            hidden = true;
-                            return true;
+                        // ends the search with that terrain's slope (a horizon the terrain
+                        // surely reaches: the sun is hidden, as extrema-soft stops).
+                        if refine && bound >= hi && hmin > f32::NEG_INFINITY {
+                            let low = self.max_slope(ray, s_in, s_out, hmin as f64);
+                            if low >= hi {
+                                hidden = low;
+                                return true;
+                            }
                         }
                         keep((bound, s_in, s_out));
                         false
                     });
                 }
-                if hidden {
-                    return best.max(hi);
+                if hidden > f64::NEG_INFINITY {
+                    return best.max(hidden);
                 }
                 if nc == 0 {
                     // Nothing under this part of the ray can rise above what is known.
