@@ -1553,7 +1553,10 @@ fn dp_refines_the_texel_a_rim_beside_the_ray_hid() {
     // The reference's exact disc over the wall's horizon (which dips off the ray's azimuth)
     // differs from the prism model's ½ by 0.045.
     assert!((reference.lit - 0.5).abs() < 0.06, "{reference:?}");
-    assert!((dp.horizon_deg - es).abs() < 1e-6, "dp horizon {dp:?} vs {es}");
+    assert!(
+        (dp.horizon_deg - es).abs() < 1e-6,
+        "dp horizon {dp:?} vs {es}"
+    );
     assert!((dp.lit - 0.5).abs() < 1e-3, "{dp:?}");
     // The case is one the plain DP gets wrong (else the test shows nothing).
     assert!(jung.lit > 0.99 && jung.horizon_deg < es - 1.0, "{jung:?}");

@@ -681,17 +681,8 @@ impl<'a> Tracer<'a> {
             let m0 = (levels - 1).min(top);
             let len = (1u64 << m0) as f64 / major;
             let b = a + len;
-            best = best.max(self.dp_run(
-                ray,
-                a,
-                b.min(end),
-                m0,
-                dda,
-                refine,
-                best.max(lo),
-                hi,
-                work,
-            ));
+            best =
+                best.max(self.dp_run(ray, a, b.min(end), m0, dda, refine, best.max(lo), hi, work));
             a = b;
             if k > 4096 {
                 break;
