@@ -35,9 +35,10 @@ pub const NEAR_PX: f64 = 1.5;
 /// Largest N′ of one DP run, and most runs.
 pub const MAX_DP_LEVELS: usize = 16;
 pub const MAX_DP_RUNS: usize = 16;
-/// Most texels a refined DP run keeps waiting (a run of 16 levels leaves at most 2 + 3 per
-/// level).
-pub const DP_STACK: usize = 64;
+/// Most texels a refined DP run keeps waiting: along the path being searched, at most 3 from the
+/// run's first level (4 candidates kept) and 2 from each finer one (a straight line crosses at
+/// most three texels of a parent), 3 + 2 · 15 = 33 for 16 levels.
+pub const DP_STACK: usize = 40;
 /// Most uniform steps.
 pub const MAX_STEPS: usize = 1 << 20;
 
@@ -658,6 +659,8 @@ impl<'a> Tracer<'a> {
     ) -> f64 {
         let mut best = self.near(ray, x, y, at, work);
         let end = self.exit(ray, lo);
+        // The refined runs' texels waiting (one stack for the pixel's runs, made when needed).
+        let mut stack = None;
         // Plane pixels of ray per texel of the major axis.
         let major = ray.cx.abs().max(ray.cy.abs());
         let top = self.pyramid.len() - 1;
@@ -681,8 +684,22 @@ impl<'a> Tracer<'a> {
             let m0 = (levels - 1).min(top);
             let len = (1u64 << m0) as f64 / major;
             let b = a + len;
-            best =
-                best.max(self.dp_run(ray, a, b.min(end), m0, dda, refine, best.max(lo), hi, work));
+            let run = if refine {
+                self.dp_run(
+                    ray,
+                    a,
+                    b.min(end),
+                    m0,
+                    dda,
+                    best.max(lo),
+                    hi,
+                    stack.get_or_insert_with(|| [(0usize, 0.0f64, 0.0f64, 0.0f64); DP_STACK]),
+                    work,
+                )
+            } else {
+                self.dp_run_plain(ray, a, b.min(end), m0, dda, best.max(lo), work)
+            };
+            best = best.max(run);
             a = b;
             if k > 4096 {
                 break;
@@ -691,10 +708,70 @@ impl<'a> Tracer<'a> {
         best
     }
 
-    /// One run of Algorithm 1 over s ∈ [a, b] starting at level `m0`: returns the exact
-    /// horizon slope over the finest cell chosen (or −∞ when no texel could beat `floor`).
-    ///
-    /// With `refine`, the texels the descent passed over are not dropped: every candidate of
+    /// One run of Algorithm 1 over s ∈ [a, b] starting at level `m0` as Jung et al. publish
+    /// it (`dp-jung`): returns the exact horizon slope over the finest cell chosen (or −∞ when
+    /// no texel could beat `floor`).
+    #[allow(clippy::too_many_arguments)]
+    fn dp_run_plain(
+        &self,
+        ray: &Ray,
+        a: f64,
+        b: f64,
+        m0: usize,
+        dda: bool,
+        floor: f64,
+        work: &mut Work,
+    ) -> f64 {
+        let (mut sa, mut sb) = (a, b);
+        for m in (0..=m0).rev() {
+            // The candidate with the largest bound.
+            let mut cand = (floor, f64::NAN, f64::NAN);
+            if dda {
+                // Canonical DDA: the texels under two points of the interval only; the part of
+                // the ray inside the chosen one (not half of the interval, which may leave out
+                // the part of the texel where its terrain is) is searched at the next level.
+                let q = (1u64 << m) as f64;
+                let mid = 0.5 * (sa + sb);
+                for p in [0.5 * (sa + mid), 0.5 * (mid + sb)] {
+                    let (px, py) = (ray.x0 + p * ray.cx, ray.y0 + p * ray.cy);
+                    if !(px >= 0.0 && py >= 0.0) {
+                        continue;
+                    }
+                    // A point on the raster's far edge is in its last texel.
+                    let l = &self.pyramid.levels[m];
+                    let (tx, ty) = ((px / q) as i64, (py / q) as i64);
+                    let (tx, ty) = (tx.min(l.w as i64 - 1), ty.min(l.h as i64 - 1));
+                    let (hmax, _) = self.pyramid.get(m, tx, ty);
+                    work.visits += 1;
+                    let (s_in, s_out) = texel_span(ray, q, tx, ty, sa, sb, p);
+                    let bound = self.max_slope(ray, s_in, s_out, hmax as f64);
+                    if bound > cand.0 {
+                        cand = (bound, s_in, s_out);
+                    }
+                }
+            } else {
+                self.walk(ray, m, sa, sb, &mut |tx, ty, s_in, s_out| {
+                    let (hmax, _) = self.pyramid.get(m, tx, ty);
+                    work.visits += 1;
+                    let bound = self.max_slope(ray, s_in, s_out, hmax as f64);
+                    if bound > cand.0 {
+                        cand = (bound, s_in, s_out);
+                    }
+                    false
+                });
+            }
+            if cand.1.is_nan() {
+                // Nothing under this part of the ray can rise above what is already known.
+                return f64::NEG_INFINITY;
+            }
+            (sa, sb) = (cand.1, cand.2);
+        }
+        work.visits += 1;
+        ray.max_over(self.ctx, sa, sb, f64::NEG_INFINITY).0
+    }
+
+    /// One run of Algorithm 1 over s ∈ [a, b] starting at level `m0`, refined (`dp`): the
+    /// texels the descent passed over are not dropped: every candidate of
     /// every level whose bound beats `floor` is kept on a stack (at most [`DP_STACK`]; a fuller
     /// stack drops the weakest, as the plain DP would), and once the descent has reached its
     /// exact answer, those whose bound still beats the best found are descended into in turn
@@ -710,14 +787,13 @@ impl<'a> Tracer<'a> {
         b: f64,
         m0: usize,
         dda: bool,
-        refine: bool,
         floor: f64,
         hi: f64,
+        stack: &mut [(usize, f64, f64, f64); DP_STACK],
         work: &mut Work,
     ) -> f64 {
         // Pending texels: (level, s_in, s_out, bound); the root is the run's whole stretch at
         // level m0 + 1 (walked at m0).
-        let mut stack = [(0usize, 0.0f64, 0.0f64, 0.0f64); DP_STACK];
         stack[0] = (m0 + 1, a, b, f64::INFINITY);
         let mut depth = 1;
         let mut best = f64::NEG_INFINITY;
@@ -743,18 +819,19 @@ impl<'a> Tracer<'a> {
                 let mut nc = 0;
                 let mut hidden = f64::NEG_INFINITY;
                 let thr = best.max(floor);
+                // Sorted on insertion, the largest bound first, the first along the ray among
+                // equals; a fifth candidate drops the weakest.
                 let mut keep = |c: (f64, f64, f64)| {
-                    if c.0 <= thr {
+                    if c.0 <= thr || (nc == cands.len() && c.0 <= cands[nc - 1].0) {
                         return;
                     }
-                    if nc < cands.len() {
-                        cands[nc] = c;
-                        nc += 1;
-                    } else if let Some(w) = cands.iter_mut().min_by(|p, q| p.0.total_cmp(&q.0)) {
-                        if c.0 > w.0 {
-                            *w = c;
-                        }
+                    let mut k = nc.min(cands.len() - 1);
+                    while k > 0 && cands[k - 1].0 < c.0 {
+                        cands[k] = cands[k - 1];
+                        k -= 1;
                     }
+                    cands[k] = c;
+                    nc = (nc + 1).min(cands.len());
                 };
                 if dda {
                     // Canonical DDA: the texels under two points of the interval only; the part
@@ -782,10 +859,10 @@ impl<'a> Tracer<'a> {
                         let (hmax, hmin) = self.pyramid.get(m, tx, ty);
                         work.visits += 1;
                         let bound = self.max_slope(ray, s_in, s_out, hmax as f64);
-                        // Refined: a texel whose lowest terrain already hides the disc's top
+                        // A texel whose lowest terrain already hides the disc's top
                         // ends the search with that terrain's slope (a horizon the terrain
                         // surely reaches: the sun is hidden, as extrema-soft stops).
-                        if refine && bound >= hi && hmin > f32::NEG_INFINITY {
+                        if bound >= hi && hmin > f32::NEG_INFINITY {
                             let low = self.max_slope(ray, s_in, s_out, hmin as f64);
                             if low >= hi {
                                 hidden = low;
@@ -803,17 +880,12 @@ impl<'a> Tracer<'a> {
                     // Nothing under this part of the ray can rise above what is known.
                     break;
                 }
-                // Stable: among equal bounds the first along the ray, as the plain DP.
-                let cands = &mut cands[..nc];
-                cands.sort_by(|p, q| q.0.total_cmp(&p.0));
-                if refine {
-                    // The runners-up wait on the stack, the weakest deepest; a full stack drops
-                    // the weakest.
-                    for c in cands[1..].iter().rev() {
-                        if depth < DP_STACK {
-                            stack[depth] = (m, c.1, c.2, c.0);
-                            depth += 1;
-                        }
+                // The runners-up wait on the stack, the weakest deepest; a full stack drops the
+                // weakest.
+                for c in cands[1..nc].iter().rev() {
+                    if depth < DP_STACK {
+                        stack[depth] = (m, c.1, c.2, c.0);
+                        depth += 1;
                     }
                 }
                 (sa, sb) = (cands[0].1, cands[0].2);
@@ -822,7 +894,7 @@ impl<'a> Tracer<'a> {
                     best = best.max(ray.max_over(self.ctx, sa, sb, f64::NEG_INFINITY).0);
                 }
             }
-            if !refine || best >= hi {
+            if best >= hi {
                 break;
             }
         }

@@ -536,11 +536,11 @@ fn sh_uniform(ray: ShRay, steps: i32, lo: f32) -> f32 {
 }
 
 // One run of Jung et al.'s Algorithm 1 over s in [a, b] from level m0, refined as the CPU's
-// dp_run: the runners-up of every level wait on a stack (the weakest deepest; a full stack drops
-// them) and, once the descent has searched its cell exactly, those whose bound still beats the
+// dp_run: the runners-up of every level wait on a stack (the weakest deepest; a full stack,
+// which the 3-texel rule never fills, drops them) and, once the descent has searched its cell exactly, those whose bound still beats the
 // best found are descended into in turn, until none is left or the best reaches hi (the disc's
 // top); a texel whose lowest terrain reaches hi ends the search with that terrain's slope.
-const SH_DP_STACK: i32 = 64;
+const SH_DP_STACK: i32 = 40;
 
 fn sh_dp_run(ray: ShRay, a: f32, b: f32, m0: i32, floor_: f32, hi: f32) -> f32 {
     var st_m: array<i32, SH_DP_STACK>;
