@@ -14,7 +14,10 @@
 //!   parent, the one that could rise highest kept; the chosen finest cell is searched exactly;
 //!   runs are concatenated ({5,5,5}, {5,5,5,3}, or `auto`: each run as long as the distance
 //!   already covered, until the ray leaves the terrain volume). `dda` samples two points per
-//!   level instead (the canonical DDA of their Fig. 4a, which misses corner texels);
+//!   level instead (the canonical DDA of their Fig. 4a, which misses corner texels). The texels
+//!   the descent passed over are refined where their bound still beats what it found (the
+//!   penumbra refinement: the plain DP misses the horizon where a texel beside the ray holds the
+//!   higher maximum); [`Method::JungDp`] is the plain DP as published;
 //! - [`Method::Extrema`]: Timokhin & Mikhaylyuk's min/max traversal (hard shadow): texels the
 //!   ray passes above are skipped, a texel whose minimum already reaches the ray ends the walk
 //!   as shadowed, the rest are refined down to exact cells.
