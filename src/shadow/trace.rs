@@ -688,17 +688,11 @@ impl<'a> Tracer<'a> {
             let len = (1u64 << m0) as f64 / major;
             let b = a + len;
             let run = if refine {
-                self.dp_run(
-                    ray,
-                    a,
-                    b.min(end),
-                    m0,
-                    dda,
-                    best.max(lo),
-                    hi,
-                    stack.get_or_insert_with(|| [(0usize, 0.0f64, 0.0f64, 0.0f64); DP_STACK]),
-                    work,
-                )
+                // Lazily: an eager `get_or_insert` would build the 1.3 KB array on every run.
+                #[allow(clippy::unnecessary_lazy_evaluations)]
+                let stack =
+                    stack.get_or_insert_with(|| [(0usize, 0.0f64, 0.0f64, 0.0f64); DP_STACK]);
+                self.dp_run(ray, a, b.min(end), m0, dda, best.max(lo), hi, stack, work)
             } else {
                 self.dp_run_plain(ray, a, b.min(end), m0, dda, best.max(lo), work)
             };
