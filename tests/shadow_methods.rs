@@ -1494,3 +1494,133 @@ fn crater_block_against_the_reference() {
         assert_block(&c, &format!("crater block, sun at {el}°"));
     }
 }
+
+/// Issue 40, point 4: Jung et al.'s DP keeps one texel per level, so where a texel beside the
+/// ray holds the higher maximum it follows that texel and misses the terrain on the ray. Here a
+/// 300 m spike stands one row beside a ray along +U (the ray runs exactly on its row's edge, so
+/// it adds nothing on the ray) in the level-3 texel after the one holding a 30 m wall across
+/// the ray, both in DP's second run: the plain DP (`dp-jung auto`) chooses the side spike's
+/// texel and sees the sun whole; `dp auto` refines the texel it passed over and finds the
+/// wall's exact elevation, as the reference does, with the sun's centre on it (lit ½).
+#[test]
+fn dp_refines_the_texel_a_rim_beside_the_ray_hid() {
+    let s = face_pixels(MOON_R, 20.0);
+    let (w, h) = (64, 32);
+    let (x0, y0) = (8usize, 16usize);
+    let ctx = build(
+        Face::Px,
+        MOON_R,
+        s,
+        origin_at(s, -0.03, 0.05, 32, 16),
+        w,
+        h,
+        |x, y| match (x, y) {
+            (36, 4..=28) => 30.0,
+            (42, 17) => 300.0,
+            _ => 0.0,
+        },
+    );
+    let tr = Tracer::new(&ctx, 0.0);
+    let es = elevation_to(&ctx, x0, y0, 36.0, 16.0, 30.0);
+    let sun = sun_toward(&tr, x0, y0, 0.0, es, SUN_R);
+    let mut work = Work::default();
+    let reference = tr.trace(x0, y0, &sun, &Method::Reference, &mut work);
+    let dp = tr.trace(
+        x0,
+        y0,
+        &sun,
+        &Method::Dp {
+            runs: Runs::Auto,
+            dda: false,
+        },
+        &mut work,
+    );
+    let jung = tr.trace(
+        x0,
+        y0,
+        &sun,
+        &Method::JungDp {
+            runs: Runs::Auto,
+            dda: false,
+        },
+        &mut work,
+    );
+    println!(
+        "wall at {es:.4}°: reference lit {:.4} (horizon {:.4}°), dp auto {:.4} ({:.4}°), \
+         dp-jung auto {:.4} ({:.4}°)",
+        reference.lit, reference.horizon_deg, dp.lit, dp.horizon_deg, jung.lit, jung.horizon_deg
+    );
+    // The reference's exact disc over the wall's horizon (which dips off the ray's azimuth)
+    // differs from the prism model's ½ by 0.045.
+    assert!((reference.lit - 0.5).abs() < 0.06, "{reference:?}");
+    assert!(
+        (dp.horizon_deg - es).abs() < 1e-6,
+        "dp horizon {dp:?} vs {es}"
+    );
+    assert!((dp.lit - 0.5).abs() < 1e-3, "{dp:?}");
+    // The case is one the plain DP gets wrong (else the test shows nothing).
+    assert!(jung.lit > 0.99 && jung.horizon_deg < es - 1.0, "{jung:?}");
+}
+
+/// The penumbra of the crater (suns within 3° of each point's exact horizon, the shadow
+/// bench's criterion), over the suns of `crater_block_against_the_reference` and more
+/// elevations near the rim's: the refined `dp auto` at most half the plain DP's mean |error| and
+/// no worse than uniform 100 (issue 40's acceptance, here on an analytic crater).
+#[test]
+fn dp_in_the_crater_penumbra() {
+    let s = face_pixels(MOON_R, 20.0);
+    let n = 160;
+    let c0 = (n / 2) as f64;
+    let ctx = build(
+        Face::Px,
+        MOON_R,
+        s,
+        origin_at(s, 0.2, -0.1, n / 2, n / 2),
+        n,
+        n,
+        |x, y| crater(x as f64, y as f64, c0, c0, 16.0, 150.0, 40.0),
+    );
+    let tr = Tracer::new(&ctx, 0.0);
+    let f = frame(&ctx, n / 2, n / 2);
+    let pts = block(n / 2 - 24, n / 2 - 24, 48, 2);
+    let ms = [
+        Method::Dp {
+            runs: Runs::Auto,
+            dda: false,
+        },
+        Method::JungDp {
+            runs: Runs::Auto,
+            dda: false,
+        },
+        Method::Uniform { steps: 100 },
+    ];
+    let (mut err, mut count) = ([0.0f64; 3], 0usize);
+    let mut work = Work::default();
+    for el in [1.0, 3.0, 5.0, 8.0, 12.0, 15.0] {
+        for k in 0..8 {
+            let sun = Sun {
+                dir: f.direction(45.0 * k as f64 + 7.0, el),
+                radius_deg: SUN_R,
+            };
+            for &(x, y) in &pts {
+                let (e, hz) = tr.band_horizon(x, y, &sun, 3.0);
+                if (e - hz).abs() > 3.0 {
+                    continue;
+                }
+                count += 1;
+                let r = tr.lit(x, y, &sun, &Method::Reference, &mut work);
+                for (m, e) in ms.iter().zip(err.iter_mut()) {
+                    *e += (tr.lit(x, y, &sun, m, &mut work) - r).abs();
+                }
+            }
+        }
+    }
+    let mean: Vec<f64> = err.iter().map(|e| e / count as f64).collect();
+    println!(
+        "crater penumbra, {count} pairs: dp auto {:.4}, dp-jung auto {:.4}, uniform 100 {:.4}",
+        mean[0], mean[1], mean[2]
+    );
+    assert!(count >= 200, "{count} penumbral pairs");
+    assert!(mean[0] <= 0.5 * mean[1], "{mean:?}");
+    assert!(mean[0] <= mean[2], "{mean:?}");
+}

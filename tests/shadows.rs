@@ -143,6 +143,7 @@ fn a_tile_and_a_box_render_with_every_method_the_same_at_any_thread_count() {
         "uniform",
         "dp",
         "dp-dda",
+        "dp-jung",
         "extrema",
         "smap",
         "horizon",

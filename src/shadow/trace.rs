@@ -14,7 +14,10 @@
 //!   parent, the one that could rise highest kept; the chosen finest cell is searched exactly;
 //!   runs are concatenated ({5,5,5}, {5,5,5,3}, or `auto`: each run as long as the distance
 //!   already covered, until the ray leaves the terrain volume). `dda` samples two points per
-//!   level instead (the canonical DDA of their Fig. 4a, which misses corner texels);
+//!   level instead (the canonical DDA of their Fig. 4a, which misses corner texels). The texels
+//!   the descent passed over are refined where their bound still beats what it found (the
+//!   penumbra refinement: the plain DP misses the horizon where a texel beside the ray holds the
+//!   higher maximum); [`Method::JungDp`] is the plain DP as published;
 //! - [`Method::Extrema`]: Timokhin & Mikhaylyuk's min/max traversal (hard shadow): texels the
 //!   ray passes above are skipped, a texel whose minimum already reaches the ray ends the walk
 //!   as shadowed, the rest are refined down to exact cells.
@@ -35,6 +38,10 @@ pub const NEAR_PX: f64 = 1.5;
 /// Largest N′ of one DP run, and most runs.
 pub const MAX_DP_LEVELS: usize = 16;
 pub const MAX_DP_RUNS: usize = 16;
+/// Most texels a refined DP run keeps waiting: along the path being searched, at most 3 from the
+/// run's first level (4 candidates kept) and 2 from each finer one (a straight line crosses at
+/// most three texels of a parent), 3 + 2 · 15 = 33 for 16 levels.
+pub const DP_STACK: usize = 40;
 /// Most uniform steps.
 pub const MAX_STEPS: usize = 1 << 20;
 
@@ -94,6 +101,12 @@ pub enum Method {
         runs: Runs,
         dda: bool,
     },
+    /// Jung et al.'s DP as published: one texel kept per level, no refinement (what `Dp` was
+    /// before the penumbra refinement; kept to compare with the paper's method).
+    JungDp {
+        runs: Runs,
+        dda: bool,
+    },
     Extrema,
     /// The min/max traversal turned into a soft shadow: the exact horizon in the sun's azimuth
     /// within the disc's band (texels that cannot rise above the best found or the disc's
@@ -114,6 +127,8 @@ impl Method {
             Method::Uniform { steps } => format!("uniform {steps}"),
             Method::Dp { runs, dda: false } => format!("dp {runs}"),
             Method::Dp { runs, dda: true } => format!("dp-dda {runs}"),
+            Method::JungDp { runs, dda: false } => format!("dp-jung {runs}"),
+            Method::JungDp { runs, dda: true } => format!("dp-dda-jung {runs}"),
             Method::Extrema => "extrema".into(),
             Method::ExtremaSoft => "extrema-soft".into(),
         }
@@ -356,7 +371,12 @@ impl<'a> Tracer<'a> {
             }
             Method::Dp { runs, dda } => {
                 let ray = ray_toward(self.ctx, x, y, at.phi);
-                let a = self.dp(&ray, x, y, &at, runs, *dda, lo, hi, work);
+                let a = self.dp(&ray, x, y, &at, runs, *dda, true, lo, hi, work);
+                done(occlusion(a, floor, el, r), a)
+            }
+            Method::JungDp { runs, dda } => {
+                let ray = ray_toward(self.ctx, x, y, at.phi);
+                let a = self.dp(&ray, x, y, &at, runs, *dda, false, lo, hi, work);
                 done(occlusion(a, floor, el, r), a)
             }
             Method::ExtremaSoft => {
@@ -365,6 +385,34 @@ impl<'a> Tracer<'a> {
                 done(occlusion(a, floor, el, r), a)
             }
         }
+    }
+
+    /// The sun's centre elevation at raster pixel (x, y) and the exact (floored) horizon in its
+    /// azimuth, both in degrees, where that horizon lies within `band_deg` of the centre: the
+    /// search stops outside the band, so a horizon beyond it reads somewhere beyond it on the
+    /// same side. NaN over no data. The shadow bench's penumbra criterion
+    /// (|elevation − horizon| ≤ 3°) is decided by it exactly.
+    pub fn band_horizon(&self, x: usize, y: usize, sun: &Sun, band_deg: f64) -> (f64, f64) {
+        let h0 = self.ctx.at(x as i64, y as i64);
+        if h0.is_nan() {
+            return (f64::NAN, f64::NAN);
+        }
+        let at = self.sun_at(x, y, sun);
+        let floor =
+            crate::fourier::stage::floor_deg(self.ctx.radius_m, self.terrain_min_m, h0 as f64);
+        let el = at.elevation_deg;
+        let ray = ray_toward(self.ctx, x, y, at.phi);
+        let mut work = Work::default();
+        let a = self.exact(
+            &ray,
+            x,
+            y,
+            &at,
+            tan_deg(el - band_deg),
+            tan_deg(el + band_deg),
+            &mut work,
+        );
+        (el, degrees(a, floor))
     }
 
     /// Distance (plane pixels) at which the ray leaves the raster.
@@ -607,12 +655,15 @@ impl<'a> Tracer<'a> {
         at: &SunAt,
         runs: &Runs,
         dda: bool,
+        refine: bool,
         lo: f64,
         hi: f64,
         work: &mut Work,
     ) -> f64 {
         let mut best = self.near(ray, x, y, at, work);
         let end = self.exit(ray, lo);
+        // The refined runs' texels waiting (one stack for the pixel's runs, made when needed).
+        let mut stack = None;
         // Plane pixels of ray per texel of the major axis.
         let major = ray.cx.abs().max(ray.cy.abs());
         let top = self.pyramid.len() - 1;
@@ -636,7 +687,16 @@ impl<'a> Tracer<'a> {
             let m0 = (levels - 1).min(top);
             let len = (1u64 << m0) as f64 / major;
             let b = a + len;
-            best = best.max(self.dp_run(ray, a, b.min(end), m0, dda, best.max(lo), work));
+            let run = if refine {
+                // Lazily: an eager `get_or_insert` would build the 1.3 KB array on every run.
+                #[allow(clippy::unnecessary_lazy_evaluations)]
+                let stack =
+                    stack.get_or_insert_with(|| [(0usize, 0.0f64, 0.0f64, 0.0f64); DP_STACK]);
+                self.dp_run(ray, a, b.min(end), m0, dda, best.max(lo), hi, stack, work)
+            } else {
+                self.dp_run_plain(ray, a, b.min(end), m0, dda, best.max(lo), work)
+            };
+            best = best.max(run);
             a = b;
             if k > 4096 {
                 break;
@@ -645,10 +705,11 @@ impl<'a> Tracer<'a> {
         best
     }
 
-    /// One run of Algorithm 1 over s ∈ [a, b] starting at level `m0`: returns the exact
-    /// horizon slope over the finest cell chosen (or −∞ when no texel could beat `floor`).
+    /// One run of Algorithm 1 over s ∈ [a, b] starting at level `m0` as Jung et al. publish
+    /// it (`dp-jung`): returns the exact horizon slope over the finest cell chosen (or −∞ when
+    /// no texel could beat `floor`).
     #[allow(clippy::too_many_arguments)]
-    fn dp_run(
+    fn dp_run_plain(
         &self,
         ray: &Ray,
         a: f64,
@@ -704,6 +765,137 @@ impl<'a> Tracer<'a> {
         }
         work.visits += 1;
         ray.max_over(self.ctx, sa, sb, f64::NEG_INFINITY).0
+    }
+
+    /// One run of Algorithm 1 over s ∈ [a, b] starting at level `m0`, refined (`dp`): the
+    /// texels the descent passed over are not dropped: every candidate of
+    /// every level whose bound beats `floor` is kept on a stack (at most [`DP_STACK`]; a fuller
+    /// stack drops the weakest, as the plain DP would), and once the descent has reached its
+    /// exact answer, those whose bound still beats the best found are descended into in turn
+    /// (the best bound of a level first), until none is left or the best reaches `hi` (the
+    /// disc's top: the sun is hidden whatever else lies on the ray). Jung et al.'s choice by
+    /// cost stays the order of the search, and only where it was wrong — a texel beside the
+    /// ray holding the higher maximum, the crater rims of the penumbra — does it cost more.
+    #[allow(clippy::too_many_arguments)]
+    fn dp_run(
+        &self,
+        ray: &Ray,
+        a: f64,
+        b: f64,
+        m0: usize,
+        dda: bool,
+        floor: f64,
+        hi: f64,
+        stack: &mut [(usize, f64, f64, f64); DP_STACK],
+        work: &mut Work,
+    ) -> f64 {
+        // Pending texels: (level, s_in, s_out, bound); the root is the run's whole stretch at
+        // level m0 + 1 (walked at m0).
+        stack[0] = (m0 + 1, a, b, f64::INFINITY);
+        let mut depth = 1;
+        let mut best = f64::NEG_INFINITY;
+        while depth > 0 {
+            depth -= 1;
+            let (m1, sa0, sb0, bound0) = stack[depth];
+            if bound0 <= best.max(floor) {
+                continue;
+            }
+            if m1 == 0 {
+                // A cell passed over at the finest level: searched exactly.
+                work.visits += 1;
+                best = best.max(ray.max_over(self.ctx, sa0, sb0, f64::NEG_INFINITY).0);
+                if best >= hi {
+                    break;
+                }
+                continue;
+            }
+            let (mut sa, mut sb) = (sa0, sb0);
+            for m in (0..m1).rev() {
+                // The candidates of this level, the one with the largest bound first.
+                let mut cands = [(f64::NEG_INFINITY, 0.0f64, 0.0f64); 4];
+                let mut nc = 0;
+                let mut hidden = f64::NEG_INFINITY;
+                let thr = best.max(floor);
+                // Sorted on insertion, the largest bound first, the first along the ray among
+                // equals; a fifth candidate drops the weakest.
+                let mut keep = |c: (f64, f64, f64)| {
+                    if c.0 <= thr || (nc == cands.len() && c.0 <= cands[nc - 1].0) {
+                        return;
+                    }
+                    let mut k = nc.min(cands.len() - 1);
+                    while k > 0 && cands[k - 1].0 < c.0 {
+                        cands[k] = cands[k - 1];
+                        k -= 1;
+                    }
+                    cands[k] = c;
+                    nc = (nc + 1).min(cands.len());
+                };
+                if dda {
+                    // Canonical DDA: the texels under two points of the interval only; the part
+                    // of the ray inside the chosen one (not half of the interval, which may
+                    // leave out the part of the texel where its terrain is) is searched at the
+                    // next level.
+                    let q = (1u64 << m) as f64;
+                    let mid = 0.5 * (sa + sb);
+                    for p in [0.5 * (sa + mid), 0.5 * (mid + sb)] {
+                        let (px, py) = (ray.x0 + p * ray.cx, ray.y0 + p * ray.cy);
+                        if !(px >= 0.0 && py >= 0.0) {
+                            continue;
+                        }
+                        // A point on the raster's far edge is in its last texel.
+                        let l = &self.pyramid.levels[m];
+                        let (tx, ty) = ((px / q) as i64, (py / q) as i64);
+                        let (tx, ty) = (tx.min(l.w as i64 - 1), ty.min(l.h as i64 - 1));
+                        let (hmax, _) = self.pyramid.get(m, tx, ty);
+                        work.visits += 1;
+                        let (s_in, s_out) = texel_span(ray, q, tx, ty, sa, sb, p);
+                        keep((self.max_slope(ray, s_in, s_out, hmax as f64), s_in, s_out));
+                    }
+                } else {
+                    self.walk(ray, m, sa, sb, &mut |tx, ty, s_in, s_out| {
+                        let (hmax, hmin) = self.pyramid.get(m, tx, ty);
+                        work.visits += 1;
+                        let bound = self.max_slope(ray, s_in, s_out, hmax as f64);
+                        // A texel whose lowest terrain already hides the disc's top
+                        // ends the search with that terrain's slope (a horizon the terrain
+                        // surely reaches: the sun is hidden, as extrema-soft stops).
+                        if bound >= hi && hmin > f32::NEG_INFINITY {
+                            let low = self.max_slope(ray, s_in, s_out, hmin as f64);
+                            if low >= hi {
+                                hidden = low;
+                                return true;
+                            }
+                        }
+                        keep((bound, s_in, s_out));
+                        false
+                    });
+                }
+                if hidden > f64::NEG_INFINITY {
+                    return best.max(hidden);
+                }
+                if nc == 0 {
+                    // Nothing under this part of the ray can rise above what is known.
+                    break;
+                }
+                // The runners-up wait on the stack, the weakest deepest; a full stack drops the
+                // weakest.
+                for c in cands[1..nc].iter().rev() {
+                    if depth < DP_STACK {
+                        stack[depth] = (m, c.1, c.2, c.0);
+                        depth += 1;
+                    }
+                }
+                (sa, sb) = (cands[0].1, cands[0].2);
+                if m == 0 {
+                    work.visits += 1;
+                    best = best.max(ray.max_over(self.ctx, sa, sb, f64::NEG_INFINITY).0);
+                }
+            }
+            if best >= hi {
+                break;
+            }
+        }
+        best
     }
 
     /// Timokhin & Mikhaylyuk's traversal: whether the terrain reaches slope `t` anywhere along

@@ -34,6 +34,9 @@ const STEPS: [usize; 6] = [25, 50, 100, 200, 400, 800];
 const PICTURE_SUN: (f64, f64) = (107.0, 12.0);
 /// Azimuths of the raw maps the horizon method looks up.
 const AZIMUTHS: usize = 360;
+/// A (pixel, sun) pair is penumbral when the sun's centre lies within this many degrees of the
+/// exact horizon in its azimuth at the pixel (where shadows are decided; issue 40, point 4).
+const PENUMBRA_DEG: f64 = 3.0;
 
 pub struct Args {
     pub data: PathBuf,
@@ -63,6 +66,13 @@ fn methods(quick: bool) -> Vec<Bm> {
         v.push(Bm::Trace(Method::Dp {
             runs: runs.parse().expect("runs"),
             dda: true,
+        }));
+    }
+    // Jung et al.'s DP as published (one texel per level, no refinement), for comparison.
+    for dda in [false, true] {
+        v.push(Bm::Trace(Method::JungDp {
+            runs: Runs::Auto,
+            dda,
         }));
     }
     v.push(Bm::Trace(Method::Extrema));
@@ -207,6 +217,21 @@ fn eval(
     (lit, visits, None)
 }
 
+/// Which (sun, block pixel) pairs are penumbral (sun-major, as [`eval`]'s lit fractions): the
+/// sun's centre within [`PENUMBRA_DEG`] of the exact horizon in its azimuth.
+fn penumbral(tr: &Tracer, case: &Case, suns: &[(f64, Sun)]) -> Vec<bool> {
+    let (n, rect) = (case.rect.w, case.rect);
+    (0..suns.len() * n * n)
+        .into_par_iter()
+        .map(|k| {
+            let (s, p) = (k / (n * n), k % (n * n));
+            let (x, y) = (rect.x0 + p % n, rect.y0 + p / n);
+            let (el, hz) = tr.band_horizon(x, y, &suns[s].1, PENUMBRA_DEG);
+            (el - hz).abs() <= PENUMBRA_DEG
+        })
+        .collect()
+}
+
 fn timed<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> Result<(T, f64)> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
@@ -225,6 +250,8 @@ struct Row {
     /// Per sun elevation (SUN_EL order), then all.
     err: Vec<ErrSum>,
     all: ErrSum,
+    /// Over the penumbral (pixel, sun) pairs only ([`PENUMBRA_DEG`]).
+    penumbra: ErrSum,
     ms_per_mpx_1t: f64,
     ms_per_mpx_2t: f64,
     visits_per_px: f64,
@@ -241,6 +268,10 @@ struct CaseInfo {
     reference_ms_per_mpx_2t: f64,
     horizon_bake_s: f64,
     fourier_encode_s: f64,
+    /// (pixel, sun) pairs of the block with the sun's centre within [`PENUMBRA_DEG`] of the
+    /// exact horizon, of all pairs over terrain.
+    penumbral_pairs: u64,
+    pairs: u64,
     note: String,
 }
 
@@ -305,6 +336,17 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
             eval(&tr, case, &sv, &Bm::Trace(Method::Reference), None)
         })?;
         say(format!("{}: reference {t_ref:.1} s", case.name));
+        let pen = penumbral(&tr, case, &sv);
+        let pairs = reference.iter().filter(|v| v.is_finite()).count() as u64;
+        let pen_pairs = pen
+            .iter()
+            .zip(&reference)
+            .filter(|(p, r)| **p && r.is_finite())
+            .count() as u64;
+        say(format!(
+            "{}: {pen_pairs} of {pairs} (pixel, sun) pairs penumbral (within {PENUMBRA_DEG}° of the horizon)",
+            case.name
+        ));
         let baked = bake(case);
         say(format!(
             "{}: horizons {:.1} s, pyramid {:.2} s",
@@ -318,6 +360,8 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
             reference_ms_per_mpx_2t: t_ref * 1e3 / mpx,
             horizon_bake_s: baked.bake_s,
             fourier_encode_s: baked.encode_s,
+            penumbral_pairs: pen_pairs,
+            pairs,
             note: case.note.clone(),
         });
         for m in &ms {
@@ -335,12 +379,18 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
             for e in &err {
                 all.merge(e);
             }
+            let mut penumbra = ErrSum::default();
+            for (k, _) in pen.iter().enumerate().filter(|(_, p)| **p) {
+                penumbra.add(lit[k], reference[k]);
+            }
             say(format!(
-                "{}: {:<20} mean |err| {:.4}, PER {:.3} %, {:.0} ms/Mpx on 2 threads",
+                "{}: {:<20} mean |err| {:.4}, PER {:.3} %; penumbra {:.4}, {:.2} %; {:.0} ms/Mpx on 2 threads",
                 case.name,
                 m.label(AZIMUTHS),
                 all.mae(),
                 all.per(),
+                penumbra.mae(),
+                penumbra.per(),
                 t2 * 1e3 / mpx
             ));
             rows.push(Row {
@@ -350,6 +400,7 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
                 hard: m.hard(),
                 err,
                 all,
+                penumbra,
                 ms_per_mpx_1t: t1 * 1e3 / mpx,
                 ms_per_mpx_2t: t2 * 1e3 / mpx,
                 visits_per_px: visits as f64 / (sv.len() * n * n) as f64,
@@ -399,6 +450,8 @@ struct Summary {
     hard: bool,
     err: Vec<ErrSum>,
     all: ErrSum,
+    /// Over the penumbral pairs of the real DEMs.
+    penumbra: ErrSum,
     /// Worst single real DEM's mean |error| over elevations ≥ 1° and PER.
     worst_mae: f64,
     worst_per: f64,
@@ -425,11 +478,13 @@ fn summarise(rows: &[Row]) -> Vec<Summary> {
                 .collect();
             let mut err = vec![ErrSum::default(); SUN_EL.len()];
             let mut all = ErrSum::default();
+            let mut penumbra = ErrSum::default();
             for r in &rs {
                 for (a, b) in err.iter_mut().zip(&r.err) {
                     a.merge(b);
                 }
                 all.merge(&r.all);
+                penumbra.merge(&r.penumbra);
             }
             let k = rs.len().max(1) as f64;
             Summary {
@@ -437,6 +492,7 @@ fn summarise(rows: &[Row]) -> Vec<Summary> {
                 hard: rs.first().is_some_and(|r| r.hard),
                 err,
                 all,
+                penumbra,
                 worst_mae: rs.iter().map(|r| r.all.mae()).fold(0.0, f64::max),
                 worst_per: rs.iter().map(|r| r.all.per()).fold(0.0, f64::max),
                 ms_per_mpx_1t: rs.iter().map(|r| r.ms_per_mpx_1t).sum::<f64>() / k,
@@ -670,18 +726,20 @@ fn markdown(
         sun_radius_deg(1.0)
     );
     let _ = writeln!(o, "## Cases\n");
-    let _ = writeln!(o, "| case | context | m/px | reference ms/Mpx (2 thr) | 360-az horizons of the block (s) | F16 encode (s) | block |");
-    let _ = writeln!(o, "|---|---|---:|---:|---:|---:|---|");
+    let _ = writeln!(o, "| case | context | m/px | reference ms/Mpx (2 thr) | 360-az horizons of the block (s) | F16 encode (s) | penumbral pairs | block |");
+    let _ = writeln!(o, "|---|---|---:|---:|---:|---:|---:|---|");
     for c in infos {
         let _ = writeln!(
             o,
-            "| {} | {} | {:.1} | {:.0} | {:.1} | {:.2} | {} |",
+            "| {} | {} | {:.1} | {:.0} | {:.1} | {:.2} | {} of {} | {} |",
             c.case,
             c.context,
             c.pixel_m,
             c.reference_ms_per_mpx_2t,
             c.horizon_bake_s,
             c.fourier_encode_s,
+            c.penumbral_pairs,
+            c.pairs,
             c.note
         );
     }
@@ -731,6 +789,33 @@ fn markdown(
             );
         }
     }
+    let real_pen: u64 = summary.first().map_or(0, |s| s.penumbra.n);
+    let _ = writeln!(o, "\n## In the penumbra, over the real DEMs\n");
+    let _ = writeln!(
+        o,
+        "The same runs restricted to the (pixel, sun) pairs where the sun's centre lies within \
+         {PENUMBRA_DEG}° of the exact horizon in its azimuth ({real_pen} pairs over the real DEMs; \
+         per case in the tables above and below): where shadows are decided, which the \
+         all-pixel means dilute with pixels far from any shadow edge.\n"
+    );
+    let _ = writeln!(
+        o,
+        "| method | penumbra mean abs error | penumbra PER | penumbra max | all-pixel mean | all-pixel PER | ms/Mpx 2 thr |"
+    );
+    let _ = writeln!(o, "|---|---:|---:|---:|---:|---:|---:|");
+    for s in summary {
+        let _ = writeln!(
+            o,
+            "| {} | {:.4} | {:.2} % | {:.3} | {:.4} | {:.3} % | {:.0} |",
+            s.method,
+            s.penumbra.mae(),
+            s.penumbra.per(),
+            s.penumbra.max,
+            s.all.mae(),
+            s.all.per(),
+            s.ms_per_mpx_2t
+        );
+    }
     let _ = writeln!(o, "\n![error against time](shadows-error.svg)\n");
     let _ = writeln!(
         o,
@@ -775,18 +860,20 @@ fn markdown(
     let _ = writeln!(o, "\n## Per case\n");
     let _ = writeln!(
         o,
-        "| case | method | mean abs error | PER | max | ms/Mpx 2 thr |"
+        "| case | method | mean abs error | PER | max | penumbra mean | penumbra PER | ms/Mpx 2 thr |"
     );
-    let _ = writeln!(o, "|---|---|---:|---:|---:|---:|");
+    let _ = writeln!(o, "|---|---|---:|---:|---:|---:|---:|---:|");
     for r in rows {
         let _ = writeln!(
             o,
-            "| {} | {} | {:.4} | {:.3} % | {:.3} | {:.0} |",
+            "| {} | {} | {:.4} | {:.3} % | {:.3} | {:.4} | {:.2} % | {:.0} |",
             r.case,
             r.method,
             r.all.mae(),
             r.all.per(),
             r.all.max,
+            r.penumbra.mae(),
+            r.penumbra.per(),
             r.ms_per_mpx_2t
         );
     }
@@ -823,7 +910,7 @@ fn markdown(
             "\n## Pictures: one sun at {}° (azimuth {}°) over 256² of the embedded scene\n",
             PICTURE_SUN.1, PICTURE_SUN.0
         );
-        let _ = writeln!(o, "Errors are |method − reference| ×4 (white: 0.25 or more). Jung et al. show streaks from a canonical DDA that samples two points per level and so misses texels the ray cuts at a corner (their Fig. 5), and visit every texel under the ray instead (the 3-texel rule, `dp`). With exact per-texel bounds both keep one texel per level and both err along the shadow's edge, where a texel beside the ray holds a higher maximum than the one the ray crosses; over the real DEMs the DDA's mean error is {:.4} and the 3-texel rule's {:.4} (tables above). `extrema-soft` searches every texel that could matter and follows the reference.\n", mae_of("dp-dda auto"), mae_of("dp auto"));
+        let _ = writeln!(o, "Errors are |method − reference| ×4 (white: 0.25 or more). Jung et al. show streaks from a canonical DDA that samples two points per level and so misses texels the ray cuts at a corner (their Fig. 5), and visit every texel under the ray instead (the 3-texel rule, `dp`). With exact per-texel bounds, Jung et al.'s DP still keeps one texel per level and errs along the shadow's edge, where a texel beside the ray holds a higher maximum than the one the ray crosses: over the real DEMs `dp-dda-jung auto`'s mean error is {:.4} and `dp-jung auto`'s {:.4} (tables above). `dp` and `dp-dda` (shown) refine the texels their descent passed over ({:.4} and {:.4}), and `extrema-soft` searches every texel that could matter.\n", mae_of("dp-dda-jung auto"), mae_of("dp-jung auto"), mae_of("dp auto"), mae_of("dp-dda auto"));
         for (name, p) in images {
             let file = Path::new(p)
                 .file_name()

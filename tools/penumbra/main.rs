@@ -649,8 +649,10 @@ enum QueryCommand {
 #[derive(Args, Clone)]
 struct ShadowFlags {
     /// horizon (look the baked horizons up), reference (exact search of the terrain, exact
-    /// disc), uniform (fixed steps), dp (Jung et al. over a maximum mipmap), dp-dda (the same
-    /// with a canonical DDA that skips texels), extrema (Timokhin & Mikhaylyuk, hard),
+    /// disc), uniform (fixed steps), dp (Jung et al. over a maximum mipmap, the texels its
+    /// descent passed over refined where they could still rise higher), dp-dda (the same with a
+    /// canonical DDA that skips texels), dp-jung and dp-dda-jung (Jung et al.'s DP as
+    /// published, one texel per level, no refinement), extrema (Timokhin & Mikhaylyuk, hard),
     /// extrema-soft (their traversal finding the exact horizon within the sun's disc) or smap
     /// (Sakalauskas' silhouette map for the sun's direction, hard).
     #[arg(long, default_value = "horizon")]
@@ -658,7 +660,7 @@ struct ShadowFlags {
     /// With --method uniform: steps along the ray (1..=1048576).
     #[arg(long, default_value_t = 100)]
     steps: usize,
-    /// With --method dp|dp-dda: N′ of each concatenated run (e.g. 5,5,5 or 5,5,5,3), or auto
+    /// With --method dp|dp-dda|dp-jung|dp-dda-jung: N′ of each concatenated run (e.g. 5,5,5 or 5,5,5,3), or auto
     /// (each run reaches as far again as the ray has come, until it leaves the terrain).
     #[arg(long, default_value = "auto")]
     dp_levels: String,
@@ -694,6 +696,14 @@ impl ShadowFlags {
                 runs: runs()?,
                 dda: true,
             },
+            "dp-jung" => T::JungDp {
+                runs: runs()?,
+                dda: false,
+            },
+            "dp-dda-jung" => T::JungDp {
+                runs: runs()?,
+                dda: true,
+            },
             "extrema" => T::Extrema,
             "extrema-soft" => T::ExtremaSoft,
             other => {
@@ -701,7 +711,7 @@ impl ShadowFlags {
                     "method",
                     format!(
                         "unknown shadow method '{other}': use horizon, reference, uniform, dp, \
-                         dp-dda, extrema, extrema-soft or smap"
+                         dp-dda, dp-jung, dp-dda-jung, extrema, extrema-soft or smap"
                     ),
                 )
                 .into())

@@ -535,37 +535,114 @@ fn sh_uniform(ray: ShRay, steps: i32, lo: f32) -> f32 {
     return best;
 }
 
-// One run of Jung et al.'s Algorithm 1 over s in [a, b] from level m0.
-fn sh_dp_run(ray: ShRay, a: f32, b: f32, m0: i32, floor_: f32) -> f32 {
-    var sa = a;
-    var sb = b;
-    for (var m = m0; m >= 0; m--) {
-        var cb = floor_;
-        var found = false;
-        var ca = 0.0;
-        var cz = 0.0;
-        var w = sh_walker(ray, m, sa, sb);
-        for (var guard = 0; guard < 100000; guard++) {
-            let t = sh_walk_next(&w);
-            if !t.ok {
+// One run of Jung et al.'s Algorithm 1 over s in [a, b] from level m0, refined as the CPU's
+// dp_run: the runners-up of every level wait on a stack (the weakest deepest; a full stack,
+// which the 3-texel rule never fills, drops them) and, once the descent has searched its cell exactly, those whose bound still beats the
+// best found are descended into in turn, until none is left or the best reaches hi (the disc's
+// top); a texel whose lowest terrain reaches hi ends the search with that terrain's slope.
+const SH_DP_STACK: i32 = 40;
+
+fn sh_dp_run(ray: ShRay, a: f32, b: f32, m0: i32, floor_: f32, hi: f32) -> f32 {
+    var st_m: array<i32, SH_DP_STACK>;
+    var st_a: array<f32, SH_DP_STACK>;
+    var st_b: array<f32, SH_DP_STACK>;
+    var st_c: array<f32, SH_DP_STACK>;
+    st_m[0] = m0 + 1;
+    st_a[0] = a;
+    st_b[0] = b;
+    st_c[0] = SH_BIG;
+    var depth = 1;
+    var best = SH_NEG;
+    for (var g = 0; g < 1000000; g++) {
+        if depth <= 0 {
+            break;
+        }
+        depth -= 1;
+        let d = depth;
+        let m1 = st_m[d];
+        let sa0 = st_a[d];
+        let sb0 = st_b[d];
+        if st_c[d] <= max(best, floor_) {
+            continue;
+        }
+        if m1 == 0 {
+            // A cell passed over at the finest level: searched exactly.
+            best = max(best, sh_max_over(ray, sa0, sb0, SH_NEG));
+            if best >= hi {
                 break;
             }
-            let hmax = sh_extrema(m, t.tx, t.ty).x;
-            let bound = sh_max_slope(ray, t.s_in, t.s_out, hmax);
-            if bound > cb {
-                cb = bound;
-                ca = t.s_in;
-                cz = t.s_out;
-                found = true;
+            continue;
+        }
+        var sa = sa0;
+        var sb = sb0;
+        for (var m = m1 - 1; m >= 0; m--) {
+            let thr = max(best, floor_);
+            // The candidates, the largest bound first (the first along the ray among equals).
+            var cb: array<f32, 4>;
+            var ca: array<f32, 4>;
+            var cz: array<f32, 4>;
+            var nc = 0;
+            var hidden = SH_NEG;
+            var w = sh_walker(ray, m, sa, sb);
+            for (var guard = 0; guard < 100000; guard++) {
+                let t = sh_walk_next(&w);
+                if !t.ok {
+                    break;
+                }
+                let e = sh_extrema(m, t.tx, t.ty);
+                let bound = sh_max_slope(ray, t.s_in, t.s_out, e.x);
+                if bound >= hi && e.y > SH_NODATA {
+                    let low = sh_max_slope(ray, t.s_in, t.s_out, e.y);
+                    if low >= hi {
+                        hidden = low;
+                        break;
+                    }
+                }
+                if bound <= thr || (nc == 4 && bound <= cb[3]) {
+                    continue;
+                }
+                var k = min(nc, 3);
+                for (var q = 0; q < 4; q++) {
+                    if k == 0 || cb[k - 1] >= bound {
+                        break;
+                    }
+                    cb[k] = cb[k - 1];
+                    ca[k] = ca[k - 1];
+                    cz[k] = cz[k - 1];
+                    k -= 1;
+                }
+                cb[k] = bound;
+                ca[k] = t.s_in;
+                cz[k] = t.s_out;
+                nc = min(nc + 1, 4);
+            }
+            if hidden > SH_NEG {
+                return max(best, hidden);
+            }
+            if nc == 0 {
+                break;
+            }
+            for (var k = nc - 1; k >= 1; k--) {
+                if depth < SH_DP_STACK {
+                    let e = depth;
+                    st_m[e] = m;
+                    st_a[e] = ca[k];
+                    st_b[e] = cz[k];
+                    st_c[e] = cb[k];
+                    depth += 1;
+                }
+            }
+            sa = ca[0];
+            sb = cz[0];
+            if m == 0 {
+                best = max(best, sh_max_over(ray, sa, sb, SH_NEG));
             }
         }
-        if !found {
-            return SH_NEG;
+        if best >= hi {
+            break;
         }
-        sa = ca;
-        sb = cz;
     }
-    return sh_max_over(ray, sa, sb, SH_NEG);
+    return best;
 }
 
 fn sh_dp(ray: ShRay, x: i32, y: i32, phi: f32, lo: f32, hi: f32) -> f32 {
@@ -593,7 +670,7 @@ fn sh_dp(ray: ShRay, x: i32, y: i32, phi: f32, lo: f32, hi: f32) -> f32 {
         let m0 = min(levels - 1, top);
         let len = f32(1 << u32(m0)) / major;
         let b = a + len;
-        best = max(best, sh_dp_run(ray, a, min(b, end), m0, max(best, lo)));
+        best = max(best, sh_dp_run(ray, a, min(b, end), m0, max(best, lo), hi));
         a = b;
     }
     return best;
