@@ -1033,6 +1033,11 @@ fn texel_span(ray: &Ray, q: f64, tx: i64, ty: i64, sa: f64, sb: f64, p: f64) -> 
     (lo.min(p), hi.max(p))
 }
 
+/// Half-width (degrees) of the penumbra band: a (pixel, sun) pair is penumbral when the sun's
+/// centre is within it of the exact horizon in its azimuth ([`Tracer::band_horizon`]), where
+/// shadows are decided and all-pixel error means hide a method's misses (issue 40).
+pub const PENUMBRA_BAND_DEG: f64 = 3.0;
+
 /// What a method found at one pixel.
 #[derive(Clone, Copy, Debug)]
 pub struct Traced {

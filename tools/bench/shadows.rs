@@ -19,7 +19,7 @@ use penumbra::fourier::sun::{sun_radius_deg, Frame, Sun};
 use penumbra::fourier::{evaluate, Pyramid};
 use penumbra::horizon::{horizons_with, Method as HzMethod, DEFAULT_NEAR_PX};
 use penumbra::shadow::smap::SMap;
-use penumbra::shadow::trace::{Method, Runs, Work};
+use penumbra::shadow::trace::{Method, Runs, Work, PENUMBRA_BAND_DEG};
 use penumbra::shadow::Tracer;
 
 use crate::cases::real_cases;
@@ -34,9 +34,6 @@ const STEPS: [usize; 6] = [25, 50, 100, 200, 400, 800];
 const PICTURE_SUN: (f64, f64) = (107.0, 12.0);
 /// Azimuths of the raw maps the horizon method looks up.
 const AZIMUTHS: usize = 360;
-/// A (pixel, sun) pair is penumbral when the sun's centre lies within this many degrees of the
-/// exact horizon in its azimuth at the pixel (where shadows are decided; issue 40, point 4).
-const PENUMBRA_DEG: f64 = 3.0;
 
 pub struct Args {
     pub data: PathBuf,
@@ -218,7 +215,7 @@ fn eval(
 }
 
 /// Which (sun, block pixel) pairs are penumbral (sun-major, as [`eval`]'s lit fractions): the
-/// sun's centre within [`PENUMBRA_DEG`] of the exact horizon in its azimuth.
+/// sun's centre within [`PENUMBRA_BAND_DEG`] of the exact horizon in its azimuth.
 fn penumbral(tr: &Tracer, case: &Case, suns: &[(f64, Sun)]) -> Vec<bool> {
     let (n, rect) = (case.rect.w, case.rect);
     (0..suns.len() * n * n)
@@ -226,8 +223,8 @@ fn penumbral(tr: &Tracer, case: &Case, suns: &[(f64, Sun)]) -> Vec<bool> {
         .map(|k| {
             let (s, p) = (k / (n * n), k % (n * n));
             let (x, y) = (rect.x0 + p % n, rect.y0 + p / n);
-            let (el, hz) = tr.band_horizon(x, y, &suns[s].1, PENUMBRA_DEG);
-            (el - hz).abs() <= PENUMBRA_DEG
+            let (el, hz) = tr.band_horizon(x, y, &suns[s].1, PENUMBRA_BAND_DEG);
+            (el - hz).abs() <= PENUMBRA_BAND_DEG
         })
         .collect()
 }
@@ -250,7 +247,7 @@ struct Row {
     /// Per sun elevation (SUN_EL order), then all.
     err: Vec<ErrSum>,
     all: ErrSum,
-    /// Over the penumbral (pixel, sun) pairs only ([`PENUMBRA_DEG`]).
+    /// Over the penumbral (pixel, sun) pairs only ([`PENUMBRA_BAND_DEG`]).
     penumbra: ErrSum,
     ms_per_mpx_1t: f64,
     ms_per_mpx_2t: f64,
@@ -268,7 +265,7 @@ struct CaseInfo {
     reference_ms_per_mpx_2t: f64,
     horizon_bake_s: f64,
     fourier_encode_s: f64,
-    /// (pixel, sun) pairs of the block with the sun's centre within [`PENUMBRA_DEG`] of the
+    /// (pixel, sun) pairs of the block with the sun's centre within [`PENUMBRA_BAND_DEG`] of the
     /// exact horizon, of all pairs over terrain.
     penumbral_pairs: u64,
     pairs: u64,
@@ -344,7 +341,7 @@ pub fn run(args: Args, quiet: bool) -> Result<()> {
             .filter(|(p, r)| **p && r.is_finite())
             .count() as u64;
         say(format!(
-            "{}: {pen_pairs} of {pairs} (pixel, sun) pairs penumbral (within {PENUMBRA_DEG}° of the horizon)",
+            "{}: {pen_pairs} of {pairs} (pixel, sun) pairs penumbral (within {PENUMBRA_BAND_DEG}° of the horizon)",
             case.name
         ));
         let baked = bake(case);
@@ -794,7 +791,7 @@ fn markdown(
     let _ = writeln!(
         o,
         "The same runs restricted to the (pixel, sun) pairs where the sun's centre lies within \
-         {PENUMBRA_DEG}° of the exact horizon in its azimuth ({real_pen} pairs over the real DEMs; \
+         {PENUMBRA_BAND_DEG}° of the exact horizon in its azimuth ({real_pen} pairs over the real DEMs; \
          per case in the tables above and below): where shadows are decided, which the \
          all-pixel means dilute with pixels far from any shadow edge.\n"
     );

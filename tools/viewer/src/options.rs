@@ -22,7 +22,7 @@ use crate::shadow::GpuMethod;
     about = "Render a Penumbra tileset with GPU soft shadows (window or headless) and validate \
              them against the CPU methods",
     after_help = "Keys (window): arrows = sun azimuth/elevation at the view's target, M = next \
-                  method, 1-5 = dp/uniform/extrema/fourier/extrema-soft, H = shadows on/off, \
+                  method, 1-6 = dp/uniform/extrema/fourier/extrema-soft/dp-jung, H = shadows on/off, \
                   F = orbit/fly, \
                   WASD/QE = fly, drag = orbit or look, wheel = zoom, +/- = sun faster/slower, \
                   Esc = quit."
@@ -31,8 +31,8 @@ pub struct Args {
     /// Tileset folder (made by `penumbra tile` or `penumbra bake`), or a package folder (made
     /// by `penumbra package`: its cube-face tileset is drawn).
     pub dir: PathBuf,
-    /// Shadow method: dp, uniform, extrema, extrema-soft or fourier (needs the Fourier
-    /// pyramids).
+    /// Shadow method: dp, dp-jung (Jung et al.'s DP as published), uniform, extrema,
+    /// extrema-soft or fourier (needs the Fourier pyramids).
     #[arg(long, default_value = "dp")]
     pub method: String,
     /// The disc model of `fourier`: constant (the series once per pixel, at the sun's azimuth),
@@ -151,12 +151,17 @@ pub fn method(name: &str, args: &Args) -> Result<GpuMethod> {
         .parse::<Model>()
         .map_err(|e| anyhow::anyhow!("--fourier-model {e}"))?;
     Ok(match name {
-        "dp" => GpuMethod::Dp {
-            runs: args
+        "dp" | "dp-jung" => {
+            let runs = args
                 .dp_levels
                 .parse::<Runs>()
-                .map_err(|e| anyhow::anyhow!("--dp-levels {e}"))?,
-        },
+                .map_err(|e| anyhow::anyhow!("--dp-levels {e}"))?;
+            if name == "dp" {
+                GpuMethod::Dp { runs }
+            } else {
+                GpuMethod::DpJung { runs }
+            }
+        }
         "uniform" => {
             if !(1..=100_000).contains(&steps) {
                 bail!("--steps {steps} is outside 1..=100000");
@@ -167,8 +172,8 @@ pub fn method(name: &str, args: &Args) -> Result<GpuMethod> {
         "extrema-soft" => GpuMethod::ExtremaSoft,
         "fourier" => GpuMethod::Fourier { model },
         _ => bail!(
-            "--method {name}: unknown shadow method; the viewer has dp, uniform, extrema, \
-             extrema-soft and fourier"
+            "--method {name}: unknown shadow method; the viewer has dp, dp-jung, uniform, \
+             extrema, extrema-soft and fourier"
         ),
     })
 }

@@ -55,7 +55,7 @@ pub struct Validation {
     pub exact_model: Option<Errors>,
     /// The same comparisons over the penumbral pixels only: those whose texel has the sun
     /// within ±3° of its own horizon in the sun's azimuth, where shadows are decided and the
-    /// all-pixel means hide a method's errors.
+    /// all-pixel means hide a method's errors (the shadow bench's penumbra metric).
     pub penumbra: Penumbra,
     /// CPU seconds (both evaluations, all threads).
     pub cpu_s: f64,

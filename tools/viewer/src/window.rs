@@ -4,7 +4,7 @@ onto the window's surface with the status line, and the keys and mouse that move
 the sun and the method.
 
 Keys: arrows turn the sun in azimuth (←/→) and elevation (↑/↓) *at the view's target*;
-`M` cycles the method, `1`–`5` pick dp, uniform, extrema, fourier, extrema-soft; `H` toggles shadows; `F`
+`M` cycles the method, `1`–`6` pick dp, uniform, extrema, fourier, extrema-soft, dp-jung; `H` toggles shadows; `F`
 toggles orbit and fly; `W A S D` and `Q E` fly; `+`/`-` make the keys' steps larger or
 smaller; `Esc` quits. Mouse: drag to orbit the target (or to look around when flying), wheel to
 zoom. `--screenshot PNG --frames N` saves the N-th frame as the window shows it and exits.
@@ -351,7 +351,8 @@ impl App {
             Key::Character(c) => match c.as_str() {
                 "m" | "M" => {
                     let next = match core.scene.method() {
-                        GpuMethod::Dp { .. } => "uniform",
+                        GpuMethod::Dp { .. } => "dp-jung",
+                        GpuMethod::DpJung { .. } => "uniform",
                         GpuMethod::Uniform { .. } => "extrema",
                         GpuMethod::Extrema => "extrema-soft",
                         GpuMethod::ExtremaSoft => "fourier",
@@ -359,9 +360,15 @@ impl App {
                     };
                     self.note = self.switch(next).err().map(|e| format!("{e:#}"));
                 }
-                "1" | "2" | "3" | "4" | "5" => {
-                    let name = ["dp", "uniform", "extrema", "fourier", "extrema-soft"]
-                        [c.parse::<usize>()? - 1];
+                "1" | "2" | "3" | "4" | "5" | "6" => {
+                    let name = [
+                        "dp",
+                        "uniform",
+                        "extrema",
+                        "fourier",
+                        "extrema-soft",
+                        "dp-jung",
+                    ][c.parse::<usize>()? - 1];
                     self.note = self.switch(name).err().map(|e| format!("{e:#}"));
                 }
                 "h" | "H" => core.shadows_on = !core.shadows_on,

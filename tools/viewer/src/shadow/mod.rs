@@ -33,7 +33,7 @@ use penumbra::fourier::sun::{self, Frame, Model, Sun};
 use penumbra::fourier::Pyramid;
 use penumbra::horizon::{Context, Rect};
 use penumbra::layout::TileId;
-use penumbra::shadow::trace::{Extrema, Method, Work, MAX_DP_RUNS, MAX_STEPS};
+use penumbra::shadow::trace::{Extrema, Method, Work, MAX_DP_RUNS, MAX_STEPS, PENUMBRA_BAND_DEG};
 use penumbra::shadow::{HorizonSource, Runs, ShadowMethod, Tracer};
 use penumbra::tileset::Store;
 use rayon::prelude::*;
@@ -48,17 +48,20 @@ const WGSL: &str = include_str!("shadow.wgsl");
 const MAX_LEVELS: usize = 16;
 /// Most Fourier coefficients the shader reads.
 const MAX_COEFFICIENTS: usize = 32;
-/// Half-width (degrees) of the band around a point's horizon where shadows are decided: the
-/// penumbra metric's suns are within it ([`TileShadow::cpu_penumbral_many`]).
-pub const PENUMBRA_BAND_DEG: f64 = 3.0;
 /// What stands for −∞ and for no data in the textures (WGSL need not support infinities).
 const NEG: f32 = -1.0e30;
 
 /// A shadow method the GPU evaluates.
 #[derive(Clone, Debug, PartialEq)]
 pub enum GpuMethod {
-    /// Jung et al.'s DP over the maximum mipmap (soft).
+    /// DP over the maximum mipmap with the exact refinement of the texels Jung's descent passed
+    /// over (soft; the CPU's `dp`).
     Dp {
+        /// How the runs are concatenated.
+        runs: Runs,
+    },
+    /// Jung et al.'s DP as published: one texel per level (soft; the CPU's `dp-jung`).
+    DpJung {
         /// How the runs are concatenated.
         runs: Runs,
     },
@@ -83,6 +86,7 @@ impl GpuMethod {
     pub fn label(&self) -> String {
         match self {
             GpuMethod::Dp { runs } => format!("dp {runs}"),
+            GpuMethod::DpJung { runs } => format!("dp-jung {runs}"),
             GpuMethod::Uniform { steps } => format!("uniform {steps}"),
             GpuMethod::Extrema => "extrema".into(),
             GpuMethod::ExtremaSoft => "extrema-soft".into(),
@@ -102,6 +106,10 @@ impl GpuMethod {
                 runs: runs.clone(),
                 dda: false,
             }),
+            GpuMethod::DpJung { runs } => ShadowMethod::Trace(Method::JungDp {
+                runs: runs.clone(),
+                dda: false,
+            }),
             GpuMethod::Uniform { steps } => ShadowMethod::Trace(Method::Uniform {
                 steps: *steps as usize,
             }),
@@ -118,7 +126,8 @@ impl GpuMethod {
     }
 }
 
-/// `dp` (runs `auto`), `dp:5,5,5` (fixed runs), `uniform` (100 steps), `uniform:N`, `extrema`,
+/// `dp` (runs `auto`), `dp:5,5,5` (fixed runs), `dp-jung`, `dp-jung:5,5,5`, `uniform` (100
+/// steps), `uniform:N`, `extrema`,
 /// `extrema-soft`, `fourier` (the `constant` model), `fourier:MODEL` (`constant`, `segment`,
 /// `slices`, `exact`).
 impl std::str::FromStr for GpuMethod {
@@ -131,6 +140,8 @@ impl std::str::FromStr for GpuMethod {
         match (name, arg) {
             ("dp", None) => Ok(GpuMethod::Dp { runs: Runs::Auto }),
             ("dp", Some(a)) => Ok(GpuMethod::Dp { runs: a.parse()? }),
+            ("dp-jung", None) => Ok(GpuMethod::DpJung { runs: Runs::Auto }),
+            ("dp-jung", Some(a)) => Ok(GpuMethod::DpJung { runs: a.parse()? }),
             ("uniform", None) => Ok(GpuMethod::Uniform { steps: 100 }),
             ("uniform", Some(a)) => match a.parse::<u32>() {
                 Ok(n) if n >= 1 && n as usize <= MAX_STEPS => Ok(GpuMethod::Uniform { steps: n }),
@@ -143,7 +154,7 @@ impl std::str::FromStr for GpuMethod {
             }),
             ("fourier", Some(a)) => Ok(GpuMethod::Fourier { model: a.parse()? }),
             _ => Err(format!(
-                "unknown GPU shadow method '{s}' (dp, dp:5,5,5, uniform, uniform:N, extrema, \
+                "unknown GPU shadow method '{s}' (dp, dp:5,5,5, dp-jung, dp-jung:5,5,5, uniform, uniform:N, extrema, \
                  extrema-soft, fourier, fourier:constant|segment|slices|exact)"
             )),
         }
@@ -549,16 +560,18 @@ fn fill_sun(p: &mut Params, sun: &Sun, method: &GpuMethod, tmin_trace: f64, tmin
         tmin_tileset
     } as f32;
     p.runs = [[0; 4]; 4];
-    let (id, arg) = match method {
-        GpuMethod::Dp { runs } => match runs {
-            Runs::Auto => (0, 0),
-            Runs::Fixed(v) => {
-                for (k, &n) in v.iter().take(MAX_DP_RUNS).enumerate() {
-                    p.runs[k / 4][k % 4] = n as i32;
-                }
-                (0, v.len().min(MAX_DP_RUNS) as i32)
+    let mut dp_runs = |runs: &Runs| match runs {
+        Runs::Auto => 0,
+        Runs::Fixed(v) => {
+            for (k, &n) in v.iter().take(MAX_DP_RUNS).enumerate() {
+                p.runs[k / 4][k % 4] = n as i32;
             }
-        },
+            v.len().min(MAX_DP_RUNS) as i32
+        }
+    };
+    let (id, arg) = match method {
+        GpuMethod::Dp { runs } => (0, dp_runs(runs)),
+        GpuMethod::DpJung { runs } => (5, dp_runs(runs)),
         GpuMethod::Uniform { steps } => (1, (*steps as usize).min(MAX_STEPS) as i32),
         GpuMethod::Extrema => (2, 0),
         GpuMethod::Fourier { model } => (
@@ -661,16 +674,11 @@ impl TileShadow {
         }
     }
 
-    /// Whether the sun is within ±[`PENUMBRA_BAND_DEG`] of the terrain's own horizon in its
-    /// azimuth at each texel (where shadows are decided: issue 40's penumbra metric). The
-    /// exact reference search with a disc of that radius around the sun's centre finds the
-    /// horizon clamped to the band; strictly inside it, the texel is penumbral. False over no
-    /// data and outside the raster.
+    /// Whether the sun's centre is within ±[`PENUMBRA_BAND_DEG`] of the terrain's own exact
+    /// horizon in its azimuth at each texel (where shadows are decided: the penumbra metric of
+    /// `penumbra-bench shadows`, by the same `Tracer::band_horizon`). False over no data and
+    /// outside the raster.
     pub fn cpu_penumbral_many(&self, texels: &[[i32; 2]], sun: &Sun) -> Vec<bool> {
-        let band = Sun {
-            dir: sun.dir,
-            radius_deg: PENUMBRA_BAND_DEG,
-        };
         let mut slot = self.extrema.lock().unwrap_or_else(|e| e.into_inner());
         let pyramid = slot.take().unwrap_or_else(|| Extrema::new(&self.ctx));
         let tracer = Tracer {
@@ -689,13 +697,9 @@ impl TileShadow {
                 if !inside {
                     return false;
                 }
-                let (x, y) = (p[0] as usize, p[1] as usize);
-                let el = tracer.sun_at(x, y, &band).elevation_deg;
-                let mut work = Work::default();
-                let h = tracer
-                    .trace(x, y, &band, &Method::Reference, &mut work)
-                    .horizon_deg;
-                h > el - PENUMBRA_BAND_DEG && h < el + PENUMBRA_BAND_DEG
+                let (el, h) =
+                    tracer.band_horizon(p[0] as usize, p[1] as usize, sun, PENUMBRA_BAND_DEG);
+                (el - h).abs() <= PENUMBRA_BAND_DEG
             })
             .collect();
         *slot = Some(tracer.pyramid);

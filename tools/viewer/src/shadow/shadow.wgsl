@@ -17,7 +17,7 @@ struct ShadowParams {
     // Face pixels S, body radius (m), lowest terrain (m) for the floor, highest terrain of the
     // raster (m).
     geo: vec4<f32>,
-    // Method (0 dp, 1 uniform, 2 extrema, 3 fourier, 4 extrema-soft), uniform steps, fixed DP
+    // Method (0 dp, 1 uniform, 2 extrema, 3 fourier, 4 extrema-soft, 5 dp-jung), uniform steps, fixed DP
     // runs (0: auto) or the Fourier disc model (0 constant, 1 segment, 2 slices, 3 exact),
     // pyramid levels, Fourier coefficients.
     method: vec4<i32>,
@@ -645,7 +645,41 @@ fn sh_dp_run(ray: ShRay, a: f32, b: f32, m0: i32, floor_: f32, hi: f32) -> f32 {
     return best;
 }
 
-fn sh_dp(ray: ShRay, x: i32, y: i32, phi: f32, lo: f32, hi: f32) -> f32 {
+// Jung et al.'s DP as published (the CPU's Method::JungDp, `dp-jung`): at each level the one
+// texel of largest bound among those under the ray, no return to the others.
+fn sh_dp_jung_run(ray: ShRay, a: f32, b: f32, m0: i32, floor_: f32) -> f32 {
+    var sa = a;
+    var sb = b;
+    for (var m = m0; m >= 0; m--) {
+        var cb = floor_;
+        var found = false;
+        var ca = 0.0;
+        var cz = 0.0;
+        var w = sh_walker(ray, m, sa, sb);
+        for (var guard = 0; guard < 100000; guard++) {
+            let t = sh_walk_next(&w);
+            if !t.ok {
+                break;
+            }
+            let hmax = sh_extrema(m, t.tx, t.ty).x;
+            let bound = sh_max_slope(ray, t.s_in, t.s_out, hmax);
+            if bound > cb {
+                cb = bound;
+                ca = t.s_in;
+                cz = t.s_out;
+                found = true;
+            }
+        }
+        if !found {
+            return SH_NEG;
+        }
+        sa = ca;
+        sb = cz;
+    }
+    return sh_max_over(ray, sa, sb, SH_NEG);
+}
+
+fn sh_dp(ray: ShRay, x: i32, y: i32, phi: f32, lo: f32, hi: f32, jung: bool) -> f32 {
     let p = shadow_params;
     var best = sh_near(ray, x, y, phi);
     let end = sh_exit(ray, lo);
@@ -670,7 +704,11 @@ fn sh_dp(ray: ShRay, x: i32, y: i32, phi: f32, lo: f32, hi: f32) -> f32 {
         let m0 = min(levels - 1, top);
         let len = f32(1 << u32(m0)) / major;
         let b = a + len;
-        best = max(best, sh_dp_run(ray, a, min(b, end), m0, max(best, lo), hi));
+        if jung {
+            best = max(best, sh_dp_jung_run(ray, a, min(b, end), m0, max(best, lo)));
+        } else {
+            best = max(best, sh_dp_run(ray, a, min(b, end), m0, max(best, lo), hi));
+        }
         a = b;
     }
     return best;
@@ -1098,7 +1136,7 @@ fn shadow_lit(p: vec2<i32>) -> f32 {
     } else if method == 4 {
         a = sh_extrema_soft(ray, p.x, p.y, phi, lo, hi);
     } else {
-        a = sh_dp(ray, p.x, p.y, phi, lo, hi);
+        a = sh_dp(ray, p.x, p.y, phi, lo, hi, method == 5);
     }
     return sh_occlusion(a, floor_deg, el, r);
 }
