@@ -646,10 +646,13 @@ fn sh_dp_run(ray: ShRay, a: f32, b: f32, m0: i32, floor_: f32, hi: f32) -> f32 {
 }
 
 // Jung et al.'s DP as published (the CPU's Method::JungDp, `dp-jung`): at each level the one
-// texel of largest bound among those under the ray, no return to the others.
-fn sh_dp_jung_run(ray: ShRay, a: f32, b: f32, m0: i32, floor_: f32) -> f32 {
+// texel of largest bound among those under the ray, no return to the others. x: the run's
+// horizon slope (SH_NEG when no texel beats floor_); y: the largest bound among the texels it
+// passed over (SH_NEG: none), which tells `dp` whether the run's answer is already exact.
+fn sh_dp_jung_run(ray: ShRay, a: f32, b: f32, m0: i32, floor_: f32) -> vec2<f32> {
     var sa = a;
     var sb = b;
+    var passed = SH_NEG;
     for (var m = m0; m >= 0; m--) {
         var cb = floor_;
         var found = false;
@@ -664,19 +667,24 @@ fn sh_dp_jung_run(ray: ShRay, a: f32, b: f32, m0: i32, floor_: f32) -> f32 {
             let hmax = sh_extrema(m, t.tx, t.ty).x;
             let bound = sh_max_slope(ray, t.s_in, t.s_out, hmax);
             if bound > cb {
+                if found {
+                    passed = max(passed, cb);
+                }
                 cb = bound;
                 ca = t.s_in;
                 cz = t.s_out;
                 found = true;
+            } else {
+                passed = max(passed, bound);
             }
         }
         if !found {
-            return SH_NEG;
+            return vec2<f32>(SH_NEG, passed);
         }
         sa = ca;
         sb = cz;
     }
-    return sh_max_over(ray, sa, sb, SH_NEG);
+    return vec2<f32>(sh_max_over(ray, sa, sb, SH_NEG), passed);
 }
 
 fn sh_dp(ray: ShRay, x: i32, y: i32, phi: f32, lo: f32, hi: f32, jung: bool) -> f32 {
@@ -704,10 +712,15 @@ fn sh_dp(ray: ShRay, x: i32, y: i32, phi: f32, lo: f32, hi: f32, jung: bool) -> 
         let m0 = min(levels - 1, top);
         let len = f32(1 << u32(m0)) / major;
         let b = a + len;
-        if jung {
-            best = max(best, sh_dp_jung_run(ray, a, min(b, end), m0, max(best, lo)));
+        // Jung's descent first, scalars only; `dp` refines (sh_dp_run, with its stack of
+        // texels) only a run where a texel the descent passed over could still beat what it
+        // found: elsewhere the descent's answer is already the exact one.
+        let fl = max(best, lo);
+        let r = sh_dp_jung_run(ray, a, min(b, end), m0, fl);
+        if jung || r.y <= max(r.x, fl) || r.x >= hi {
+            best = max(best, r.x);
         } else {
-            best = max(best, sh_dp_run(ray, a, min(b, end), m0, max(best, lo), hi));
+            best = max(best, sh_dp_run(ray, a, min(b, end), m0, fl, hi));
         }
         a = b;
     }
