@@ -25,13 +25,20 @@ if [ ! -e "$dir/tileset.json" ] && [ "$dir" = "$out/scene" ]; then
     "$pen" --quiet bake --out "$dir" --scene-size 1024 --tile-size 64 --levels 10 --horizon-levels 9
 fi
 camera=(--camera=-89.8,30,9000,210,-60,50 --sun-lat=-2.5 --sun-lon 75)
-# METHODS="dp;uniform;fourier constant" picks some (dp and uniform are needed for the ratios).
-IFS=';' read -r -a methods <<<"${METHODS:-dp;uniform;extrema;extrema-soft;fourier constant;fourier segment;fourier exact}"
+# METHODS="dp;uniform;uniform 400;fourier constant" picks some (dp and uniform, 100 steps, are
+# needed for the ratios); a second word is fourier's model, uniform's steps or dp's levels.
+IFS=';' read -r -a methods <<<"${METHODS:-dp;dp-jung;uniform;uniform 400;extrema;extrema-soft;fourier constant;fourier segment;fourier exact}"
 for size in "${sizes[@]}"; do
     for m in "${methods[@]}"; do
         set -- $m
         args=(--method "$1")
-        [ $# -gt 1 ] && args+=(--fourier-model "$2")
+        if [ $# -gt 1 ]; then
+            case "$1" in
+                fourier) args+=(--fourier-model "$2") ;;
+                uniform) args+=(--steps "$2") ;;
+                *) args+=(--dp-levels "$2") ;;
+            esac
+        fi
         tag="${m// /-}-$size"
         echo "+ $tag" >&2
         "$view" "$dir" --headless "${camera[@]}" "${args[@]}" --size "$size" --frames "$frames" \

@@ -141,6 +141,7 @@ fn every_method_matches_its_cpu_twin_on_the_scene() {
     }
     for (m, extra) in [
         ("uniform", &["--steps", "50"][..]),
+        ("dp-jung", &[][..]),
         ("extrema", &[][..]),
         ("extrema-soft", &[][..]),
         ("fourier", &[][..]),

@@ -235,6 +235,7 @@ fn compare_scene(gpu: &Gpu, dir: &Path, tile: TileId, scene: &str) {
         GpuMethod::Dp {
             runs: "5,5,5".parse().unwrap(),
         },
+        GpuMethod::DpJung { runs: Runs::Auto },
         GpuMethod::Uniform { steps: 64 },
         GpuMethod::Extrema,
         GpuMethod::ExtremaSoft,
@@ -265,7 +266,7 @@ fn compare_scene(gpu: &Gpu, dir: &Path, tile: TileId, scene: &str) {
             .prepare_tile(gpu, &store, tile, &sun, &methods[0], 512)
             .unwrap();
         let fourier = shadows
-            .prepare_tile(gpu, &store, tile, &sun, &methods[5], 512)
+            .prepare_tile(gpu, &store, tile, &sun, &methods[6], 512)
             .unwrap();
         let texels = interior(&trace);
         let mut exact_cpu = None;
@@ -656,6 +657,10 @@ fn method_names_parse() {
         GpuMethod::ExtremaSoft
     );
     assert!("fourier:disc".parse::<GpuMethod>().is_err());
+    assert_eq!(
+        "dp-jung:5,5,5".parse::<GpuMethod>().unwrap().label(),
+        "dp-jung 5,5,5"
+    );
     assert!("smap".parse::<GpuMethod>().is_err());
     assert!("uniform:0".parse::<GpuMethod>().is_err());
 }
