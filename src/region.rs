@@ -621,16 +621,7 @@ pub fn parse_path_csv(text: &str) -> Result<Vec<PathPoint>> {
 
 /// [`parse_path_csv`] of the file at `path` (a regular file of at most 256 MiB, UTF-8).
 pub fn read_path_csv(path: &Path) -> Result<Vec<PathPoint>> {
-    let bytes = crate::fsio::read_capped(path, MAX_PATH_FILE_BYTES, "a camera path CSV")?;
-    let text = std::str::from_utf8(&bytes).map_err(|e| {
-        Error::invalid(
-            path,
-            format!("not UTF-8 text ({e}): a camera path is a CSV text file"),
-        )
-    })?;
-    parse_path(text)
-        .map(points_of)
-        .map_err(|m| Error::invalid(path, m))
+    read_path_poses(path).map(points_of)
 }
 
 /// One row of a camera path with its optional view columns, for a viewer that flies it.

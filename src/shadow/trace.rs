@@ -705,6 +705,37 @@ impl<'a> Tracer<'a> {
         best
     }
 
+    /// The canonical DDA's texels of level `m` over s ∈ [sa, sb]: those under two points of the
+    /// interval only, each handed to `f` as (bound, s_in, s_out) with the part of the ray
+    /// inside it (not half of the interval, which may leave out the part of the texel where
+    /// its terrain is), which the next level searches.
+    fn dda_texels(
+        &self,
+        ray: &Ray,
+        m: usize,
+        sa: f64,
+        sb: f64,
+        work: &mut Work,
+        mut f: impl FnMut((f64, f64, f64)),
+    ) {
+        let q = (1u64 << m) as f64;
+        let mid = 0.5 * (sa + sb);
+        for p in [0.5 * (sa + mid), 0.5 * (mid + sb)] {
+            let (px, py) = (ray.x0 + p * ray.cx, ray.y0 + p * ray.cy);
+            if !(px >= 0.0 && py >= 0.0) {
+                continue;
+            }
+            // A point on the raster's far edge is in its last texel.
+            let l = &self.pyramid.levels[m];
+            let (tx, ty) = ((px / q) as i64, (py / q) as i64);
+            let (tx, ty) = (tx.min(l.w as i64 - 1), ty.min(l.h as i64 - 1));
+            let (hmax, _) = self.pyramid.get(m, tx, ty);
+            work.visits += 1;
+            let (s_in, s_out) = texel_span(ray, q, tx, ty, sa, sb, p);
+            f((self.max_slope(ray, s_in, s_out, hmax as f64), s_in, s_out));
+        }
+    }
+
     /// One run of Algorithm 1 over s ∈ [a, b] starting at level `m0` as Jung et al. publish
     /// it (`dp-jung`): returns the exact horizon slope over the finest cell chosen (or −∞ when
     /// no texel could beat `floor`).
@@ -724,28 +755,11 @@ impl<'a> Tracer<'a> {
             // The candidate with the largest bound.
             let mut cand = (floor, f64::NAN, f64::NAN);
             if dda {
-                // Canonical DDA: the texels under two points of the interval only; the part of
-                // the ray inside the chosen one (not half of the interval, which may leave out
-                // the part of the texel where its terrain is) is searched at the next level.
-                let q = (1u64 << m) as f64;
-                let mid = 0.5 * (sa + sb);
-                for p in [0.5 * (sa + mid), 0.5 * (mid + sb)] {
-                    let (px, py) = (ray.x0 + p * ray.cx, ray.y0 + p * ray.cy);
-                    if !(px >= 0.0 && py >= 0.0) {
-                        continue;
+                self.dda_texels(ray, m, sa, sb, work, |c| {
+                    if c.0 > cand.0 {
+                        cand = c;
                     }
-                    // A point on the raster's far edge is in its last texel.
-                    let l = &self.pyramid.levels[m];
-                    let (tx, ty) = ((px / q) as i64, (py / q) as i64);
-                    let (tx, ty) = (tx.min(l.w as i64 - 1), ty.min(l.h as i64 - 1));
-                    let (hmax, _) = self.pyramid.get(m, tx, ty);
-                    work.visits += 1;
-                    let (s_in, s_out) = texel_span(ray, q, tx, ty, sa, sb, p);
-                    let bound = self.max_slope(ray, s_in, s_out, hmax as f64);
-                    if bound > cand.0 {
-                        cand = (bound, s_in, s_out);
-                    }
-                }
+                });
             } else {
                 self.walk(ray, m, sa, sb, &mut |tx, ty, s_in, s_out| {
                     let (hmax, _) = self.pyramid.get(m, tx, ty);
@@ -831,26 +845,7 @@ impl<'a> Tracer<'a> {
                     nc = (nc + 1).min(cands.len());
                 };
                 if dda {
-                    // Canonical DDA: the texels under two points of the interval only; the part
-                    // of the ray inside the chosen one (not half of the interval, which may
-                    // leave out the part of the texel where its terrain is) is searched at the
-                    // next level.
-                    let q = (1u64 << m) as f64;
-                    let mid = 0.5 * (sa + sb);
-                    for p in [0.5 * (sa + mid), 0.5 * (mid + sb)] {
-                        let (px, py) = (ray.x0 + p * ray.cx, ray.y0 + p * ray.cy);
-                        if !(px >= 0.0 && py >= 0.0) {
-                            continue;
-                        }
-                        // A point on the raster's far edge is in its last texel.
-                        let l = &self.pyramid.levels[m];
-                        let (tx, ty) = ((px / q) as i64, (py / q) as i64);
-                        let (tx, ty) = (tx.min(l.w as i64 - 1), ty.min(l.h as i64 - 1));
-                        let (hmax, _) = self.pyramid.get(m, tx, ty);
-                        work.visits += 1;
-                        let (s_in, s_out) = texel_span(ray, q, tx, ty, sa, sb, p);
-                        keep((self.max_slope(ray, s_in, s_out, hmax as f64), s_in, s_out));
-                    }
+                    self.dda_texels(ray, m, sa, sb, work, &mut keep);
                 } else {
                     self.walk(ray, m, sa, sb, &mut |tx, ty, s_in, s_out| {
                         let (hmax, hmin) = self.pyramid.get(m, tx, ty);

@@ -108,23 +108,30 @@ pub struct NoShadows {
     pub wall_ms_median: f64,
 }
 
+/// What [`time_frames`] measured: per frame GPU ms (None without timestamps) and wall ms, and
+/// the drawn tiles of the last frame.
+struct Timed {
+    gpu_ms: Vec<Option<f64>>,
+    wall_ms: Vec<f64>,
+    tiles: Vec<penumbra::layout::TileId>,
+}
+
 /// Times `frames` renders after one untimed warm-up render (drivers such as lavapipe compile
-/// a pipeline's shaders at its first draw): per frame GPU ms (None without timestamps) and
-/// wall ms, and the drawn tiles of the last.
-fn time_frames(
-    core: &mut Core,
-    targets: &Targets,
-    frames: u32,
-) -> Result<(Vec<Option<f64>>, Vec<f64>, Vec<penumbra::layout::TileId>)> {
-    let (mut gpu_ms, mut wall_ms, mut tiles) = (Vec::new(), Vec::new(), Vec::new());
+/// a pipeline's shaders at its first draw).
+fn time_frames(core: &mut Core, targets: &Targets, frames: u32) -> Result<Timed> {
+    let mut t = Timed {
+        gpu_ms: Vec::new(),
+        wall_ms: Vec::new(),
+        tiles: Vec::new(),
+    };
     core.render(targets)?;
     for _ in 0..frames {
         let f = core.render(targets)?;
-        gpu_ms.push(f.time.gpu_ms);
-        wall_ms.push(f.time.wall_ms);
-        tiles = f.tiles;
+        t.gpu_ms.push(f.time.gpu_ms);
+        t.wall_ms.push(f.time.wall_ms);
+        t.tiles = f.tiles;
     }
-    Ok((gpu_ms, wall_ms, tiles))
+    Ok(t)
 }
 
 /// The median of the GPU times when every frame has one.
@@ -209,18 +216,22 @@ pub fn run(opts: &Options) -> Result<Report> {
     // The frame without shadows first, so that the targets hold the frame with them after.
     let no_shadows = if core.shadows_on {
         core.shadows_on = false;
-        let (g, w, _) = time_frames(&mut core, &targets, opts.frames)?;
+        let t = time_frames(&mut core, &targets, opts.frames)?;
         core.shadows_on = true;
         Some(NoShadows {
-            gpu_ms_median: gpu_median(&g),
-            wall_ms_median: median(&w),
-            gpu_ms: g,
-            wall_ms: w,
+            gpu_ms_median: gpu_median(&t.gpu_ms),
+            wall_ms_median: median(&t.wall_ms),
+            gpu_ms: t.gpu_ms,
+            wall_ms: t.wall_ms,
         })
     } else {
         None
     };
-    let (gpu_ms, wall_ms, tiles) = time_frames(&mut core, &targets, opts.frames)?;
+    let Timed {
+        gpu_ms,
+        wall_ms,
+        tiles,
+    } = time_frames(&mut core, &targets, opts.frames)?;
     let gpu_ms_median = gpu_median(&gpu_ms);
     let wall_ms_median = median(&wall_ms);
     let shadow_overhead_ms = no_shadows

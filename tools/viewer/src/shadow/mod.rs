@@ -633,34 +633,19 @@ impl TileShadow {
                 ShadowMethod::SMap => unreachable!("no GPU method's twin is the SMap"),
             },
         };
-        let inside = |p: &[i32; 2]| {
-            p[0] >= 0 && p[1] >= 0 && (p[0] as usize) < self.ctx.width && {
-                (p[1] as usize) < self.ctx.height
-            }
-        };
         match trace {
-            Some(m) => {
-                let mut slot = self.extrema.lock().unwrap_or_else(|e| e.into_inner());
-                let pyramid = slot.take().unwrap_or_else(|| Extrema::new(&self.ctx));
-                let tracer = Tracer {
-                    ctx: &self.ctx,
-                    pyramid,
-                    hmax: self.hmax,
-                    terrain_min_m: self.tmin_trace,
-                };
-                let out = texels
+            Some(m) => self.with_tracer(|tracer| {
+                texels
                     .par_iter()
                     .map(|p| {
-                        if !inside(p) {
+                        if !self.inside(p) {
                             return f64::NAN;
                         }
                         let mut work = Work::default();
                         tracer.lit(p[0] as usize, p[1] as usize, sun, &m, &mut work)
                     })
-                    .collect();
-                *slot = Some(tracer.pyramid);
-                out
-            }
+                    .collect()
+            }),
             None => {
                 let model = match method {
                     CpuTwin::Same(GpuMethod::Fourier { model }) => *model,
@@ -679,6 +664,32 @@ impl TileShadow {
     /// `penumbra-bench shadows`, by the same `Tracer::band_horizon`). False over no data and
     /// outside the raster.
     pub fn cpu_penumbral_many(&self, texels: &[[i32; 2]], sun: &Sun) -> Vec<bool> {
+        self.with_tracer(|tracer| {
+            texels
+                .par_iter()
+                .map(|p| {
+                    if !self.inside(p) {
+                        return false;
+                    }
+                    let (el, h) =
+                        tracer.band_horizon(p[0] as usize, p[1] as usize, sun, PENUMBRA_BAND_DEG);
+                    (el - h).abs() <= PENUMBRA_BAND_DEG
+                })
+                .collect()
+        })
+    }
+
+    /// Whether raster texel `p` lies inside the context raster.
+    fn inside(&self, p: &[i32; 2]) -> bool {
+        p[0] >= 0
+            && p[1] >= 0
+            && (p[0] as usize) < self.ctx.width
+            && (p[1] as usize) < self.ctx.height
+    }
+
+    /// Runs `f` with a [`Tracer`] over the tile's context raster, lending it the min/max
+    /// pyramid kept between calls (made on first use).
+    fn with_tracer<R>(&self, f: impl FnOnce(&Tracer) -> R) -> R {
         let mut slot = self.extrema.lock().unwrap_or_else(|e| e.into_inner());
         let pyramid = slot.take().unwrap_or_else(|| Extrema::new(&self.ctx));
         let tracer = Tracer {
@@ -687,21 +698,7 @@ impl TileShadow {
             hmax: self.hmax,
             terrain_min_m: self.tmin_trace,
         };
-        let out = texels
-            .par_iter()
-            .map(|p| {
-                let inside = p[0] >= 0
-                    && p[1] >= 0
-                    && (p[0] as usize) < self.ctx.width
-                    && (p[1] as usize) < self.ctx.height;
-                if !inside {
-                    return false;
-                }
-                let (el, h) =
-                    tracer.band_horizon(p[0] as usize, p[1] as usize, sun, PENUMBRA_BAND_DEG);
-                (el - h).abs() <= PENUMBRA_BAND_DEG
-            })
-            .collect();
+        let out = f(&tracer);
         *slot = Some(tracer.pyramid);
         out
     }
