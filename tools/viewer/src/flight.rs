@@ -30,88 +30,13 @@ use crate::camera::{local_az_el, norm, sub, Camera};
 use crate::core::Core;
 use crate::gpu::Gpu;
 use crate::headless::AdapterReport;
-use crate::options::{Args, Options};
+use crate::options::Options;
 use crate::output;
 use crate::render::{FrameTime, Targets};
 use crate::stream::Loader;
 
-/// The flight's flags (flattened into [`Args`]).
-#[derive(Clone, Debug, Default, clap::Args)]
-pub struct FlightArgs {
-    /// Fly a camera path, one frame per row, tiles loaded in the background: a CSV whose
-    /// header is lat_deg,lon_deg,height_m[,heading_deg,pitch_deg] (degrees, metres above
-    /// the reference sphere). Headless with --record DIR (frames and report), or in the
-    /// window.
-    #[arg(long)]
-    pub path: Option<PathBuf>,
-    /// With --headless --path: write the frames (frame_00000.png …) and report.json into this
-    /// folder (made if missing; files of the same names are replaced).
-    #[arg(long)]
-    pub record: Option<PathBuf>,
-    /// With --path: draw a frame only when every tile it chose is ready (complete,
-    /// reproducible frames; the wait is reported). Otherwise frames draw what is ready.
-    #[arg(long)]
-    pub wait_tiles: bool,
-    /// With --path: background threads that prepare tiles.
-    #[arg(long, default_value_t = 1)]
-    pub load_threads: usize,
-}
-
 /// Field of view of a flight's camera (degrees): the viewer's default.
 pub const FLIGHT_FOV_DEG: f64 = 45.0;
-
-/// Most loader threads.
-pub const MAX_LOAD_THREADS: usize = 64;
-
-/// Refuse flag combinations the flight does not take (from [`Options::resolve`]).
-pub fn check(args: &Args) -> Result<()> {
-    let f = &args.flight;
-    if f.path.is_none() {
-        for (set, flag) in [
-            (f.record.is_some(), "--record"),
-            (f.wait_tiles, "--wait-tiles"),
-            (f.load_threads != 1, "--load-threads"),
-        ] {
-            if set {
-                bail!("{flag} goes with --path FILE.csv (a camera path to fly)");
-            }
-        }
-        return Ok(());
-    }
-    if !(1..=MAX_LOAD_THREADS).contains(&f.load_threads) {
-        bail!(
-            "--load-threads {} is outside 1..={MAX_LOAD_THREADS}",
-            f.load_threads
-        );
-    }
-    for (set, flag, why) in [
-        (
-            args.camera.is_some(),
-            "--camera",
-            "the path sets the camera",
-        ),
-        (
-            args.frames.is_some(),
-            "--frames",
-            "a flight draws one frame per row of the path",
-        ),
-        (
-            args.out.is_some(),
-            "--out",
-            "a headless flight writes its frames with --record DIR",
-        ),
-        (args.lit.is_some(), "--lit", "not recorded along a path"),
-        (args.validate, "--validate", "validate single frames"),
-    ] {
-        if set {
-            bail!("{flag} does not go with --path: {why}");
-        }
-    }
-    if f.record.is_some() && !args.headless {
-        bail!("--record is for --headless flights; the window flies the path on screen");
-    }
-    Ok(())
-}
 
 /// The camera path of `path`, checked against the tileset in `store`: each row's camera,
 /// with the row's line. Errors (exit 2) name the file and the line.

@@ -10,7 +10,7 @@
 //! - [`lod`]: which tiles to draw (screen-space error, frustum and horizon culling).
 //! - [`mesh`]: a tile's displaced grid relative to its centre, skirts, per-texel normals.
 //! - [`scene`]: the tiles on the GPU (mesh, normals, albedo, shadow data), made on first use
-//!   or, when they stream, by background loaders ([`stream`]).
+//!   ([`maker`]) or, when they stream, by background loaders ([`stream`]).
 //! - [`render`]: the terrain pass, drawing [`render::GpuTile`]s (what the scene makes) into
 //!   colour, lit-fraction and texel-id targets, GPU timestamps, readback.
 //! - [`core`]: what the window and the headless mode share: one frame.
@@ -30,6 +30,7 @@ pub mod font;
 pub mod gpu;
 pub mod headless;
 pub mod lod;
+pub mod maker;
 pub mod mesh;
 pub mod options;
 pub mod output;

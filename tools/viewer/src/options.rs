@@ -113,7 +113,7 @@ pub struct Args {
     pub threads: Option<usize>,
     /// Flying a camera path (crate::flight).
     #[command(flatten)]
-    pub flight: crate::flight::FlightArgs,
+    pub flight: FlightArgs,
 }
 
 /// The camera as given.
@@ -237,6 +237,81 @@ pub fn parse_size(s: &str) -> Result<(u32, u32)> {
     Ok((w, h))
 }
 
+/// The flight's flags (flattened into [`Args`]).
+#[derive(Clone, Debug, Default, clap::Args)]
+pub struct FlightArgs {
+    /// Fly a camera path, one frame per row, tiles loaded in the background: a CSV whose
+    /// header is lat_deg,lon_deg,height_m[,heading_deg,pitch_deg] (degrees, metres above
+    /// the reference sphere). Headless with --record DIR (frames and report), or in the
+    /// window.
+    #[arg(long)]
+    pub path: Option<PathBuf>,
+    /// With --headless --path: write the frames (frame_00000.png …) and report.json into this
+    /// folder (made if missing; files of the same names are replaced).
+    #[arg(long)]
+    pub record: Option<PathBuf>,
+    /// With --path: draw a frame only when every tile it chose is ready (complete,
+    /// reproducible frames; the wait is reported). Otherwise frames draw what is ready.
+    #[arg(long)]
+    pub wait_tiles: bool,
+    /// With --path: background threads that prepare tiles.
+    #[arg(long, default_value_t = 1)]
+    pub load_threads: usize,
+}
+
+/// Most loader threads.
+pub const MAX_LOAD_THREADS: usize = 64;
+
+/// Refuse flag combinations the flight does not take (from [`Options::resolve`]).
+pub fn check_flight(args: &Args) -> Result<()> {
+    let f = &args.flight;
+    if f.path.is_none() {
+        for (set, flag) in [
+            (f.record.is_some(), "--record"),
+            (f.wait_tiles, "--wait-tiles"),
+            (f.load_threads != 1, "--load-threads"),
+        ] {
+            if set {
+                bail!("{flag} goes with --path FILE.csv (a camera path to fly)");
+            }
+        }
+        return Ok(());
+    }
+    if !(1..=MAX_LOAD_THREADS).contains(&f.load_threads) {
+        bail!(
+            "--load-threads {} is outside 1..={MAX_LOAD_THREADS}",
+            f.load_threads
+        );
+    }
+    for (set, flag, why) in [
+        (
+            args.camera.is_some(),
+            "--camera",
+            "the path sets the camera",
+        ),
+        (
+            args.frames.is_some(),
+            "--frames",
+            "a flight draws one frame per row of the path",
+        ),
+        (
+            args.out.is_some(),
+            "--out",
+            "a headless flight writes its frames with --record DIR",
+        ),
+        (args.lit.is_some(), "--lit", "not recorded along a path"),
+        (args.validate, "--validate", "validate single frames"),
+    ] {
+        if set {
+            bail!("{flag} does not go with --path: {why}");
+        }
+    }
+    if f.record.is_some() && !args.headless {
+        bail!("--record is for --headless flights; the window flies the path on screen");
+    }
+    Ok(())
+}
+
 impl Options {
     /// Check `args`.
     pub fn resolve(args: Args) -> Result<Options> {
@@ -290,7 +365,7 @@ impl Options {
         if args.diff.is_some() && !args.validate {
             bail!("--diff needs --validate");
         }
-        crate::flight::check(&args)?;
+        check_flight(&args)?;
         let frames = args.frames.unwrap_or(3);
         if !(1..=10_000).contains(&frames) {
             bail!("--frames {frames} is outside 1..=10000");

@@ -21,8 +21,8 @@ use anyhow::{anyhow, Result};
 use penumbra::layout::TileId;
 
 use crate::camera::SunPos;
+use crate::maker::TileMaker;
 use crate::render::GpuTile;
-use crate::scene::TileMaker;
 use crate::shadow::GpuMethod;
 
 /// A tile a loader finished (or failed to make), with what it was made for.
