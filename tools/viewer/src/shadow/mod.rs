@@ -625,16 +625,17 @@ impl TileShadow {
 
     /// [`TileShadow::cpu_lit`] at many texels, in parallel.
     pub fn cpu_lit_many(&self, texels: &[[i32; 2]], sun: &Sun, method: &CpuTwin) -> Vec<f64> {
+        // A ray-marching method, or the Fourier lookup with its disc model.
         let trace = match method {
-            CpuTwin::Reference => Some(Method::Reference),
+            CpuTwin::Reference => Ok(Method::Reference),
             CpuTwin::Same(m) => match m.cpu() {
-                ShadowMethod::Trace(t) => Some(t),
-                ShadowMethod::Horizon(..) => None,
+                ShadowMethod::Trace(t) => Ok(t),
+                ShadowMethod::Horizon(_, model) => Err(model),
                 ShadowMethod::SMap => unreachable!("no GPU method's twin is the SMap"),
             },
         };
         match trace {
-            Some(m) => self.with_tracer(|tracer| {
+            Ok(m) => self.with_tracer(|tracer| {
                 texels
                     .par_iter()
                     .map(|p| {
@@ -646,16 +647,10 @@ impl TileShadow {
                     })
                     .collect()
             }),
-            None => {
-                let model = match method {
-                    CpuTwin::Same(GpuMethod::Fourier { model }) => *model,
-                    _ => Model::Exact,
-                };
-                texels
-                    .par_iter()
-                    .map(|p| self.cpu_fourier(p[0] as i64, p[1] as i64, sun, model))
-                    .collect()
-            }
+            Err(model) => texels
+                .par_iter()
+                .map(|p| self.cpu_fourier(p[0] as i64, p[1] as i64, sun, model))
+                .collect(),
         }
     }
 
