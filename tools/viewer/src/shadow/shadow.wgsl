@@ -240,21 +240,30 @@ fn sh_bilinear_rel(xi_: f32, yi_: f32, h0: f32) -> f32 {
     let yi = i32(fy0);
     let fx = x - fx0;
     let fy = y - fy0;
+    let w00 = (1.0 - fx) * (1.0 - fy);
+    let w10 = fx * (1.0 - fy);
+    let w01 = (1.0 - fx) * fy;
+    let w11 = fx * fy;
+    let h00 = sh_height(xi, yi);
+    let h10 = sh_height(xi + 1, yi);
+    let h01 = sh_height(xi, yi + 1);
+    let h11 = sh_height(xi + 1, yi + 1);
+    if sh_valid(h00) && sh_valid(h10) && sh_valid(h01) && sh_valid(h11) {
+        // All four taps hold terrain (the common case): the sums below, straight.
+        let acc = w00 * (h00 - h0) + w10 * (h10 - h0) + w01 * (h01 - h0) + w11 * (h11 - h0);
+        return acc / (w00 + w10 + w01 + w11);
+    }
+    // A tap without terrain, or outside the raster with no weight: left out.
     var acc = 0.0;
     var wsum = 0.0;
-    let ws = array<f32, 4>((1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy);
-    let dx = array<i32, 4>(0, 1, 0, 1);
-    let dy = array<i32, 4>(0, 0, 1, 1);
+    let ws = array<f32, 4>(w00, w10, w01, w11);
+    let hs = array<f32, 4>(h00, h10, h01, h11);
     for (var k = 0; k < 4; k++) {
         let w = ws[k];
-        if w == 0.0 {
+        if w == 0.0 || !sh_valid(hs[k]) {
             continue;
         }
-        let v = sh_height(xi + dx[k], yi + dy[k]);
-        if !sh_valid(v) {
-            continue;
-        }
-        acc += w * (v - h0);
+        acc += w * (hs[k] - h0);
         wsum += w;
     }
     if wsum > 0.0 {
@@ -358,6 +367,43 @@ fn sh_max_over(ray: ShRay, s_from: f32, s_to: f32, floor_: f32) -> f32 {
         s = s_next;
         sh_advance(&ax, s);
         sh_advance(&ay, s);
+    }
+    return best;
+}
+
+// The largest slope over s in [sa, sb], a stretch of the ray inside one cell (a level-0 texel
+// of the min/max pyramid): sh_max_over's work for that cell without its walk. The cell is the
+// one under the stretch's middle; one without terrain at a corner goes to sh_max_over.
+fn sh_cell_max(ray: ShRay, sa: f32, sb: f32) -> f32 {
+    let mid = 0.5 * (sa + sb);
+    let ix = clamp(i32(floor(ray.x0 + mid * ray.cx)), 0, shadow_params.raster.z - 2);
+    let iy = clamp(i32(floor(ray.y0 + mid * ray.cy)), 0, shadow_params.raster.w - 2);
+    let h00 = sh_height(ix, iy);
+    let h10 = sh_height(ix + 1, iy);
+    let h01 = sh_height(ix, iy + 1);
+    let h11 = sh_height(ix + 1, iy + 1);
+    if !(sh_valid(h00) && sh_valid(h10) && sh_valid(h01) && sh_valid(h11)) {
+        return sh_max_over(ray, sa, sb, SH_NEG);
+    }
+    let r00 = h00 - ray.h0;
+    let a = h10 - h00;
+    let b = h01 - h00;
+    let c = (h11 - h10) - (h01 - h00);
+    let ex = ray.x0 - f32(ix);
+    let ey = ray.y0 - f32(iy);
+    let c0 = r00 + a * ex + b * ey + c * ex * ey;
+    let c1 = a * ray.cx + b * ray.cy + c * (ex * ray.cy + ey * ray.cx);
+    let c2 = c * ray.cx * ray.cy;
+    var best = sh_slope_rel(ray, sb, c0 + sb * (c1 + sb * c2));
+    if sa > 0.0 {
+        best = max(best, sh_slope_rel(ray, sa, c0 + sa * (c1 + sa * c2)));
+    }
+    let cc = c2 - ray.kappa;
+    if c0 != 0.0 && cc != 0.0 && c0 / cc > 0.0 {
+        let st = sqrt(c0 / cc);
+        if st > sa && st < sb {
+            best = max(best, sh_slope_rel(ray, st, c0 + st * (c1 + st * c2)));
+        }
     }
     return best;
 }
@@ -520,6 +566,147 @@ fn sh_walk_next(w: ptr<function, ShWalker>) -> ShTexel {
 }
 
 // ---------------------------------------------------------------------------------------------
+// The exact search over the min/max pyramid, without a stack: a texel is named by its level and
+// index, its children and parent by integer arithmetic, so that a lane's whole state is a few
+// scalars (on lavapipe a stack of walkers in private memory doubled the cost of every step).
+
+// Inverse of a direction component (0 for a component that is 0).
+fn sh_inv(c: f32) -> f32 {
+    if c == 0.0 {
+        return 0.0;
+    }
+    return 1.0 / c;
+}
+
+// Distance at which the ray leaves [i·q, (i+1)·q) along one axis (SH_BIG: never).
+fn sh_leave(x0: f32, c: f32, ic: f32, i: i32, q: f32) -> f32 {
+    if c > 0.0 {
+        return (f32(i + 1) * q - x0) * ic;
+    }
+    if c < 0.0 {
+        return (f32(i) * q - x0) * ic;
+    }
+    return SH_BIG;
+}
+
+// Index (along one axis) of the child of texel i (children of size h) that the ray is in at
+// coordinate x, moving by c: on their boundary, the one it moves into (c = 0: the upper one, as
+// floor).
+fn sh_child(i: i32, x: f32, c: f32, h: f32) -> i32 {
+    let mid = f32(2 * i + 1) * h;
+    if x > mid || (x == mid && c >= 0.0) {
+        return 2 * i + 1;
+    }
+    return 2 * i;
+}
+
+// The ray's stretch (s_in, s_out) inside [lo_edge, lo_edge + q) along one axis; for a ray
+// without motion along it, everything or nothing.
+fn sh_slab(x0: f32, c: f32, ic: f32, lo_edge: f32, q: f32) -> vec2<f32> {
+    if c == 0.0 {
+        if x0 >= lo_edge && x0 < lo_edge + q {
+            return vec2<f32>(-SH_BIG, SH_BIG);
+        }
+        return vec2<f32>(SH_BIG, -SH_BIG);
+    }
+    let t1 = (lo_edge - x0) * ic;
+    let t2 = (lo_edge + q - x0) * ic;
+    return vec2<f32>(min(t1, t2), max(t1, t2));
+}
+
+// The exact horizon slope over s in [sa, sb], searched from the level whose texels are about as
+// long as the stretch (two or three of them under it) down: a texel whose
+// bound cannot rise above max(best, lo) is passed whole; one that can is entered, down to its
+// cells, searched exactly (sh_cell_max). Stops once the slope reaches hi (the disc's top); a
+// texel whose lowest terrain reaches hi ends it with that terrain's slope. Returns the largest
+// of `best` and what it found.
+fn sh_search(ray: ShRay, sa: f32, sb: f32, best_in: f32, lo: f32, hi: f32) -> f32 {
+    var best = best_in;
+    if best >= hi || !(sa < sb) {
+        return best;
+    }
+    let icx = sh_inv(ray.cx);
+    let icy = sh_inv(ray.cy);
+    let stx = i32(sign(ray.cx));
+    let sty = i32(sign(ray.cy));
+    let top = shadow_params.method.z - 1;
+    let major = max(abs(ray.cx), abs(ray.cy));
+    var m = min(i32(firstLeadingBit(u32(max((sb - sa) * major, 1.0)))), top);
+    var q = f32(1 << u32(m));
+    var s = sa;
+    let x = ray.x0 + sa * ray.cx;
+    let y = ray.y0 + sa * ray.cy;
+    if !(x >= 0.0 && y >= 0.0) {
+        return best;
+    }
+    var ix = sh_axis(x / q, ray.cx / q, sa).i;
+    var iy = sh_axis(y / q, ray.cy / q, sa).i;
+    let l0 = shadow_params.levels[m];
+    if ray.cx == 0.0 && ix == l0.z {
+        ix -= 1;
+    }
+    if ray.cy == 0.0 && iy == l0.w {
+        iy -= 1;
+    }
+    for (var guard = 0; guard < 1000000; guard++) {
+        if !(s < sb) {
+            break;
+        }
+        let l = shadow_params.levels[m];
+        if ix < 0 || iy < 0 || ix >= l.z || iy >= l.w {
+            break;
+        }
+        let ex = sh_leave(ray.x0, ray.cx, icx, ix, q);
+        let ey = sh_leave(ray.y0, ray.cy, icy, iy, q);
+        let s_out = max(min(min(ex, ey), sb), s);
+        let e = textureLoad(shadow_extrema, vec2<i32>(l.x + ix, l.y + iy), 0).xy;
+        if sh_max_slope(ray, s, s_out, e.x) > max(best, lo) {
+            if e.y > SH_NODATA {
+                let low = sh_max_slope(ray, s, s_out, e.y);
+                if low >= hi {
+                    best = max(best, low);
+                    break;
+                }
+            }
+            if m > 0 {
+                // Into the child the ray is in at s.
+                m -= 1;
+                q *= 0.5;
+                ix = sh_child(ix, ray.x0 + s * ray.cx, ray.cx, q);
+                iy = sh_child(iy, ray.y0 + s * ray.cy, ray.cy, q);
+                continue;
+            }
+            best = max(best, sh_cell_max(ray, s, s_out));
+            if best >= hi {
+                break;
+            }
+        }
+        // On to the next texel of this level, and up as many levels as the step left parents.
+        s = s_out;
+        var ox = ix;
+        var oy = iy;
+        if ex <= ey {
+            ix += stx;
+        }
+        if ey <= ex {
+            iy += sty;
+        }
+        for (var u = 0; u < 16; u++) {
+            if m >= top || ((ix >> 1u) == (ox >> 1u) && (iy >> 1u) == (oy >> 1u)) {
+                break;
+            }
+            m += 1;
+            q *= 2.0;
+            ix = ix >> 1u;
+            iy = iy >> 1u;
+            ox = ox >> 1u;
+            oy = oy >> 1u;
+        }
+    }
+    return best;
+}
+
+// ---------------------------------------------------------------------------------------------
 // The methods.
 
 fn sh_uniform(ray: ShRay, steps: i32, lo: f32) -> f32 {
@@ -535,156 +722,88 @@ fn sh_uniform(ray: ShRay, steps: i32, lo: f32) -> f32 {
     return best;
 }
 
-// One run of Jung et al.'s Algorithm 1 over s in [a, b] from level m0, refined as the CPU's
-// dp_run: the runners-up of every level wait on a stack (the weakest deepest; a full stack,
-// which the 3-texel rule never fills, drops them) and, once the descent has searched its cell exactly, those whose bound still beats the
-// best found are descended into in turn, until none is left or the best reaches hi (the disc's
-// top); a texel whose lowest terrain reaches hi ends the search with that terrain's slope.
-const SH_DP_STACK: i32 = 40;
-
-fn sh_dp_run(ray: ShRay, a: f32, b: f32, m0: i32, floor_: f32, hi: f32) -> f32 {
-    var st_m: array<i32, SH_DP_STACK>;
-    var st_a: array<f32, SH_DP_STACK>;
-    var st_b: array<f32, SH_DP_STACK>;
-    var st_c: array<f32, SH_DP_STACK>;
-    st_m[0] = m0 + 1;
-    st_a[0] = a;
-    st_b[0] = b;
-    st_c[0] = SH_BIG;
-    var depth = 1;
-    var best = SH_NEG;
-    for (var g = 0; g < 1000000; g++) {
-        if depth <= 0 {
-            break;
-        }
-        depth -= 1;
-        let d = depth;
-        let m1 = st_m[d];
-        let sa0 = st_a[d];
-        let sb0 = st_b[d];
-        if st_c[d] <= max(best, floor_) {
-            continue;
-        }
-        if m1 == 0 {
-            // A cell passed over at the finest level: searched exactly.
-            best = max(best, sh_max_over(ray, sa0, sb0, SH_NEG));
-            if best >= hi {
-                break;
-            }
-            continue;
-        }
-        var sa = sa0;
-        var sb = sb0;
-        for (var m = m1 - 1; m >= 0; m--) {
-            let thr = max(best, floor_);
-            // The candidates, the largest bound first (the first along the ray among equals).
-            var cb: array<f32, 4>;
-            var ca: array<f32, 4>;
-            var cz: array<f32, 4>;
-            var nc = 0;
-            var hidden = SH_NEG;
-            var w = sh_walker(ray, m, sa, sb);
-            for (var guard = 0; guard < 100000; guard++) {
-                let t = sh_walk_next(&w);
-                if !t.ok {
-                    break;
-                }
-                let e = sh_extrema(m, t.tx, t.ty);
-                let bound = sh_max_slope(ray, t.s_in, t.s_out, e.x);
-                if bound >= hi && e.y > SH_NODATA {
-                    let low = sh_max_slope(ray, t.s_in, t.s_out, e.y);
-                    if low >= hi {
-                        hidden = low;
-                        break;
-                    }
-                }
-                if bound <= thr || (nc == 4 && bound <= cb[3]) {
-                    continue;
-                }
-                var k = min(nc, 3);
-                for (var q = 0; q < 4; q++) {
-                    if k == 0 || cb[k - 1] >= bound {
-                        break;
-                    }
-                    cb[k] = cb[k - 1];
-                    ca[k] = ca[k - 1];
-                    cz[k] = cz[k - 1];
-                    k -= 1;
-                }
-                cb[k] = bound;
-                ca[k] = t.s_in;
-                cz[k] = t.s_out;
-                nc = min(nc + 1, 4);
-            }
-            if hidden > SH_NEG {
-                return max(best, hidden);
-            }
-            if nc == 0 {
-                break;
-            }
-            for (var k = nc - 1; k >= 1; k--) {
-                if depth < SH_DP_STACK {
-                    let e = depth;
-                    st_m[e] = m;
-                    st_a[e] = ca[k];
-                    st_b[e] = cz[k];
-                    st_c[e] = cb[k];
-                    depth += 1;
-                }
-            }
-            sa = ca[0];
-            sb = cz[0];
-            if m == 0 {
-                best = max(best, sh_max_over(ray, sa, sb, SH_NEG));
-            }
-        }
-        if best >= hi {
-            break;
-        }
-    }
-    return best;
-}
-
 // Jung et al.'s DP as published (the CPU's Method::JungDp, `dp-jung`): at each level the one
 // texel of largest bound among those under the ray, no return to the others. x: the run's
 // horizon slope (SH_NEG when no texel beats floor_); y: the largest bound among the texels it
 // passed over (SH_NEG: none), which tells `dp` whether the run's answer is already exact.
 fn sh_dp_jung_run(ray: ShRay, a: f32, b: f32, m0: i32, floor_: f32) -> vec2<f32> {
-    var sa = a;
-    var sb = b;
     var passed = SH_NEG;
+    let icx = sh_inv(ray.cx);
+    let icy = sh_inv(ray.cy);
+    // A ray along a column or row on the raster's far edge is in the last cells (as the walk).
+    let xc = min(ray.x0, f32(shadow_params.raster.z) - 1.5);
+    let yc = min(ray.y0, f32(shadow_params.raster.w) - 1.5);
+    // Level m0: the run's stretch is one texel long along the ray's major axis, so the texels
+    // under it are the one it starts in and its neighbours ahead in x, in y and in both.
+    let q0 = f32(1 << u32(m0));
+    let x = ray.x0 + a * ray.cx;
+    let y = ray.y0 + a * ray.cy;
+    if !(x >= 0.0 && y >= 0.0) {
+        return vec2<f32>(SH_NEG, passed);
+    }
+    var bx = sh_axis(x / q0, ray.cx / q0, a).i;
+    var by = sh_axis(y / q0, ray.cy / q0, a).i;
+    let dx = i32(sign(ray.cx));
+    let dy = i32(sign(ray.cy));
+    // Each level: the (up to three) texels of a 2×2 block the ray crosses over [ca, cz], in
+    // straight-line code instead of a walk (Jung et al.'s own formulation): the same texels and
+    // spans as the walk's, the first along the ray among equal bounds. Below m0 the block is
+    // the children of the texel chosen.
+    var ca = a;
+    var cz = b;
+    var tx = bx;
+    var ty = by;
+    var sx = dx;
+    var sy = dy;
     for (var m = m0; m >= 0; m--) {
-        var cb = floor_;
-        var found = false;
-        var ca = 0.0;
-        var cz = 0.0;
-        var w = sh_walker(ray, m, sa, sb);
-        for (var guard = 0; guard < 100000; guard++) {
-            let t = sh_walk_next(&w);
-            if !t.ok {
-                break;
+        let q = f32(1 << u32(m));
+        let l = shadow_params.levels[m];
+        var nb = floor_;
+        var nfound = false;
+        var na = 0.0;
+        var nz = 0.0;
+        var nx = 0;
+        var ny = 0;
+        for (var k = 0; k < 4; k++) {
+            let cx = tx + (k & 1) * sx;
+            let cy = ty + (k >> 1u) * sy;
+            if (k & 1) == 1 && sx == 0 || (k >> 1u) == 1 && sy == 0 {
+                continue;
             }
-            let hmax = sh_extrema(m, t.tx, t.ty).x;
-            let bound = sh_max_slope(ray, t.s_in, t.s_out, hmax);
-            if bound > cb {
-                if found {
-                    passed = max(passed, cb);
+            let spx = sh_slab(xc, ray.cx, icx, f32(cx) * q, q);
+            let spy = sh_slab(yc, ray.cy, icy, f32(cy) * q, q);
+            let s_in = max(max(spx.x, spy.x), ca);
+            let s_out = min(min(spx.y, spy.y), cz);
+            if !(s_out > s_in) || cx < 0 || cy < 0 || cx >= l.z || cy >= l.w {
+                continue;
+            }
+            let hmax = textureLoad(shadow_extrema, vec2<i32>(l.x + cx, l.y + cy), 0).x;
+            let bound = sh_max_slope(ray, s_in, s_out, hmax);
+            if bound > nb || (nfound && bound == nb && s_in < na) {
+                if nfound {
+                    passed = max(passed, nb);
                 }
-                cb = bound;
-                ca = t.s_in;
-                cz = t.s_out;
-                found = true;
+                nb = bound;
+                na = s_in;
+                nz = s_out;
+                nx = cx;
+                ny = cy;
+                nfound = true;
             } else {
                 passed = max(passed, bound);
             }
         }
-        if !found {
+        if !nfound {
             return vec2<f32>(SH_NEG, passed);
         }
-        sa = ca;
-        sb = cz;
+        ca = na;
+        cz = nz;
+        tx = 2 * nx;
+        ty = 2 * ny;
+        sx = 1;
+        sy = 1;
     }
-    return vec2<f32>(sh_max_over(ray, sa, sb, SH_NEG), passed);
+    return vec2<f32>(sh_cell_max(ray, ca, cz), passed);
 }
 
 fn sh_dp(ray: ShRay, x: i32, y: i32, phi: f32, lo: f32, hi: f32, jung: bool) -> f32 {
@@ -695,6 +814,11 @@ fn sh_dp(ray: ShRay, x: i32, y: i32, phi: f32, lo: f32, hi: f32, jung: bool) -> 
     let top = p.method.z - 1;
     let nruns = p.method.y;
     var a = SH_NEAR_PX;
+    // The largest bound among the texels the descents passed over that could beat what their
+    // run found, and the stretch [first, to] of those runs.
+    var passed = SH_NEG;
+    var first = -1.0;
+    var to = 0.0;
     for (var k = 0; k <= 4096; k++) {
         if a >= end || best >= hi {
             break;
@@ -712,17 +836,25 @@ fn sh_dp(ray: ShRay, x: i32, y: i32, phi: f32, lo: f32, hi: f32, jung: bool) -> 
         let m0 = min(levels - 1, top);
         let len = f32(1 << u32(m0)) / major;
         let b = a + len;
-        // Jung's descent first, scalars only; `dp` refines (sh_dp_run, with its stack of
-        // texels) only a run where a texel the descent passed over could still beat what it
-        // found: elsewhere the descent's answer is already the exact one.
         let fl = max(best, lo);
         let r = sh_dp_jung_run(ray, a, min(b, end), m0, fl);
-        if jung || r.y <= max(r.x, fl) || r.x >= hi {
-            best = max(best, r.x);
-        } else {
-            best = max(best, sh_dp_run(ray, a, min(b, end), m0, fl, hi));
+        if r.y > max(r.x, fl) {
+            // A texel this run passed over could beat what it found.
+            passed = max(passed, r.y);
+            if first < 0.0 {
+                first = a;
+            }
+            to = min(b, end);
         }
+        best = max(best, r.x);
         a = b;
+    }
+    // `dp`: where a texel some descent passed over could still rise above the best the runs
+    // found, one exact search over those runs' stretch,
+    // passing every texel that cannot (sh_search; the CPU's dp refines run by run, with a stack
+    // of the texels passed over: the same exact answer). Elsewhere the runs' answer is exact.
+    if !jung && passed > max(best, lo) && best < hi {
+        best = sh_search(ray, first, to, best, lo, hi);
     }
     return best;
 }
@@ -736,43 +868,9 @@ fn sh_extrema_dark(ray: ShRay, x: i32, y: i32, phi: f32, t: f32) -> bool {
     if end <= SH_NEAR_PX {
         return false;
     }
-    let top = min(shadow_params.method.z - 1, 7);
-    // One walk per level, the finer ones nested in the texel the coarser one is at.
-    var stack: array<ShWalker, 8>;
-    stack[top] = sh_walker(ray, top, SH_NEAR_PX, end);
-    var cur = top;
-    var dark = false;
-    for (var guard = 0; guard < 10000000; guard++) {
-        let m = cur;
-        var w = stack[m];
-        let tex = sh_walk_next(&w);
-        stack[m] = w;
-        if !tex.ok {
-            if m == top {
-                break;
-            }
-            cur = m + 1;
-            continue;
-        }
-        let e = sh_extrema(m, tex.tx, tex.ty);
-        if sh_max_slope(ray, tex.s_in, tex.s_out, e.x) < t {
-            continue;
-        }
-        if e.y > SH_NODATA && sh_max_slope(ray, tex.s_in, tex.s_out, e.y) >= t {
-            dark = true;
-            break;
-        }
-        if m == 0 {
-            if sh_max_over(ray, tex.s_in, tex.s_out, SH_NEG) >= t {
-                dark = true;
-                break;
-            }
-            continue;
-        }
-        stack[m - 1] = sh_walker(ray, m - 1, tex.s_in, tex.s_out);
-        cur = m - 1;
-    }
-    return dark;
+    // Texels whose highest terrain stays below t are passed, one whose lowest reaches it ends
+    // the walk, cells are searched exactly.
+    return sh_search(ray, SH_NEAR_PX, end, SH_NEG, t, t) >= t;
 }
 
 // The min/max traversal as a soft method (the CPU's extrema_soft): the exact horizon slope in
@@ -780,7 +878,7 @@ fn sh_extrema_dark(ray: ShRay, x: i32, y: i32, phi: f32, t: f32) -> bool {
 // up to hi (anything higher hides it). Texels that cannot rise above the best slope found or
 // lo are skipped; the walk stops once a texel hides the disc's top.
 fn sh_extrema_soft(ray: ShRay, x: i32, y: i32, phi: f32, lo: f32, hi: f32) -> f32 {
-    var best = sh_near(ray, x, y, phi);
+    let best = sh_near(ray, x, y, phi);
     if best >= hi {
         return best;
     }
@@ -788,41 +886,7 @@ fn sh_extrema_soft(ray: ShRay, x: i32, y: i32, phi: f32, lo: f32, hi: f32) -> f3
     if end <= SH_NEAR_PX {
         return best;
     }
-    let top = min(shadow_params.method.z - 1, 7);
-    var stack: array<ShWalker, 8>;
-    stack[top] = sh_walker(ray, top, SH_NEAR_PX, end);
-    var cur = top;
-    for (var guard = 0; guard < 10000000; guard++) {
-        let m = cur;
-        var w = stack[m];
-        let tex = sh_walk_next(&w);
-        stack[m] = w;
-        if !tex.ok {
-            if m == top {
-                break;
-            }
-            cur = m + 1;
-            continue;
-        }
-        let e = sh_extrema(m, tex.tx, tex.ty);
-        if sh_max_slope(ray, tex.s_in, tex.s_out, e.x) <= max(best, lo) {
-            continue;
-        }
-        if e.y > SH_NODATA && sh_max_slope(ray, tex.s_in, tex.s_out, e.y) >= hi {
-            best = max(best, hi);
-            break;
-        }
-        if m == 0 {
-            best = sh_max_over(ray, tex.s_in, tex.s_out, best);
-            if best >= hi {
-                break;
-            }
-            continue;
-        }
-        stack[m - 1] = sh_walker(ray, m - 1, tex.s_in, tex.s_out);
-        cur = m - 1;
-    }
-    return best;
+    return sh_search(ray, SH_NEAR_PX, end, best, lo, hi);
 }
 
 // Jung et al.'s disc occlusion: a horizon of slope a (floored) hides the segment below it.
