@@ -5,15 +5,23 @@
 #   tools/golden/run.sh record   # write tools/golden/hashes.txt (before a refactor)
 #   tools/golden/run.sh check    # compare against it (after); exit 1 on any difference
 #
-# Uses target/release/penumbra (built here) and ../shared/data. A tileset's manifest records the
-# source paths it was given, so the script always runs from the repository root with the same
-# relative paths. The bookkeeping folder .penumbra/ (locks, indexes) is not output and is left out.
+# Uses target/release/penumbra (built here), or the binary named by PENUMBRA_BIN (CI passes the
+# debug build its tests made: the outputs are the same bytes whatever the optimisation level,
+# and that saves CI a release build of every crate), and ../shared/data. A tileset's manifest
+# records the source paths it was given, so the script always runs from the repository root
+# with the same relative paths. The bookkeeping folder .penumbra/ (locks, indexes) is not output
+# and is left out.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 mode=${1:-check}
 data=../shared/data
-bin=target/release/penumbra
-cargo build --release --locked --quiet -p penumbra-cli
+bin=${PENUMBRA_BIN:-target/release/penumbra}
+if [ -z "${PENUMBRA_BIN:-}" ]; then
+  cargo build --release --locked --quiet -p penumbra-cli
+elif [ ! -x "$bin" ]; then
+  echo "golden: PENUMBRA_BIN=$bin is not an executable; build it first (cargo build -p penumbra-cli)" >&2
+  exit 2
+fi
 work=target/golden
 rm -rf "$work"
 mkdir -p "$work"
