@@ -681,26 +681,22 @@ fn sh_search(ray: ShRay, sa: f32, sb: f32, best_in: f32, lo: f32, hi: f32) -> f3
                 break;
             }
         }
-        // On to the next texel of this level, and up as many levels as the step left parents.
+        // On to the next texel of this level, and up a level where the step left the parent
+        // (one level per step: a loop climbing further cost more on lavapipe than it saved).
         s = s_out;
-        var ox = ix;
-        var oy = iy;
+        let ox = ix;
+        let oy = iy;
         if ex <= ey {
             ix += stx;
         }
         if ey <= ex {
             iy += sty;
         }
-        for (var u = 0; u < 16; u++) {
-            if m >= top || ((ix >> 1u) == (ox >> 1u) && (iy >> 1u) == (oy >> 1u)) {
-                break;
-            }
+        if m < top && ((ix >> 1u) != (ox >> 1u) || (iy >> 1u) != (oy >> 1u)) {
             m += 1;
             q *= 2.0;
             ix = ix >> 1u;
             iy = iy >> 1u;
-            ox = ox >> 1u;
-            oy = oy >> 1u;
         }
     }
     return best;
