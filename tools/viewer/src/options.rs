@@ -46,6 +46,8 @@ pub struct Args {
     /// DP levels per run (`auto`, or a list such as 5,5,5).
     #[arg(long, default_value = "auto")]
     pub dp_levels: String,
+    // The brackets are the help text's (clap shows this comment), not links.
+    #[allow(rustdoc::broken_intra_doc_links)]
     /// Camera: LAT,LON,ALT[,HEADING[,PITCH[,FOV]]] — eye latitude and longitude (degrees),
     /// height above the reference sphere (m), compass heading, pitch above the horizontal
     /// (−90 looks straight down) and vertical field of view (degrees). Default: above the
@@ -240,6 +242,8 @@ pub fn parse_size(s: &str) -> Result<(u32, u32)> {
 /// The flight's flags (flattened into [`Args`]).
 #[derive(Clone, Debug, Default, clap::Args)]
 pub struct FlightArgs {
+    // The brackets are the help text's (clap shows this comment), not links.
+    #[allow(rustdoc::broken_intra_doc_links)]
     /// Fly a camera path, one frame per row, tiles loaded in the background: a CSV whose
     /// header is lat_deg,lon_deg,height_m[,heading_deg,pitch_deg] (degrees, metres above
     /// the reference sphere). Headless with --record DIR (frames and report), or in the

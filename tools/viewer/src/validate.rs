@@ -1,8 +1,9 @@
 /*!
 `--validate`: the GPU's lit fractions against the CPU at exactly the texels a headless frame
 shows. The id target says which tile texel each pixel shows; each distinct texel is evaluated
-once on the CPU (in parallel, tile by tile) by the CPU twin of the same method and by the exact `reference`
-([`TileShadow::cpu_lit`]), and every pixel is compared with its texel's CPU values.
+once on the CPU (in parallel, tile by tile) by the CPU twin of the same method and by the exact
+`reference` ([`TileShadow::cpu_lit`](crate::shadow::TileShadow::cpu_lit)), and every pixel is
+compared with its texel's CPU values.
 
 Numbers (over the pixels that show terrain): the mean and largest absolute lit-fraction
 error, and PER, the share of pixels whose lit/unlit decision at 0.5 differs (as
