@@ -313,6 +313,34 @@ fn sh_advance(a: ptr<function, ShAxis>, s: f32) {
     }
 }
 
+// Cell (ix, iy)'s bilinear surface along the ray, relative to the observer: height c0 + s·c1 +
+// s²·c2 at distance s, from its corners h = (h00, h10, h01, h11).
+fn sh_cell_line(ray: ShRay, ix: i32, iy: i32, h: vec4<f32>) -> vec3<f32> {
+    let r00 = h.x - ray.h0;
+    let a = h.y - h.x;
+    let b = h.z - h.x;
+    let c = (h.w - h.y) - (h.z - h.x);
+    let ex = ray.x0 - f32(ix);
+    let ey = ray.y0 - f32(iy);
+    let c0 = r00 + a * ex + b * ey + c * ex * ey;
+    let c1 = a * ray.cx + b * ray.cy + c * (ex * ray.cy + ey * ray.cx);
+    return vec3<f32>(c0, c1, c * ray.cx * ray.cy);
+}
+
+// The slope at the stationary point of that line's slope strictly inside (s0, s1) (SH_NEG when
+// there is none): with the curvature drop κ·s², the slope (c0 + c1·s + (c2 − κ)·s²)/s is
+// stationary at s = √(c0 / (c2 − κ)).
+fn sh_cell_peak(ray: ShRay, c: vec3<f32>, s0: f32, s1: f32) -> f32 {
+    let cc = c.z - ray.kappa;
+    if c.x != 0.0 && cc != 0.0 && c.x / cc > 0.0 {
+        let st = sqrt(c.x / cc);
+        if st > s0 && st < s1 {
+            return sh_slope_rel(ray, st, c.x + st * (c.y + st * c.z));
+        }
+    }
+    return SH_NEG;
+}
+
 // The largest slope over the continuous bilinear surface along the ray for s in
 // [s_from, s_to], cell by cell (the CPU's Ray::max_over).
 fn sh_max_over(ray: ShRay, s_from: f32, s_to: f32, floor_: f32) -> f32 {
@@ -344,23 +372,9 @@ fn sh_max_over(ray: ShRay, s_from: f32, s_to: f32, floor_: f32) -> f32 {
         let h01 = sh_height(ix, iy + 1);
         let h11 = sh_height(ix + 1, iy + 1);
         if sh_valid(h00) && sh_valid(h10) && sh_valid(h01) && sh_valid(h11) {
-            let r00 = h00 - ray.h0;
-            let a = h10 - h00;
-            let b = h01 - h00;
-            let c = (h11 - h10) - (h01 - h00);
-            let ex = ray.x0 - f32(ix);
-            let ey = ray.y0 - f32(iy);
-            let c0 = r00 + a * ex + b * ey + c * ex * ey;
-            let c1 = a * ray.cx + b * ray.cy + c * (ex * ray.cy + ey * ray.cx);
-            let c2 = c * ray.cx * ray.cy;
-            best = max(best, sh_slope_rel(ray, s_next, c0 + s_next * (c1 + s_next * c2)));
-            let cc = c2 - ray.kappa;
-            if c0 != 0.0 && cc != 0.0 && c0 / cc > 0.0 {
-                let st = sqrt(c0 / cc);
-                if st > s && st < s_next {
-                    best = max(best, sh_slope_rel(ray, st, c0 + st * (c1 + st * c2)));
-                }
-            }
+            let c = sh_cell_line(ray, ix, iy, vec4<f32>(h00, h10, h01, h11));
+            best = max(best, sh_slope_rel(ray, s_next, c.x + s_next * (c.y + s_next * c.z)));
+            best = max(best, sh_cell_peak(ray, c, s, s_next));
         } else {
             best = max(best, sh_slope_at(ray, s_next));
         }
@@ -385,27 +399,12 @@ fn sh_cell_max(ray: ShRay, sa: f32, sb: f32) -> f32 {
     if !(sh_valid(h00) && sh_valid(h10) && sh_valid(h01) && sh_valid(h11)) {
         return sh_max_over(ray, sa, sb, SH_NEG);
     }
-    let r00 = h00 - ray.h0;
-    let a = h10 - h00;
-    let b = h01 - h00;
-    let c = (h11 - h10) - (h01 - h00);
-    let ex = ray.x0 - f32(ix);
-    let ey = ray.y0 - f32(iy);
-    let c0 = r00 + a * ex + b * ey + c * ex * ey;
-    let c1 = a * ray.cx + b * ray.cy + c * (ex * ray.cy + ey * ray.cx);
-    let c2 = c * ray.cx * ray.cy;
-    var best = sh_slope_rel(ray, sb, c0 + sb * (c1 + sb * c2));
+    let c = sh_cell_line(ray, ix, iy, vec4<f32>(h00, h10, h01, h11));
+    var best = sh_slope_rel(ray, sb, c.x + sb * (c.y + sb * c.z));
     if sa > 0.0 {
-        best = max(best, sh_slope_rel(ray, sa, c0 + sa * (c1 + sa * c2)));
+        best = max(best, sh_slope_rel(ray, sa, c.x + sa * (c.y + sa * c.z)));
     }
-    let cc = c2 - ray.kappa;
-    if c0 != 0.0 && cc != 0.0 && c0 / cc > 0.0 {
-        let st = sqrt(c0 / cc);
-        if st > sa && st < sb {
-            best = max(best, sh_slope_rel(ray, st, c0 + st * (c1 + st * c2)));
-        }
-    }
-    return best;
+    return max(best, sh_cell_peak(ray, c, sa, sb));
 }
 
 // Distance (plane pixels) at which the ray leaves the raster.
