@@ -89,17 +89,14 @@ impl Loader {
     /// The tiles wanted now, most wanted first, and the sun and method to make them for; it
     /// replaces the earlier list (tiles being made carry on and are not asked again).
     pub fn want(&self, ids: &[TileId], sun: SunPos, method: &GpuMethod) {
-        let mut q = lock(&self.shared);
+        let mut guard = lock(&self.shared);
+        let q = &mut *guard;
         q.wanted.clear();
-        let busy = std::mem::take(&mut q.busy);
         q.wanted
-            .extend(ids.iter().copied().filter(|id| !busy.contains(id)));
-        q.busy = busy;
+            .extend(ids.iter().copied().filter(|id| !q.busy.contains(id)));
         q.sun = sun;
-        if q.method != *method {
-            q.method = method.clone();
-        }
-        drop(q);
+        q.method = method.clone();
+        drop(guard);
         self.shared.cv.notify_all();
     }
 
@@ -111,11 +108,13 @@ impl Loader {
     /// The next finished tile, waiting for it (an error if nothing is wanted or being made,
     /// which would wait for ever).
     pub fn recv(&self) -> Result<Loaded> {
-        if let Ok(d) = self.done.try_recv() {
-            return Ok(d);
-        }
         {
+            // Under the lock: a loader sends its tile before it leaves `busy`, so with both
+            // empty every finished tile is already in the channel.
             let q = lock(&self.shared);
+            if let Ok(d) = self.done.try_recv() {
+                return Ok(d);
+            }
             if q.wanted.is_empty() && q.busy.is_empty() {
                 return Err(anyhow!("waiting for a tile that no loader makes"));
             }
