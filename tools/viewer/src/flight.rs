@@ -26,13 +26,14 @@ use penumbra::region::PathPose;
 use penumbra::tileset::Store;
 use serde::Serialize;
 
-use crate::camera::{local_az_el, norm, sub, Camera};
+use crate::camera::{add, norm, sub, Camera};
 use crate::core::Core;
 use crate::gpu::Gpu;
 use crate::headless::AdapterReport;
 use crate::options::Options;
 use crate::output;
 use crate::render::{FrameTime, Targets};
+use crate::scene::FrameLoad;
 use crate::stream::Loader;
 
 /// Field of view of a flight's camera (degrees): the viewer's default.
@@ -44,8 +45,8 @@ pub fn load_path(path: &Path, store: &Store) -> Result<Vec<(usize, Camera)>> {
     let poses = penumbra::region::read_path_poses(path).with_context(|| {
         format!(
             "--path {}: not a camera path to fly; give a CSV whose header is \
-             lat_deg,lon_deg,height_m[,heading_deg,pitch_deg] with one row per frame, and fix \
-             the line named",
+             lat_deg,lon_deg,height_m[,heading_deg,pitch_deg] with one row per frame (what \
+             is wrong, and where, follows)",
             path.display()
         )
     })?;
@@ -105,9 +106,7 @@ pub fn cameras(poses: &[PathPose], radius_m: f64, fov_deg: f64) -> Vec<Camera> {
                     .find(|d| norm(*d) > SAME_M)
             };
             if let Some(d) = ahead.or_else(behind) {
-                let (az, el) = local_az_el(c.eye, d);
-                c.heading_deg = az;
-                c.pitch_deg = el;
+                c.look_at(add(c.eye, d));
             }
             if let Some(h) = poses[k].heading_deg {
                 c.heading_deg = h;
@@ -162,14 +161,10 @@ pub struct FrameRecord {
     pub frame_ms: f64,
     /// The terrain pass on the GPU (timestamp queries), when the adapter has them.
     pub gpu_ms: Option<f64>,
-    /// Tiles chosen, drawn (ready ones and stand-ins), missing, stand-ins, arrived.
-    pub chosen: usize,
-    pub drawn: usize,
-    pub missing: usize,
-    pub stand_ins: usize,
-    pub arrived: usize,
-    /// Milliseconds the frame waited for tiles (`--wait-tiles`).
-    pub wait_ms: f64,
+    /// Tiles chosen, drawn, missing, stand-ins, arrived, and the wait for them (the report
+    /// lists them beside the fields above).
+    #[serde(flatten)]
+    pub load: FrameLoad,
 }
 
 /// What a flight reports.
@@ -281,7 +276,6 @@ impl Flight {
     pub fn end(&mut self, core: &Core, time: &FrameTime) -> &mut FrameRecord {
         let t0 = self.frame_t0.take().expect("a frame was begun");
         let frame_ms = t0.elapsed().as_secs_f64() * 1e3;
-        let l = core.scene.last_load;
         let index = self.frames.len();
         let c = &core.camera;
         let (lat, lon, alt) = c.lat_lon_alt(core.scene.radius_m());
@@ -295,12 +289,7 @@ impl Flight {
             ),
             frame_ms,
             gpu_ms: time.gpu_ms,
-            chosen: l.chosen,
-            drawn: l.drawn,
-            missing: l.missing,
-            stand_ins: l.stand_ins,
-            arrived: l.arrived,
-            wait_ms: l.wait_ms,
+            load: core.scene.last_load,
         });
         self.frames.last_mut().expect("just pushed")
     }
@@ -340,20 +329,23 @@ impl Flight {
             outside_gpu_ms: (outside.len() == fr.len())
                 .then(|| Percentiles::of(&outside))
                 .flatten(),
-            frames_waiting: fr.iter().filter(|f| f.missing > 0).count(),
-            tiles_missing: fr.iter().map(|f| f.missing).sum(),
-            stand_ins: fr.iter().map(|f| f.stand_ins).sum(),
+            frames_waiting: fr.iter().filter(|f| f.load.missing > 0).count(),
+            tiles_missing: fr.iter().map(|f| f.load.missing).sum(),
+            stand_ins: fr.iter().map(|f| f.load.stand_ins).sum(),
             tiles_loaded: core.scene.loads.len(),
             load_ms: Percentiles::of(&core.scene.loads),
-            wait_s: fr.iter().map(|f| f.wait_ms).sum::<f64>() / 1e3,
+            wait_s: fr.iter().map(|f| f.load.wait_ms).sum::<f64>() / 1e3,
             total_s: self.started.elapsed().as_secs_f64(),
             per_frame: fr.clone(),
         }
     }
 }
 
-/// The folder of `--record`, checked before anything is rendered: a folder, or a name whose
-/// parent folder exists (it is made before the first frame is written).
+/// The folder of `--record`, checked before anything is rendered: a new name whose parent
+/// folder exists (it is made before the first frame is written), an empty folder, or the
+/// record of an earlier flight (its frames and report, which this one replaces). A folder
+/// holding anything else is refused: the flight would write over a user's `report.json` or mix
+/// its frames with other files.
 fn record_dir(dir: &Path) -> Result<PathBuf> {
     let dir = output::in_folder(dir);
     if dir.exists() && !dir.is_dir() {
@@ -364,6 +356,25 @@ fn record_dir(dir: &Path) -> Result<PathBuf> {
     }
     if !dir.exists() {
         output::check_parent(&dir, "--record")?;
+        return Ok(dir);
+    }
+    let entries = std::fs::read_dir(&dir)
+        .with_context(|| format!("--record {}: cannot list the folder", dir.display()))?;
+    for e in entries {
+        let name = e
+            .with_context(|| format!("--record {}: cannot list the folder", dir.display()))?
+            .file_name();
+        let name = name.to_string_lossy();
+        let ours = name == "report.json"
+            || frame_index(&name).is_some()
+            || name.contains(penumbra::fsio::TEMP_MARK);
+        if !ours {
+            bail!(
+                "--record {}: the folder holds {name}, which is not a flight's record (frames \
+                 frame_NNNNN.png and report.json); give a new or empty folder",
+                dir.display()
+            );
+        }
     }
     Ok(dir)
 }
@@ -371,6 +382,31 @@ fn record_dir(dir: &Path) -> Result<PathBuf> {
 /// The frame file of row `k`.
 pub fn frame_name(k: usize) -> String {
     format!("frame_{k:05}.png")
+}
+
+/// The row of a frame file's name ([`frame_name`]'s inverse).
+fn frame_index(name: &str) -> Option<usize> {
+    let digits = name.strip_prefix("frame_")?.strip_suffix(".png")?;
+    (digits.len() >= 5 && digits.bytes().all(|b| b.is_ascii_digit()))
+        .then(|| digits.parse().ok())
+        .flatten()
+}
+
+/// An earlier record's frames past this flight's `frames`, removed once this one is written so
+/// that the folder holds one flight (only names [`record_dir`] let through are there).
+fn remove_stale_frames(dir: &Path, frames: usize) -> Result<()> {
+    for e in std::fs::read_dir(dir)? {
+        let e = e?;
+        if frame_index(&e.file_name().to_string_lossy()).is_some_and(|k| k >= frames) {
+            std::fs::remove_file(e.path()).with_context(|| {
+                format!(
+                    "--record: cannot remove the earlier frame {}",
+                    e.path().display()
+                )
+            })?;
+        }
+    }
+    Ok(())
 }
 
 /// Fly the path headless: every row a frame (written to `--record` when given), and the
@@ -384,9 +420,20 @@ pub fn run_headless(opts: &Options) -> Result<FlightReport> {
     let mut core = Core::new(gpu, store, opts)?;
     let targets = Targets::new(&core.gpu, opts.width, opts.height);
     flight.attach(&mut core, opts);
-    if let Some(d) = record.as_ref().filter(|d| !d.exists()) {
-        std::fs::create_dir(d)
-            .with_context(|| format!("--record {}: cannot make the folder", d.display()))?;
+    if let Some(d) = &record {
+        if d.exists() {
+            // An earlier record's report goes first: until this flight's is written, the
+            // folder has none, which says the record is not whole.
+            let old = d.join("report.json");
+            if old.exists() {
+                std::fs::remove_file(&old).with_context(|| {
+                    format!("--record: cannot remove the earlier {}", old.display())
+                })?;
+            }
+        } else {
+            std::fs::create_dir(d)
+                .with_context(|| format!("--record {}: cannot make the folder", d.display()))?;
+        }
     }
     while flight.begin(&mut core) {
         let f = core.render(&targets)?;
@@ -406,6 +453,7 @@ pub fn run_headless(opts: &Options) -> Result<FlightReport> {
     }
     let report = flight.report("headless", &core, opts, (opts.width, opts.height));
     if let Some(dir) = &record {
+        remove_stale_frames(dir, report.frames)?;
         let json = serde_json::to_vec_pretty(&report)?;
         penumbra::fsio::write_atomic_bytes(&dir.join("report.json"), &json)?;
     }

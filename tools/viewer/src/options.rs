@@ -251,7 +251,8 @@ pub struct FlightArgs {
     #[arg(long)]
     pub path: Option<PathBuf>,
     /// With --headless --path: write the frames (frame_00000.png …) and report.json into this
-    /// folder (made if missing; files of the same names are replaced).
+    /// folder: a new or empty one, or an earlier flight's record, which this one replaces
+    /// (report.json is written last: a flight stopped by an error leaves none).
     #[arg(long)]
     pub record: Option<PathBuf>,
     /// With --path: draw a frame only when every tile it chose is ready (complete,

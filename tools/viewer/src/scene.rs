@@ -57,7 +57,7 @@ pub struct Scene {
 }
 
 /// What a streamed frame chose, drew and lacked.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct FrameLoad {
     /// Tiles the frame chose.
     pub chosen: usize,
@@ -108,11 +108,6 @@ impl Scene {
     pub fn stream(&mut self, loader: Loader, wait_tiles: bool) {
         self.loader = Some(loader);
         self.wait_tiles = wait_tiles;
-    }
-
-    /// Whether tiles stream.
-    pub fn streaming(&self) -> bool {
-        self.loader.is_some()
     }
 
     pub fn method(&self) -> &GpuMethod {

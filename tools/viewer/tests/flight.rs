@@ -104,6 +104,27 @@ fn a_headless_flight_records_every_row_and_a_report() {
     // Row 3's view is its own.
     let cam = r["per_frame"][2]["camera"].as_str().unwrap();
     assert!(cam.contains(",210.000,-50.000,"), "{cam}");
+    // A shorter flight into the same record replaces it whole: its frames and report, none of
+    // the earlier flight's frames past its own.
+    let short: String = PATH.lines().take(4).map(|l| format!("{l}\n")).collect();
+    let short_path = d.path().join("short.csv");
+    std::fs::write(&short_path, short).unwrap();
+    let r3 = fly(short_path.to_str().unwrap(), &rec, &[]);
+    check_report(&r3, 3, false);
+    let mut names: Vec<String> = std::fs::read_dir(&rec)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(
+        names,
+        [
+            "frame_00000.png",
+            "frame_00001.png",
+            "frame_00002.png",
+            "report.json"
+        ]
+    );
 
     // Waiting for the tiles: complete frames, none drawn with a tile missing, the same
     // bytes on a rerun.
@@ -224,6 +245,27 @@ fn bad_paths_exit_2_naming_the_line_and_write_nothing() {
         assert!(stderr(&o).contains(needle), "{args:?}: {}", stderr(&o));
     }
     assert!(!rec.exists());
+    // A record folder holding someone else's files is refused, and they are left as they were.
+    let theirs = d.path().join("theirs");
+    std::fs::create_dir(&theirs).unwrap();
+    std::fs::write(theirs.join("report.json"), "mine").unwrap();
+    std::fs::write(theirs.join("notes.txt"), "mine").unwrap();
+    let o = run(&[
+        full,
+        "--headless",
+        "--path",
+        &good,
+        "--record",
+        theirs.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("notes.txt") && stderr(&o).contains("not a flight's record"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(std::fs::read(theirs.join("report.json")).unwrap(), b"mine");
+    assert_eq!(std::fs::read_dir(&theirs).unwrap().count(), 2);
 }
 
 #[test]
