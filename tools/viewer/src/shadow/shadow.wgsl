@@ -59,6 +59,10 @@ struct ShRay {
     a1: f32,
     b1: f32,
     kappa: f32,
+    // The origin for walks over the min/max pyramid: (x0, y0), except that a ray along the
+    // raster's last column (or row) starts in the last cells, as the CPU's walk does.
+    wx: f32,
+    wy: f32,
 }
 
 struct ShAxis {
@@ -66,24 +70,6 @@ struct ShAxis {
     step: i32,
     next: f32,
     delta: f32,
-}
-
-struct ShWalker {
-    ax: ShAxis,
-    ay: ShAxis,
-    s: f32,
-    sb: f32,
-    level: i32,
-    live: bool,
-}
-
-// One texel a walker hands out: its index and the ray's span inside it.
-struct ShTexel {
-    ok: bool,
-    tx: i32,
-    ty: i32,
-    s_in: f32,
-    s_out: f32,
 }
 
 fn sh_height(x: i32, y: i32) -> f32 {
@@ -96,15 +82,6 @@ fn sh_height(x: i32, y: i32) -> f32 {
 
 fn sh_valid(h: f32) -> bool {
     return h > SH_NODATA;
-}
-
-// (max, min) of texel (x, y) of pyramid level m; (−∞, −∞) outside.
-fn sh_extrema(m: i32, x: i32, y: i32) -> vec2<f32> {
-    let l = shadow_params.levels[m];
-    if x < 0 || y < 0 || x >= l.z || y >= l.w {
-        return vec2<f32>(SH_NEG, SH_NEG);
-    }
-    return textureLoad(shadow_extrema, vec2<i32>(l.x + x, l.y + y), 0).xy;
 }
 
 // Unit up vector of raster texel (x, y) and the length of its plane point.
@@ -201,6 +178,14 @@ fn sh_ray(x: i32, y: i32, h0: f32, phi: f32) -> ShRay {
     r.b1 = length(cross(w, ph));
     let gm = r.r0 * r.b1 / n0;
     r.kappa = gm * gm / (2.0 * r.r0);
+    r.wx = r.x0;
+    if r.cx == 0.0 {
+        r.wx = min(r.x0, f32(p.raster.z) - 1.5);
+    }
+    r.wy = r.y0;
+    if r.cy == 0.0 {
+        r.wy = min(r.y0, f32(p.raster.w) - 1.5);
+    }
     return r;
 }
 
@@ -501,70 +486,6 @@ fn sh_near(ray: ShRay, x: i32, y: i32, phi: f32) -> f32 {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Walks over the texels of a pyramid level the ray crosses.
-
-fn sh_walker(ray: ShRay, m: i32, sa: f32, sb: f32) -> ShWalker {
-    var w: ShWalker;
-    let q = f32(1 << u32(m));
-    let x = ray.x0 + sa * ray.cx;
-    let y = ray.y0 + sa * ray.cy;
-    w.level = m;
-    w.s = sa;
-    w.sb = sb;
-    w.live = x >= 0.0 && y >= 0.0;
-    w.ax = sh_axis(x / q, ray.cx / q, sa);
-    w.ay = sh_axis(y / q, ray.cy / q, sa);
-    let l = shadow_params.levels[m];
-    if ray.cx == 0.0 && w.ax.i == l.z {
-        w.ax.i -= 1;
-    }
-    if ray.cy == 0.0 && w.ay.i == l.w {
-        w.ay.i -= 1;
-    }
-    return w;
-}
-
-fn sh_walk_next(w: ptr<function, ShWalker>) -> ShTexel {
-    var t: ShTexel;
-    t.ok = false;
-    var wk = *w;
-    // (Indexing with a field of a local var directly trips naga 30's SPIR-V writer.)
-    let lv = wk.level;
-    let l = shadow_params.levels[lv];
-    for (var guard = 0; guard < 1000000; guard++) {
-        if !wk.live || !(wk.s < wk.sb) {
-            wk.live = false;
-            break;
-        }
-        if wk.ax.i < 0 || wk.ay.i < 0 || wk.ax.i >= l.z || wk.ay.i >= l.w {
-            wk.live = false;
-            break;
-        }
-        let s = wk.s;
-        let next = min(min(wk.ax.next, wk.ay.next), wk.sb);
-        let tx = wk.ax.i;
-        let ty = wk.ay.i;
-        wk.s = next;
-        var ax = wk.ax;
-        var ay = wk.ay;
-        sh_advance(&ax, next);
-        sh_advance(&ay, next);
-        wk.ax = ax;
-        wk.ay = ay;
-        if next > s {
-            t.ok = true;
-            t.tx = tx;
-            t.ty = ty;
-            t.s_in = s;
-            t.s_out = next;
-            break;
-        }
-    }
-    *w = wk;
-    return t;
-}
-
-// ---------------------------------------------------------------------------------------------
 // The exact search over the min/max pyramid, without a stack: a texel is named by its level and
 // index, its children and parent by integer arithmetic, so that a lane's whole state is a few
 // scalars (on lavapipe a stack of walkers in private memory doubled the cost of every step).
@@ -633,20 +554,13 @@ fn sh_search(ray: ShRay, sa: f32, sb: f32, best_in: f32, lo: f32, hi: f32) -> f3
     var m = min(i32(firstLeadingBit(u32(max((sb - sa) * major, 1.0)))), top);
     var q = f32(1 << u32(m));
     var s = sa;
-    let x = ray.x0 + sa * ray.cx;
-    let y = ray.y0 + sa * ray.cy;
+    let x = ray.wx + sa * ray.cx;
+    let y = ray.wy + sa * ray.cy;
     if !(x >= 0.0 && y >= 0.0) {
         return best;
     }
     var ix = sh_axis(x / q, ray.cx / q, sa).i;
     var iy = sh_axis(y / q, ray.cy / q, sa).i;
-    let l0 = shadow_params.levels[m];
-    if ray.cx == 0.0 && ix == l0.z {
-        ix -= 1;
-    }
-    if ray.cy == 0.0 && iy == l0.w {
-        iy -= 1;
-    }
     for (var guard = 0; guard < 1000000; guard++) {
         if !(s < sb) {
             break;
@@ -671,8 +585,8 @@ fn sh_search(ray: ShRay, sa: f32, sb: f32, best_in: f32, lo: f32, hi: f32) -> f3
                 // Into the child the ray is in at s.
                 m -= 1;
                 q *= 0.5;
-                ix = sh_child(ix, ray.x0 + s * ray.cx, ray.cx, q);
-                iy = sh_child(iy, ray.y0 + s * ray.cy, ray.cy, q);
+                ix = sh_child(ix, ray.wx + s * ray.cx, ray.cx, q);
+                iy = sh_child(iy, ray.wy + s * ray.cy, ray.cy, q);
                 continue;
             }
             best = max(best, sh_cell_max(ray, s, s_out));
@@ -725,31 +639,24 @@ fn sh_dp_jung_run(ray: ShRay, a: f32, b: f32, m0: i32, floor_: f32) -> vec2<f32>
     var passed = SH_NEG;
     let icx = sh_inv(ray.cx);
     let icy = sh_inv(ray.cy);
-    // A ray along a column or row on the raster's far edge is in the last cells (as the walk).
-    let xc = min(ray.x0, f32(shadow_params.raster.z) - 1.5);
-    let yc = min(ray.y0, f32(shadow_params.raster.w) - 1.5);
     // Level m0: the run's stretch is one texel long along the ray's major axis, so the texels
     // under it are the one it starts in and its neighbours ahead in x, in y and in both.
     let q0 = f32(1 << u32(m0));
-    let x = ray.x0 + a * ray.cx;
-    let y = ray.y0 + a * ray.cy;
+    let x = ray.wx + a * ray.cx;
+    let y = ray.wy + a * ray.cy;
     if !(x >= 0.0 && y >= 0.0) {
         return vec2<f32>(SH_NEG, passed);
     }
-    var bx = sh_axis(x / q0, ray.cx / q0, a).i;
-    var by = sh_axis(y / q0, ray.cy / q0, a).i;
-    let dx = i32(sign(ray.cx));
-    let dy = i32(sign(ray.cy));
     // Each level: the (up to three) texels of a 2×2 block the ray crosses over [ca, cz], in
     // straight-line code instead of a walk (Jung et al.'s own formulation): the same texels and
     // spans as the walk's, the first along the ray among equal bounds. Below m0 the block is
     // the children of the texel chosen.
     var ca = a;
     var cz = b;
-    var tx = bx;
-    var ty = by;
-    var sx = dx;
-    var sy = dy;
+    var tx = sh_axis(x / q0, ray.cx / q0, a).i;
+    var ty = sh_axis(y / q0, ray.cy / q0, a).i;
+    var sx = i32(sign(ray.cx));
+    var sy = i32(sign(ray.cy));
     for (var m = m0; m >= 0; m--) {
         let q = f32(1 << u32(m));
         let l = shadow_params.levels[m];
@@ -762,11 +669,11 @@ fn sh_dp_jung_run(ray: ShRay, a: f32, b: f32, m0: i32, floor_: f32) -> vec2<f32>
         for (var k = 0; k < 4; k++) {
             let cx = tx + (k & 1) * sx;
             let cy = ty + (k >> 1u) * sy;
-            if (k & 1) == 1 && sx == 0 || (k >> 1u) == 1 && sy == 0 {
+            if ((k & 1) == 1 && sx == 0) || ((k >> 1u) == 1 && sy == 0) {
                 continue;
             }
-            let spx = sh_slab(xc, ray.cx, icx, f32(cx) * q, q);
-            let spy = sh_slab(yc, ray.cy, icy, f32(cy) * q, q);
+            let spx = sh_slab(ray.wx, ray.cx, icx, f32(cx) * q, q);
+            let spy = sh_slab(ray.wy, ray.cy, icy, f32(cy) * q, q);
             let s_in = max(max(spx.x, spy.x), ca);
             let s_out = min(min(spx.y, spy.y), cz);
             if !(s_out > s_in) || cx < 0 || cy < 0 || cx >= l.z || cy >= l.w {
@@ -1080,7 +987,6 @@ fn sh_fourier(p: vec2<i32>, h0: f32, up: vec3<f32>) -> f32 {
     }
     var coef: ShCoef;
     sh_fourier_coefficients(&coef, ti, tj);
-    let a0 = sh_horizon(sh_series(&coef, phi0), floor_deg);
     if model == 2 {
         // slices: 8 strips, the horizon at each strip's middle, each strip's exact area.
         var lit_s = 0.0;
@@ -1099,6 +1005,7 @@ fn sh_fourier(p: vec2<i32>, h0: f32, up: vec3<f32>) -> f32 {
         }
         return clamp(lit_s / SH_PI, 0.0, 1.0);
     }
+    let a0 = sh_horizon(sh_series(&coef, phi0), floor_deg);
     // A cheap answer where the horizon cannot cross the disc: |α'| ≤ Σ k|c_k| bounds its
     // change over the disc's azimuths (from 8 rim points, with 50 % to spare).
     if el + r_deg < 89.0 {
