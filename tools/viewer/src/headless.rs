@@ -251,8 +251,14 @@ pub fn run(opts: &Options) -> Result<Report> {
                 .iter()
                 .map(|id| core.scene.get(*id).expect("drawn tiles are kept"))
                 .collect();
-            let (v, cpu) =
-                validate::validate(&rb, &gt, &core.scene.sun().sun(), core.scene.method());
+            let (v, cpu) = validate::validate(
+                &rb,
+                &gt,
+                &core.scene.sun().sun(),
+                core.scene.method(),
+                &core.scene.store,
+                core.scene.max_margin_px,
+            )?;
             validate::write_diff_png(d, rb.width, rb.height, &rb.lit, &cpu.same)?;
             let dref = d.with_file_name(format!(
                 "{}-reference.png",

@@ -17,6 +17,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 use penumbra::fourier::sun::{Model, Sun};
+use penumbra::tileset::Store;
 use serde::Serialize;
 
 use crate::render::{GpuTile, Readback};
@@ -87,7 +88,9 @@ pub fn validate(
     tiles: &[&GpuTile],
     sun: &Sun,
     method: &GpuMethod,
-) -> (Validation, CpuValues) {
+    store: &Store,
+    max_margin_px: u64,
+) -> Result<(Validation, CpuValues)> {
     let t0 = Instant::now();
     // Distinct texels, in a fixed order (first appearance in the frame).
     let mut index: HashMap<(u32, u32, u32), usize> = HashMap::new();
@@ -133,11 +136,10 @@ pub fn validate(
             })
             .collect();
         let same = sh.cpu_lit_many(&at, sun, &CpuTwin::Same(method.clone()));
-        let reference = sh.cpu_lit_many(&at, sun, &CpuTwin::Reference);
+        let (reference, band) = sh.cpu_reference_and_band(store, &at, sun, max_margin_px)?;
         let model = exact
             .as_ref()
             .map(|m| sh.cpu_lit_many(&at, sun, &CpuTwin::Same(m.clone())));
-        let band = sh.cpu_penumbral_many(&at, sun);
         for (n, &k) in ks.iter().enumerate() {
             let e = model.as_ref().map_or(f32::NAN, |v| v[n] as f32);
             values[k] = (same[n] as f32, reference[n] as f32, e);
@@ -188,7 +190,7 @@ pub fn validate(
         },
         cpu_s: t0.elapsed().as_secs_f64(),
     };
-    (v, cpu)
+    Ok((v, cpu))
 }
 
 /// Compare `a` with `b` over the pixels where `mask` holds (NaN: no data).

@@ -11,10 +11,14 @@
 //! lit fraction of the sun's disc at raster texel `p` (0 or 1 for the hard `extrema`), negative
 //! over no data. The shader follows the CPU methods step by step (docs/shadow-methods.md):
 //!
-//! - `dp`: Jung et al.'s Algorithm 1 (the at most three texels under the ray at each level,
-//!   runs fixed or `auto`), the exact near field and the exact search of the chosen cell;
+//! - `dp-jung`: Jung et al.'s Algorithm 1 (the at most three texels of a 2×2 block under the
+//!   ray at each level, runs fixed or `auto`), the exact near field and the exact search of the
+//!   chosen cell; `dp` the same, then, where a texel a descent passed over could still beat what
+//!   the runs found, one exact search of those runs' stretch (the CPU's answer, found without
+//!   its stack);
 //! - `uniform`: equal steps out to where the ray leaves the terrain volume;
-//! - `extrema`: Timokhin & Mikhaylyuk's min/max traversal (an explicit stack of level walks);
+//! - `extrema`: Timokhin & Mikhaylyuk's min/max traversal (without a stack: a texel named by
+//!   its level and index, `sh_search`);
 //! - `extrema-soft`: the same traversal finding the exact horizon slope within the disc's band,
 //!   with DP's disc occlusion (the CPU's most accurate soft method);
 //! - `fourier`: the pyramid's coefficients at the texel centre (bilinear, clamp-to-edge, as
@@ -672,6 +676,50 @@ impl TileShadow {
                 })
                 .collect()
         })
+    }
+
+    /// The exact reference's lit fraction and the penumbral band ([`Self::cpu_penumbral_many`])
+    /// at `texels` of this tile's raster. A `fourier` tile's raster is the tile alone, whose
+    /// horizon stops at the tile's edge; for it both come from a context raster made as the
+    /// ray-marching methods' (`shadow_context` for the sun, within `max_margin_px`), at the
+    /// same texels of the tile.
+    pub fn cpu_reference_and_band(
+        &self,
+        store: &Store,
+        texels: &[[i32; 2]],
+        sun: &Sun,
+        max_margin_px: u64,
+    ) -> anyhow::Result<(Vec<f64>, Vec<bool>)> {
+        if self.method.is_trace() {
+            return Ok((
+                self.cpu_lit_many(texels, sun, &CpuTwin::Reference),
+                self.cpu_penumbral_many(texels, sun),
+            ));
+        }
+        let lowest = penumbra::shadow::lowest_sun_deg(store, self.tile, sun);
+        let (ctx, rect) =
+            penumbra::shadow::shadow_context(store, self.tile, lowest, max_margin_px)?;
+        let tracer = Tracer::new(&ctx, self.tmin_tileset);
+        let (dx, dy) = (
+            rect.x0 as i64 - self.rect.x0 as i64,
+            rect.y0 as i64 - self.rect.y0 as i64,
+        );
+        let at = |p: &[i32; 2]| {
+            let (x, y) = (p[0] as i64 + dx, p[1] as i64 + dy);
+            (x >= 0 && y >= 0 && (x as usize) < ctx.width && (y as usize) < ctx.height)
+                .then_some((x as usize, y as usize))
+        };
+        Ok(texels
+            .par_iter()
+            .map(|p| match at(p) {
+                Some((x, y)) => {
+                    let lit = tracer.lit(x, y, sun, &Method::Reference, &mut Work::default());
+                    let (el, h) = tracer.band_horizon(x, y, sun, PENUMBRA_BAND_DEG);
+                    (lit, (el - h).abs() <= PENUMBRA_BAND_DEG)
+                }
+                None => (f64::NAN, false),
+            })
+            .unzip())
     }
 
     /// Whether raster texel `p` lies inside the context raster.
