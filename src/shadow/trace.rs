@@ -387,6 +387,13 @@ impl<'a> Tracer<'a> {
         }
     }
 
+    /// Whether the sun's centre at raster pixel (x, y) lies within [`PENUMBRA_BAND_DEG`] of the
+    /// exact horizon in its azimuth: the penumbra metric's pixels (false over no data).
+    pub fn penumbral(&self, x: usize, y: usize, sun: &Sun) -> bool {
+        let (el, h) = self.band_horizon(x, y, sun, PENUMBRA_BAND_DEG);
+        (el - h).abs() <= PENUMBRA_BAND_DEG
+    }
+
     /// The sun's centre elevation at raster pixel (x, y) and the exact (floored) horizon in its
     /// azimuth, both in degrees, where that horizon lies within `band_deg` of the centre: the
     /// search stops outside the band, so a horizon beyond it reads somewhere beyond it on the

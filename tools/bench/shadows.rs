@@ -223,8 +223,7 @@ fn penumbral(tr: &Tracer, case: &Case, suns: &[(f64, Sun)]) -> Vec<bool> {
         .map(|k| {
             let (s, p) = (k / (n * n), k % (n * n));
             let (x, y) = (rect.x0 + p % n, rect.y0 + p / n);
-            let (el, hz) = tr.band_horizon(x, y, &suns[s].1, PENUMBRA_BAND_DEG);
-            (el - hz).abs() <= PENUMBRA_BAND_DEG
+            tr.penumbral(x, y, &suns[s].1)
         })
         .collect()
 }

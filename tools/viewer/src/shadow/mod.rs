@@ -37,7 +37,7 @@ use penumbra::fourier::sun::{self, Frame, Model, Sun};
 use penumbra::fourier::Pyramid;
 use penumbra::horizon::{Context, Rect};
 use penumbra::layout::TileId;
-use penumbra::shadow::trace::{Extrema, Method, Work, MAX_DP_RUNS, MAX_STEPS, PENUMBRA_BAND_DEG};
+use penumbra::shadow::trace::{Extrema, Method, Work, MAX_DP_RUNS, MAX_STEPS};
 use penumbra::shadow::{HorizonSource, Runs, ShadowMethod, Tracer};
 use penumbra::tileset::Store;
 use rayon::prelude::*;
@@ -658,10 +658,9 @@ impl TileShadow {
         }
     }
 
-    /// Whether the sun's centre is within ±[`PENUMBRA_BAND_DEG`] of the terrain's own exact
-    /// horizon in its azimuth at each texel (where shadows are decided: the penumbra metric of
-    /// `penumbra-bench shadows`, by the same `Tracer::band_horizon`). False over no data and
-    /// outside the raster.
+    /// Whether the sun's centre is within ±3° of the terrain's own exact horizon in its azimuth
+    /// at each texel (where shadows are decided: the penumbra metric of `penumbra-bench
+    /// shadows`, by the same [`Tracer::penumbral`]). False over no data and outside the raster.
     pub fn cpu_penumbral_many(&self, texels: &[[i32; 2]], sun: &Sun) -> Vec<bool> {
         self.with_tracer(|tracer| {
             texels
@@ -670,9 +669,7 @@ impl TileShadow {
                     if !self.inside(p) {
                         return false;
                     }
-                    let (el, h) =
-                        tracer.band_horizon(p[0] as usize, p[1] as usize, sun, PENUMBRA_BAND_DEG);
-                    (el - h).abs() <= PENUMBRA_BAND_DEG
+                    tracer.penumbral(p[0] as usize, p[1] as usize, sun)
                 })
                 .collect()
         })
@@ -714,8 +711,7 @@ impl TileShadow {
             .map(|p| match at(p) {
                 Some((x, y)) => {
                     let lit = tracer.lit(x, y, sun, &Method::Reference, &mut Work::default());
-                    let (el, h) = tracer.band_horizon(x, y, sun, PENUMBRA_BAND_DEG);
-                    (lit, (el - h).abs() <= PENUMBRA_BAND_DEG)
+                    (lit, tracer.penumbral(x, y, sun))
                 }
                 None => (f64::NAN, false),
             })
